@@ -1,0 +1,1 @@
+"""coopsim: cooperative-manipulator closed-chain dynamics, validated against MuJoCo."""
