@@ -1,0 +1,63 @@
+"""Stage 2 — recursive Gibbs–Appell dynamics of one open arm (paper eqs. 9–10).
+
+The Gibbs function of link i (mass m_i, inertia I_i about its centre of mass c_i, world axes) is
+    S_i = ½ m_i a_ci·a_ci + ½ ω̇_iᵀ I_i ω̇_i + ω̇_iᵀ (ω_i × I_i ω_i) + (terms free of θ̈),
+and Appell's equations ∂S/∂θ̈ = τ with S = Σ S_i give, since ∂a_ci/∂θ̈_j = z_j × (c_i − p_j) and
+∂ω̇_i/∂θ̈_j = z_j (j ≤ i),
+    ∂S/∂θ̈_j = z_j · Σ_{i≥j} [(c_i − p_j) × m_i a_ci + I_i ω̇_i + ω_i × I_i ω_i].
+∂S/∂θ̈ is affine in θ̈: ∂S/∂θ̈ = I_m θ̈ − Re_m, where the mass matrix I_m = ∂²S/∂θ̈² is the Gram
+matrix of the partial accelerations and −Re_m (velocity and gravity terms, "bias forces" h) is
+∂S/∂θ̈ evaluated at θ̈ = 0. Arm m alone: I_m θ̈_m = Re_m + τ_m − J_mᵀ F_e^m (eq. 10).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
+from .model import ArmModel
+from .spatial import cross
+
+
+def gibbs_gradient(arm: ArmModel, pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """∂S/∂θ̈ (n,) N·m at (θ, θ̇, θ̈) with gravity g (3,) m/s² (forward recursion, then
+    `gibbs_gradient_of_motion`)."""
+    return gibbs_gradient_of_motion(arm, pose, link_motion(pose, qd, qdd, -g))
+
+
+def gibbs_gradient_of_motion(arm: ArmModel, pose: ArmPose, motion: LinkMotion) -> np.ndarray:
+    """∂S/∂θ̈ (n,) N·m for a link motion of the forward recursion: the backward recursion
+    F_j = m_j a_cj + F_{j+1},
+    N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1} + (p_{j+1} − p_j) × F_{j+1},
+    ∂S/∂θ̈_j = z_j · N_j (evaluated with reverse prefix sums)."""
+    ma = arm.link_mass[:, None] * link_com_accelerations(motion, pose)
+    Iw = np.einsum("nij,nj->ni", pose.I, motion.w)
+    local = cross(pose.c, ma) + np.einsum("nij,nj->ni", pose.I, motion.dw) + cross(motion.w, Iw)
+    F = np.cumsum(ma[::-1], axis=0)[::-1]
+    N = np.cumsum(local[::-1], axis=0)[::-1] - cross(pose.p, F)
+    return np.einsum("ni,ni->n", pose.z, N)
+
+
+def mass_matrix(arm: ArmModel, pose: ArmPose) -> np.ndarray:
+    """I_m = ∂²S/∂θ̈² (n, n) kg·m²: Σ_i m_i Jv_ciᵀ Jv_ci + Jω_iᵀ I_i Jω_i, with the partial
+    accelerations Jv_ci[:, j] = z_j × (c_i − p_j), Jω_i[:, j] = z_j for j ≤ i (zero for j > i)."""
+    n = arm.n
+    below = np.tril(np.ones((n, n)))[:, :, None]  # [i, j] = 1 where j <= i
+    Jv = cross(pose.z[None, :, :], pose.c[:, None, :] - pose.p[None, :, :]) * below
+    Jw = np.broadcast_to(pose.z[None, :, :], (n, n, 3)) * below
+    M = np.einsum("i,ijk,ilk->jl", arm.link_mass, Jv, Jv)
+    M += np.einsum("ijk,ikm,ilm->jl", Jw, pose.I, Jw)
+    return 0.5 * (M + M.T)
+
+
+def bias_forces(arm: ArmModel, pose: ArmPose, qd: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """h = −Re_m (n,) N·m: Coriolis, centrifugal and gravity terms, ∂S/∂θ̈ at θ̈ = 0."""
+    return gibbs_gradient(arm, pose, qd, np.zeros_like(qd), g)
+
+
+def arm_dynamics(arm: ArmModel, pose: ArmPose, qd: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(I_m, h, J̇_mθ̇_m) of eq. 10 written as I_m θ̈ + h = τ_m − J_mᵀ F_e^m, from one forward
+    recursion at θ̈ = 0 (the end-effector bias acceleration is that motion's, less the base's −g)."""
+    motion = link_motion(pose, qd, np.zeros_like(qd), -g)
+    Jd_qd = ee_acceleration(motion, pose) + np.concatenate([g, np.zeros(3)])
+    return mass_matrix(arm, pose), gibbs_gradient_of_motion(arm, pose, motion), Jd_qd

@@ -1,0 +1,112 @@
+"""Stage 1 — arm kinematics: frame poses, link motion recursion, Jacobians and J̇θ̇.
+
+All outputs are in world axes. The twist of a point P of the last link is [v_P; ω] and its
+"acceleration" is [a_P; ω̇] with a_P = dv_P/dt (classical point acceleration), so that
+[a_P; ω̇] = J_P θ̈ + J̇_P θ̇ (paper eqs. 3, 13).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .model import ArmModel
+from .spatial import axis_angle_to_rot, cross
+
+
+class ArmPose(NamedTuple):
+    """Configuration-dependent geometry of one arm (world axes, SI).
+    p (n, 3) joint origins; R (n, 3, 3) link frames; z (n, 3) joint axes; c (n, 3) link centres of
+    mass; I (n, 3, 3) link inertias about c; p_ee (3,), R_ee (3, 3) end-effector frame."""
+
+    p: np.ndarray
+    R: np.ndarray
+    z: np.ndarray
+    c: np.ndarray
+    I: np.ndarray
+    p_ee: np.ndarray
+    R_ee: np.ndarray
+
+
+class LinkMotion(NamedTuple):
+    """Link motion from the forward recursion (world axes): w (n, 3) angular velocities ω_i,
+    dw (n, 3) angular accelerations ω̇_i, a (n, 3) accelerations of the joint origins."""
+
+    w: np.ndarray
+    dw: np.ndarray
+    a: np.ndarray
+
+
+def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
+    """Forward kinematics of one arm at joint angles q (n,) rad:
+    R_i = R_{i−1} R0_i Rot(axis_i, θ_i), p_i = p_{i−1} + R_{i−1} d_i."""
+    n = arm.n
+    p = np.empty((n, 3))
+    R = np.empty((n, 3, 3))
+    p_prev, R_prev = arm.base_pos, arm.base_rot
+    for i in range(n):
+        p[i] = p_prev + R_prev @ arm.joint_pos[i]
+        R[i] = R_prev @ arm.joint_rot[i] @ axis_angle_to_rot(arm.joint_axis[i], q[i])
+        p_prev, R_prev = p[i], R[i]
+    z = np.einsum("nij,nj->ni", R, arm.joint_axis)
+    c = p + np.einsum("nij,nj->ni", R, arm.link_com)
+    I = np.einsum("nij,njk,nlk->nil", R, arm.link_inertia, R)
+    p_ee = p[-1] + R[-1] @ arm.ee_pos
+    R_ee = R[-1] @ arm.ee_rot
+    return ArmPose(p, R, z, c, I, p_ee, R_ee)
+
+
+def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarray) -> LinkMotion:
+    """Forward recursion of the recursive Gibbs–Appell formulation (paper eq. 9):
+    ω_i = ω_{i−1} + z_i θ̇_i,  ω̇_i = ω̇_{i−1} + z_i θ̈_i + ω_{i−1} × z_i θ̇_i,
+    a_{i+1} = a_i + ω̇_i × (p_{i+1} − p_i) + ω_i × (ω_i × (p_{i+1} − p_i)),  a_0 = a_base
+    (gravity enters as an upward base acceleration a_base = −g). The recursions are evaluated as
+    prefix sums, which is the same recursion unrolled."""
+    z, p = pose.z, pose.p
+    w = np.cumsum(z * qd[:, None], axis=0)
+    w_prev = np.vstack([np.zeros(3), w[:-1]])
+    dw = np.cumsum(z * qdd[:, None] + cross(w_prev, z) * qd[:, None], axis=0)
+    r = p[1:] - p[:-1]
+    da = cross(dw[:-1], r) + cross(w[:-1], cross(w[:-1], r))
+    a = a_base + np.vstack([np.zeros(3), np.cumsum(da, axis=0)])
+    return LinkMotion(w, dw, a)
+
+
+def point_acceleration(motion: LinkMotion, pose: ArmPose, i: int, point: np.ndarray) -> np.ndarray:
+    """Acceleration (3,) of a point fixed in link i: a_i + ω̇_i × r + ω_i × (ω_i × r), r = point − p_i."""
+    r = point - pose.p[i]
+    w = motion.w[i]
+    return motion.a[i] + cross(motion.dw[i], r) + cross(w, cross(w, r))
+
+
+def link_com_accelerations(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
+    """Centre-of-mass accelerations a_ci (n, 3) of every link (paper eq. 9)."""
+    r = pose.c - pose.p
+    return motion.a + cross(motion.dw, r) + cross(motion.w, cross(motion.w, r))
+
+
+def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
+    """Geometric Jacobian J (6, n) of a point fixed in the last link: columns [z_j × (P − p_j); z_j]."""
+    Jv = cross(pose.z, point - pose.p).T
+    return np.vstack([Jv, pose.z.T])
+
+
+def ee_jacobian(pose: ArmPose) -> np.ndarray:
+    """End-effector Jacobian J_m (6, n): twist [v_EE; ω] = J_m θ̇ (world axes)."""
+    return point_jacobian(pose, pose.p_ee)
+
+
+def ee_acceleration(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
+    """End-effector [a_EE; ω̇] (6,) of a link motion."""
+    return np.concatenate([point_acceleration(motion, pose, len(pose.p) - 1, pose.p_ee), motion.dw[-1]])
+
+
+def ee_bias_acceleration(pose: ArmPose, qd: np.ndarray) -> np.ndarray:
+    """J̇_m θ̇ (6,): end-effector [a_EE; ω̇] at θ̈ = 0 and no gravity."""
+    return ee_acceleration(link_motion(pose, qd, np.zeros_like(qd), np.zeros(3)), pose)
+
+
+def ee_twist(pose: ArmPose, qd: np.ndarray) -> np.ndarray:
+    """End-effector twist [v_EE; ω] (6,) = J_m θ̇."""
+    return ee_jacobian(pose) @ qd

@@ -1,0 +1,80 @@
+"""Stage 5 — the loop-closure manifold: consistent initial conditions and constraint stabilization.
+
+Positions are projected by Gauss–Newton steps of minimum norm, Δθ = −Λ⁺ Φ(θ) (Λ⁺ the
+Moore–Penrose inverse, so redundant or rank-deficient rows are harmless), velocities by
+θ̇ ← θ̇ − Λ⁺ Λ θ̇. Baumgarte stabilization instead adds 2αΛθ̇ + β²Φ to the acceleration constraint.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
+                           position_residual)
+from .grasp import grasp_matrix_inv_T
+from .kinematics import ee_jacobian
+from .model import Model
+
+
+class Projection(NamedTuple):
+    """Result of a projection: q, qd the consistent state; dq, dqd the corrections applied;
+    residual_before / residual_after: max |Φ| (m or rad); iterations: Gauss–Newton steps."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    dq: np.ndarray
+    dqd: np.ndarray
+    residual_before: float
+    residual_after: float
+    iterations: int
+
+
+def constraint_jacobian(model: Model, q: np.ndarray) -> np.ndarray:
+    """Λ (k(r−1), n) at q (velocity-level loop-closure Jacobian, eq. 23)."""
+    poses = arm_poses(model, q)
+    c = model.object.carrier
+    s = grasp_offsets(model, carrier_object(model, poses))
+    J = [ee_jacobian(p) for p in poses]
+    J_o = grasp_matrix_inv_T(s[c]) @ J[c]
+    zeros = np.zeros((model.r, 6))
+    return _constraints(model, J, zeros, J_o, np.zeros(6), np.zeros(3), s)[0]
+
+
+def project_positions(model: Model, q: np.ndarray, tol: float, max_iter: int = 50) -> tuple[np.ndarray, int]:
+    """Gauss–Newton projection of q onto Φ(q) = 0 to max |Φ| <= tol; raises ConstraintError when it
+    does not converge (an unreachable grasp or a singular loop)."""
+    q = q.copy()
+    for it in range(max_iter + 1):
+        phi = position_residual(model, q)
+        if np.max(np.abs(phi)) <= tol:
+            return q, it
+        if it == max_iter:
+            break
+        dq = np.linalg.lstsq(constraint_jacobian(model, q), phi, rcond=None)[0]
+        q -= dq
+    raise ConstraintError(f"loop closure did not converge: max |Φ| = {np.max(np.abs(phi)):.3g} after "
+                          f"{max_iter} Gauss–Newton steps at q = {np.array2string(q, precision=6)}")
+
+
+def project_velocities(model: Model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Minimum-norm correction of qd onto Λ(q) θ̇ = 0."""
+    Lam = constraint_jacobian(model, q)
+    return qd - np.linalg.lstsq(Lam, Lam @ qd, rcond=None)[0]
+
+
+def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+    """Project (q, qd) onto the manifold (positions, then velocities) and report the correction."""
+    before = float(np.max(np.abs(position_residual(model, q))))
+    q_new, it = project_positions(model, q, model.integrator.projection_tol)
+    qd_new = project_velocities(model, q_new, qd)
+    after = float(np.max(np.abs(position_residual(model, q_new))))
+    return Projection(q_new, qd_new, q_new - q, qd_new - qd, before, after, it)
+
+
+def baumgarte_term(model: Model, q: np.ndarray, Lam_qd: np.ndarray) -> np.ndarray:
+    """2α Λθ̇ + β² Φ (k(r−1),): the stabilising right-hand side of Baumgarte's method."""
+    s = model.integrator
+    return 2.0 * s.baumgarte_alpha * Lam_qd + s.baumgarte_beta ** 2 * position_residual(model, q)
+

@@ -1,0 +1,155 @@
+"""Frozen model data: every array the kernels need, built once from a scenario.
+
+Units are SI throughout (m, kg, s, N, N·m, rad). Frames: "world" is Σ; each arm has a base frame and
+one frame per link, attached at the link's joint (MuJoCo's body convention: frame i sits at
+`joint_pos[i]` in the parent frame, rotated by `joint_rot[i]`, then turned by θ_i about
+`joint_axis[i]`, given in frame i). The object frame Σ_o sits at the object's centre of mass C.
+Joint vectors of all arms are stacked arm after arm (`Model.dof_slices`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+
+class CoopsimError(Exception):
+    """Base class of every error coopsim reports to a user as one line."""
+
+
+@dataclass(frozen=True, eq=False)
+class ArmModel:
+    """One serial arm of n revolute joints.
+
+    base_pos (3,) world, base_rot (3, 3) world←base;
+    joint_pos (n, 3) origin of frame i in frame i−1 (the base frame for i = 0);
+    joint_rot (n, 3, 3) frame i−1 ← frame i at θ_i = 0; joint_axis (n, 3) unit, in frame i;
+    link_mass (n,) kg; link_com (n, 3) centre of mass in frame i; link_inertia (n, 3, 3) about the
+    centre of mass, frame-i axes (kg·m²); link_box (n, 3) box size for drawing (zeros: none), its
+    centre at link_com; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1.
+    """
+
+    name: str
+    base_pos: np.ndarray
+    base_rot: np.ndarray
+    joint_pos: np.ndarray
+    joint_rot: np.ndarray
+    joint_axis: np.ndarray
+    link_mass: np.ndarray
+    link_com: np.ndarray
+    link_inertia: np.ndarray
+    link_box: np.ndarray
+    ee_pos: np.ndarray
+    ee_rot: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.link_mass)
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectModel:
+    """The grasped rigid object. mass kg; inertia (3, 3) about C in object axes; box (3,) size for
+    drawing (zeros: none). grasp_pos (r, 3) and grasp_rot (r, 3, 3): pose of arm m's end-effector
+    frame in the object frame (row m belongs to arm m). carrier: index of the arm whose last link the
+    object is rigidly attached to in the reduced model (paper eqs. 17–19, arm "1")."""
+
+    mass: float
+    inertia: np.ndarray
+    box: np.ndarray
+    grasp_pos: np.ndarray
+    grasp_rot: np.ndarray
+    carrier: int
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueTable:
+    """Piecewise-linear joint torques of one arm: times (k,) s strictly increasing, values (k, n) N·m;
+    held constant outside [times[0], times[-1]] (one row = constant torque)."""
+
+    times: np.ndarray
+    values: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Motors:
+    """Per joint, stacked: stall_torque (n,) N·m, no_load_speed (n,) rad/s (eq. 36; inf: no limit),
+    energy_weight (n,) diagonal of Q (eqs. 33–35), passive (n,) bool."""
+
+    stall_torque: np.ndarray
+    no_load_speed: np.ndarray
+    energy_weight: np.ndarray
+    passive: np.ndarray
+
+
+@dataclass(frozen=True)
+class IntegratorSettings:
+    """method: 'dop853' | 'dopri5' (adaptive, rtol/atol) | 'rk4' (fixed `step`, s; also the maximum
+    step of the adaptive methods); output_dt: sample interval of the results, s;
+    stabilization: 'projection' | 'baumgarte' | 'none'; baumgarte_alpha (1/s), baumgarte_beta (1/s)
+    in Λθ̈ = −Λ̇θ̇ − 2αΛθ̇ − β²Φ; projection_tol: loop-closure tolerance (m and rad);
+    max_initial_correction: largest joint correction (rad) accepted when the initial state is made
+    consistent; constraint_rows: 'auto' (planar rows for planar scenes) or 'spatial';
+    rank_tol: relative eigenvalue below which the constraint matrix counts as rank-deficient;
+    on_rank_deficiency: 'warn' (minimum-norm grasp wrenches, warning) or 'error'."""
+
+    method: str = "dop853"
+    rtol: float = 1e-11
+    atol: float = 1e-12
+    step: float = 1e-2
+    output_dt: float = 1e-2
+    stabilization: str = "projection"
+    baumgarte_alpha: float = 10.0
+    baumgarte_beta: float = 10.0
+    projection_tol: float = 1e-12
+    max_initial_correction: float = 0.05
+    constraint_rows: str = "auto"
+    rank_tol: float = 1e-10
+    on_rank_deficiency: str = "warn"
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
+    a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
+    spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
+    state as given (not yet consistent); duration s."""
+
+    name: str
+    arms: tuple[ArmModel, ...]
+    object: ObjectModel
+    gravity: np.ndarray
+    plane: np.ndarray | None
+    rows: np.ndarray
+    q0: np.ndarray
+    qd0: np.ndarray
+    duration: float
+    torques: tuple[TorqueTable, ...]
+    motors: Motors
+    integrator: IntegratorSettings
+
+    @property
+    def r(self) -> int:
+        return len(self.arms)
+
+    @property
+    def n_total(self) -> int:
+        return int(sum(a.n for a in self.arms))
+
+    @cached_property
+    def dof_slices(self) -> tuple[slice, ...]:
+        ends = np.cumsum([0] + [a.n for a in self.arms])
+        return tuple(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:]))
+
+
+def torque_at(tables: tuple[TorqueTable, ...], t: float) -> np.ndarray:
+    """Stacked joint torques τ(t) (n_total,) N·m, linear between table rows, held outside."""
+    parts = []
+    for tab in tables:
+        if len(tab.times) == 1:
+            parts.append(tab.values[0])
+        else:
+            parts.append(np.array([np.interp(t, tab.times, col) for col in tab.values.T]))
+    return np.concatenate(parts)

@@ -1,0 +1,439 @@
+"""Scenario files (YAML) → validated, frozen `Model`.
+
+This is an I/O edge: kernels never import it. Every rejected input raises `ScenarioError` with one
+line "FILE: FIELD: reason", FIELD a dotted path such as `arms[0].links[1].box.density`.
+Angles are in radians unless the key ends in `_deg`; every other quantity is SI.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .kinematics import arm_pose
+from .model import (ArmModel, CoopsimError, IntegratorSettings, Model, Motors, ObjectModel,
+                    TorqueTable)
+from .spatial import quat_to_rot, rpy_to_rot
+
+_REQUIRED = object()
+
+
+class ScenarioError(CoopsimError):
+    """A scenario that cannot be turned into a model; the message names the field."""
+
+
+class _Section:
+    """A mapping being read: typed getters that record which keys were used, `done()` rejects the rest."""
+
+    def __init__(self, data, path: str, where: str):
+        if not isinstance(data, dict):
+            raise ScenarioError(f"{where}: {path or 'scenario'}: expected a mapping, got {type(data).__name__}")
+        self.data, self.path, self.where, self.used = data, path, where, set()
+
+    def field(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else key
+
+    def fail(self, key: str, reason: str):
+        raise ScenarioError(f"{self.where}: {self.field(key)}: {reason}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default=_REQUIRED):
+        self.used.add(key)
+        if key not in self.data or self.data[key] is None:
+            if default is _REQUIRED:
+                self.fail(key, "missing required field")
+            return default
+        return self.data[key]
+
+    def number(self, key, default=_REQUIRED, positive=False, nonneg=False) -> float:
+        v = self.raw(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(key, f"expected a number, got {v!r}")
+        v = float(v)
+        if not np.isfinite(v):
+            self.fail(key, f"must be finite, got {v}")
+        if positive and not v > 0:
+            self.fail(key, f"must be positive, got {v}")
+        if nonneg and v < 0:
+            self.fail(key, f"must be non-negative, got {v}")
+        return v
+
+    def string(self, key, choices=None, default=_REQUIRED) -> str:
+        v = self.raw(key, default)
+        if not isinstance(v, str):
+            self.fail(key, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            self.fail(key, f"must be one of {', '.join(choices)}; got {v!r}")
+        return v
+
+    def array(self, key, shape=None, default=_REQUIRED, positive=False, nonneg=False, allow_inf=False) -> np.ndarray:
+        v = self.raw(key, default)
+        try:
+            a = np.array(v, dtype=float)
+        except (TypeError, ValueError):
+            self.fail(key, f"expected numbers, got {v!r}")
+        if a.dtype == object or (shape is not None and (a.ndim != len(shape) or any(
+                s is not None and s != d for s, d in zip(shape, a.shape)))):
+            want = "×".join("n" if s is None else str(s) for s in shape)
+            self.fail(key, f"expected shape {want}, got {list(a.shape)}")
+        if np.any(np.isnan(a)) or (not allow_inf and not np.all(np.isfinite(a))):
+            self.fail(key, "must be finite")
+        if positive and not np.all(a > 0):
+            self.fail(key, f"must be positive, got {a.tolist()}")
+        if nonneg and not np.all(a >= 0):
+            self.fail(key, f"must be non-negative, got {a.tolist()}")
+        return a
+
+    def angles(self, key, shape, default=_REQUIRED) -> np.ndarray:
+        """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
+        degrees (|x| > 2π), are rejected."""
+        deg = f"{key}_deg"
+        if self.has(key) and self.has(deg):
+            self.fail(key, f"give either {key} (rad) or {deg} (deg), not both")
+        if self.has(deg):
+            return np.deg2rad(self.array(deg, shape))
+        a = self.array(key, shape, default=default)
+        if np.any(np.abs(a) > 2 * np.pi + 1e-9):
+            self.fail(key, f"{np.max(np.abs(a)):g} rad is more than a turn: degrees? use {deg}")
+        return a
+
+    def section(self, key, default=_REQUIRED) -> "_Section | None":
+        v = self.raw(key, default)
+        return None if v is None else _Section(v, self.field(key), self.where)
+
+    def items(self, key, min_len=0) -> list["_Section"]:
+        v = self.raw(key)
+        if not isinstance(v, list) or len(v) < min_len:
+            self.fail(key, f"expected a list of at least {min_len} entries")
+        return [_Section(x, f"{self.field(key)}[{i}]", self.where) for i, x in enumerate(v)]
+
+    def done(self):
+        extra = sorted(set(self.data) - self.used)
+        if extra:
+            self.fail(extra[0], f"unknown field (known here: {', '.join(sorted(self.used))})")
+
+
+def _rotation(sec: _Section, key_prefix: str = "") -> np.ndarray:
+    """Rotation from `rpy`/`rpy_deg` (R = Rz Ry Rx) or `quat` [w, x, y, z]; identity if absent."""
+    rpy, quat = f"{key_prefix}rpy", f"{key_prefix}quat"
+    if sec.has(quat) and (sec.has(rpy) or sec.has(rpy + "_deg")):
+        sec.fail(quat, "give either a quaternion or roll-pitch-yaw angles, not both")
+    if sec.has(quat):
+        q = sec.array(quat, (4,))
+        if np.linalg.norm(q) < 1e-12:
+            sec.fail(quat, "zero quaternion")
+        return quat_to_rot(q)
+    return rpy_to_rot(sec.angles(rpy, (3,), default=[0.0, 0.0, 0.0]))
+
+
+def _unit(sec: _Section, key: str, default) -> np.ndarray:
+    a = sec.array(key, (3,), default=default)
+    norm = np.linalg.norm(a)
+    if norm < 1e-9:
+        sec.fail(key, "zero-length axis")
+    return a / norm
+
+
+def _box_inertia(mass: float, size: np.ndarray) -> np.ndarray:
+    """Inertia (3, 3) of a solid box about its centre, box axes: m/12 (b² + c²), ..."""
+    a2 = size ** 2
+    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
+
+
+def _inertia_tensor(sec: _Section, key: str) -> np.ndarray:
+    """3×3 symmetric matrix or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]; must be positive definite and satisfy
+    the triangle inequalities of principal moments."""
+    v = sec.raw(key)
+    if isinstance(v, list) and len(v) == 6:
+        xx, yy, zz, xy, xz, yz = sec.array(key, (6,))
+        I = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    else:
+        I = sec.array(key, (3, 3))
+    if not np.allclose(I, I.T, rtol=0, atol=1e-12 * max(1.0, np.abs(I).max())):
+        sec.fail(key, "inertia tensor must be symmetric")
+    ev = np.linalg.eigvalsh(I)
+    if ev[0] <= 0:
+        sec.fail(key, f"inertia tensor must be positive definite (eigenvalues {ev.tolist()})")
+    if ev[0] + ev[1] < ev[2] * (1 - 1e-9):
+        sec.fail(key, f"principal moments {ev.tolist()} violate the triangle inequality")
+    return I
+
+
+def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=None):
+    """(mass, com (3,), inertia about com (3, 3), box size (3,)) from a `box` (size along the local
+    x, y, z; density kg/m³) or an `inertial` block (mass, com, inertia). A link box starts at the
+    joint and extends along local +x (com_default = None: centred at the frame origin)."""
+    if sec.has(key_box) == sec.has(key_inertial):
+        sec.fail(key_box, f"give exactly one of {key_box} or {key_inertial}")
+    if sec.has(key_box):
+        box = sec.section(key_box)
+        if box.has("size"):
+            size = box.array("size", (3,), positive=True)
+        else:
+            length = box.number("length", positive=True)
+            cross = box.array("cross_section", (2,), positive=True)
+            size = np.array([length, cross[0], cross[1]])
+        density = box.number("density", positive=True)
+        box.done()
+        mass = density * float(np.prod(size))
+        com = np.zeros(3) if com_default is None else np.array([size[0] / 2, 0.0, 0.0])
+        return mass, com, _box_inertia(mass, size), size
+    inertial = sec.section(key_inertial)
+    mass = inertial.number("mass", positive=True)
+    com = inertial.array("com", (3,), default=[0.0, 0.0, 0.0])
+    I = _inertia_tensor(inertial, "inertia")
+    inertial.done()
+    return mass, com, I, np.zeros(3)
+
+
+def _arm(sec: _Section, index: int) -> tuple[ArmModel, dict]:
+    """One arm; returns the model and its per-arm extras (initial state, torque, motors)."""
+    name = sec.string("name", default=f"arm{index + 1}")
+    base = sec.section("base", default={})
+    base_pos = base.array("position", (3,), default=[0.0, 0.0, 0.0])
+    base_rot = _rotation(base)
+    base.done()
+    links = sec.items("links", min_len=1)
+    jp, jr, ja, lm, lc, li, lb = [], [], [], [], [], [], []
+    prev_length = 0.0
+    for link in links:
+        joint = link.section("joint", default={})
+        jp.append(joint.array("position", (3,), default=[prev_length, 0.0, 0.0]))
+        jr.append(_rotation(joint))
+        ja.append(_unit(joint, "axis", [0.0, 0.0, 1.0]))
+        joint.done()
+        m, c, I, box = _body(link, com_default="link")
+        lm.append(m), lc.append(c), li.append(I), lb.append(box)
+        prev_length = box[0]
+        link.done()
+    ee = sec.section("end_effector", default={})
+    ee_pos = ee.array("position", (3,), default=[prev_length, 0.0, 0.0])
+    ee_rot = _rotation(ee)
+    ee.done()
+    n = len(links)
+    arm = ArmModel(name, base_pos, base_rot, np.array(jp), np.array(jr), np.array(ja), np.array(lm),
+                   np.array(lc), np.array(li), np.array(lb), ee_pos, ee_rot)
+    return arm, {"n": n}
+
+
+def _arm_state(sec: _Section, n: int):
+    init = sec.section("initial")
+    q0 = init.angles("angles", (n,))
+    qd0 = init.angles("rates", (n,), default=np.zeros(n))
+    init.done()
+    return q0, qd0
+
+
+def _torque(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
+    tq = sec.section("torque", default={"constant": [0.0] * n})
+    kinds = [k for k in ("constant", "table", "csv") if tq.has(k)]
+    if len(kinds) != 1:
+        tq.fail("constant", "give exactly one of constant, table or csv")
+    if kinds[0] == "constant":
+        table = TorqueTable(np.zeros(1), tq.array("constant", (n,))[None, :])
+    elif kinds[0] == "table":
+        tab = tq.section("table")
+        times = tab.array("time", (None,))
+        values = tab.array("values", (len(times), n))
+        tab.done()
+        table = _checked_table(tq, "table", times, values)
+    else:
+        table = _csv_table(tq, n, where_dir)
+    tq.done()
+    return table
+
+
+def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarray) -> TorqueTable:
+    if len(times) < 1 or np.any(np.diff(times) <= 0):
+        sec.fail(key, "times must be strictly increasing")
+    return TorqueTable(times, values)
+
+
+def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
+    """CSV with a header row; first column time (s), then one column per joint (N·m)."""
+    rel = sec.string("csv")
+    path = (where_dir / rel).resolve()
+    if not path.is_file():
+        sec.fail("csv", f"file not found: {path}")
+    with open(path, newline="") as fh:
+        rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    try:
+        data = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float)
+    except ValueError as exc:
+        sec.fail("csv", f"{path.name}: non-numeric value ({exc})")
+    if data.ndim != 2 or data.shape[1] != n + 1:
+        sec.fail("csv", f"{path.name}: expected a header and rows of 1 + {n} columns (time, torques)")
+    return _checked_table(sec, "csv", data[:, 0], data[:, 1:])
+
+
+def _motors(sec: _Section, n: int):
+    mot = sec.section("motors", default={})
+    stall = mot.array("stall_torque", (n,), default=np.full(n, np.inf), positive=True, allow_inf=True)
+    speed = mot.array("no_load_speed", (n,), default=np.full(n, np.inf), positive=True, allow_inf=True)
+    mot.done()
+    weights = sec.array("energy_weights", (n,), default=np.ones(n), positive=True)
+    passive = sec.raw("passive", default=[False] * n)
+    if not isinstance(passive, list) or len(passive) != n or not all(isinstance(p, bool) for p in passive):
+        sec.fail("passive", f"expected a list of {n} true/false values")
+    return stall, speed, weights, np.array(passive, dtype=bool)
+
+
+def _integrator(sec: _Section | None) -> IntegratorSettings:
+    if sec is None:
+        return IntegratorSettings()
+    d = IntegratorSettings()
+    s = IntegratorSettings(
+        method=sec.string("method", ("dop853", "dopri5", "rk4"), d.method),
+        rtol=sec.number("rtol", d.rtol, positive=True),
+        atol=sec.number("atol", d.atol, positive=True),
+        step=sec.number("step", d.step, positive=True),
+        output_dt=sec.number("output_dt", d.output_dt, positive=True),
+        stabilization=sec.string("stabilization", ("projection", "baumgarte", "none"), d.stabilization),
+        baumgarte_alpha=sec.number("baumgarte_alpha", d.baumgarte_alpha, nonneg=True),
+        baumgarte_beta=sec.number("baumgarte_beta", d.baumgarte_beta, nonneg=True),
+        projection_tol=sec.number("projection_tol", d.projection_tol, positive=True),
+        max_initial_correction=sec.number("max_initial_correction", d.max_initial_correction, positive=True),
+        constraint_rows=sec.string("constraint_rows", ("auto", "spatial"), d.constraint_rows),
+        rank_tol=sec.number("rank_tol", d.rank_tol, positive=True),
+        on_rank_deficiency=sec.string("on_rank_deficiency", ("warn", "error"), d.on_rank_deficiency),
+    )
+    sec.done()
+    return s
+
+
+def _object(sec: _Section, arms: list[ArmModel]):
+    """Object inertia and grasps; grasps given explicitly or `derive` (from the initial state)."""
+    mass, com, inertia, box = _body(sec)
+    if np.linalg.norm(com) > 0:
+        sec.fail("inertial.com", "the object frame is at its centre of mass: com must be [0, 0, 0]")
+    names = [a.name for a in arms]
+    pose = sec.section("pose", default=None)
+    grasps_raw = sec.raw("grasps")
+    if grasps_raw == "derive":
+        order = list(range(len(arms)))
+        grasp = None
+    else:
+        order, grasp = [], {}
+        for g in sec.items("grasps", min_len=2):
+            arm = g.raw("arm")
+            idx = names.index(arm) if arm in names else arm
+            if isinstance(idx, bool) or not isinstance(idx, int) or not 0 <= idx < len(arms):
+                g.fail("arm", f"no arm {arm!r} (arms: {', '.join(names)})")
+            if idx in grasp:
+                g.fail("arm", f"arm {names[idx]!r} grasps twice")
+            grasp[idx] = (g.array("position", (3,)), _rotation(g), g.field("arm").rsplit(".", 1)[0])
+            order.append(idx)
+            g.done()
+        if len(grasp) != len(arms):
+            missing = [names[i] for i in range(len(arms)) if i not in grasp]
+            sec.fail("grasps", f"every arm must grasp the object; missing: {', '.join(missing)}")
+    pose_data = None
+    if pose is not None:
+        pose_data = (pose.array("position", (3,)), _rotation(pose))
+        pose.done()
+    sec.done()
+    return mass, inertia, box, order, grasp, pose_data
+
+
+def load_scenario(path: str | Path) -> Model:
+    """Read and validate a scenario YAML file (see scenarios/*.yaml for the format)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: scenario file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ScenarioError(f"{path}: malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem)
+
+
+def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."), default_name="scenario") -> Model:
+    """Build the frozen model from parsed YAML data (a dict)."""
+    root = _Section(data, "", where)
+    name = root.string("name", default=default_name)
+    root.string("description", default="")
+    gravity = root.array("gravity", (3,), default=[0.0, 0.0, -9.81])
+    duration = root.number("duration", positive=True)
+    arm_secs = root.items("arms", min_len=2)
+    arms, q0, qd0, torques, motor_parts = [], [], [], [], []
+    for i, sec in enumerate(arm_secs):
+        arm, info = _arm(sec, i)
+        q, qd = _arm_state(sec, info["n"])
+        torques.append(_torque(sec, info["n"], base_dir))
+        motor_parts.append(_motors(sec, info["n"]))
+        sec.done()
+        arms.append(arm), q0.append(q), qd0.append(qd)
+    names = [a.name for a in arms]
+    if len(set(names)) != len(names):
+        root.fail("arms", f"arm names must be unique, got {names}")
+    mass, inertia, box, order, grasp, pose = _object(root.section("object"), arms)
+    integrator = _integrator(root.section("integrator", default=None))
+    root.done()
+    q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
+    grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
+    obj = ObjectModel(mass, inertia, box, grasp_pos, grasp_rot, carrier=order[0])
+    motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
+    planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
+    return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
+                 tuple(torques), motors, integrator)
+
+
+def _arm_poses(arms: list[ArmModel], q: np.ndarray):
+    ends = np.cumsum([0] + [a.n for a in arms])
+    return [arm_pose(a, q[s:e]) for a, s, e in zip(arms, ends[:-1], ends[1:])]
+
+
+def _resolve_grasps(arms, q0, order, grasp, pose, where):
+    """Grasp poses (EE frame in the object frame), rows by arm index: as given, checked for reach,
+    or derived from the initial configuration (object pose from `object.pose`, else at the centroid
+    of the end-effectors with the first arm's end-effector orientation)."""
+    poses = _arm_poses(arms, q0)
+    r = len(arms)
+    if grasp is None:
+        if pose is None:
+            pose = (np.mean([p.p_ee for p in poses], axis=0), poses[0].R_ee)
+        p_C, R_o = pose
+        gp = np.array([R_o.T @ (p.p_ee - p_C) for p in poses])
+        gr = np.array([R_o.T @ p.R_ee for p in poses])
+        return gp, gr
+    gp = np.array([grasp[m][0] for m in range(r)])
+    gr = np.array([grasp[m][1] for m in range(r)])
+    c = order[0]
+    R_o = poses[c].R_ee @ gr[c].T
+    p_C = poses[c].p_ee - R_o @ gp[c]
+    for m in order[1:]:
+        arm = arms[m]
+        reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
+        dist = float(np.linalg.norm(p_C + R_o @ gp[m] - poses[m].p[0]))
+        if dist > reach * (1 + 1e-9):
+            raise ScenarioError(f"{where}: {grasp[m][2]}: arm {arm.name!r} cannot reach its grasp: "
+                                f"the grasp point is {dist:.4g} m from its first joint, its reach is {reach:.4g} m")
+    return gp, gr
+
+
+def _plane(arms: list[ArmModel], q0: np.ndarray) -> np.ndarray | None:
+    """Rows (e1, e2, n) of the plane of motion if every joint axis is parallel to one n, else None.
+    Rotations about parallel axes keep them parallel, so checking one configuration suffices."""
+    z = np.vstack([p.z for p in _arm_poses(arms, q0)])
+    nrm = z[0]
+    if np.max(np.linalg.norm(np.cross(z, nrm), axis=1)) > 1e-12:
+        return None
+    e2 = np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e2 /= np.linalg.norm(e2)
+    return np.array([np.cross(e2, nrm), e2, nrm])
+
+
+def _rows(plane: np.ndarray | None) -> np.ndarray:
+    """Constraint-row selector S (k, 6): planar [e1ᵀ 0; e2ᵀ 0; 0 nᵀ], spatial I₆."""
+    if plane is None:
+        return np.eye(6)
+    S = np.zeros((3, 6))
+    S[0, :3], S[1, :3], S[2, 3:] = plane[0], plane[1], plane[2]
+    return S

@@ -1,0 +1,176 @@
+"""Forward simulation of the closed chain: the pipeline in the order it runs.
+
+    state (θ, θ̇), torque τ(t)
+      → chain_terms        kinematics (stage 1), Gibbs–Appell arm dynamics (2), object/grasp (3),
+                           loop-closure Jacobians (4)
+      → stabilization      Baumgarte right-hand side, if selected (5)
+      → forward_dynamics   θ̈ and grasp wrenches (eqs. 25–27)
+      → integrate          adaptive DOP853/DOPRI5 or fixed-step RK4, projection after each step (5)
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
+                           forward_dynamics, position_residual)
+from .grasp import grasp_matrix, internal_wrench
+from .integrate import IntegrationError, IntegratorStats, integrate
+from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
+from .model import CoopsimError, IntegratorSettings, Model, torque_at
+from .spatial import rot_to_quat
+
+
+class SimulationError(CoopsimError):
+    """The simulation stopped; the message gives the time, the configuration and the reason."""
+
+
+class ConstraintRankWarning(RuntimeWarning):
+    """The constraint matrix Λ𝐈⁻¹Λᵀ lost rank; grasp wrenches are the minimum-norm ones."""
+
+
+@dataclass(frozen=True, eq=False)
+class SimResult:
+    """Sampled trajectory (N samples, n joints stacked arm by arm, r arms), SI units, world axes.
+    t (N,) s; q, qd, qdd (N, n) rad, rad/s, rad/s²; tau (N, n) N·m;
+    object_pos (N, 3) m (centre of mass); object_quat (N, 4) [w, x, y, z]; object_twist (N, 6)
+    [v_C; ω]; object_acc (N, 6) [v̇_C; ω̇]; grasp_wrench (N, r, 6) wrench each EE applies to the
+    object at its EE point; internal_wrench (N, r, 6) at C (eq. 7, paper's W⁺; rows sum to zero);
+    residual_pos (N,) max |Φ| (m or rad); residual_vel (N,) max |Λθ̇|; cond (N,) condition number of
+    Λ𝐈⁻¹Λᵀ; initial: the projection applied to the scenario's initial state; stats: integrator counts;
+    wall_time s (not deterministic: never logged as data)."""
+
+    model: Model
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    object_pos: np.ndarray
+    object_quat: np.ndarray
+    object_twist: np.ndarray
+    object_acc: np.ndarray
+    grasp_wrench: np.ndarray
+    internal_wrench: np.ndarray
+    residual_pos: np.ndarray
+    residual_vel: np.ndarray
+    cond: np.ndarray
+    initial: Projection
+    stats: IntegratorStats
+    wall_time: float
+
+
+def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[ChainTerms, ChainAcceleration]:
+    """One evaluation of the closed-chain forward dynamics at (q, qd) with torques tau (n,)."""
+    terms = chain_terms(model, q, qd)
+    stab = baumgarte_term(model, q, terms.Lam_qd) if model.integrator.stabilization == "baumgarte" else None
+    return terms, forward_dynamics(model, terms, tau, stab)
+
+
+def _describe(t: float, q: np.ndarray) -> str:
+    return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
+
+
+def initial_state(model: Model) -> Projection:
+    """Consistent initial state: the scenario's (q0, qd0) projected onto the loop-closure manifold.
+    Raises ConstraintError naming the fields when the grasps cannot be reached from there."""
+    try:
+        proj = consistent_state(model, model.q0, model.qd0)
+    except ConstraintError as exc:
+        raise ConstraintError(f"object.grasps: the arms cannot close the loop from arms[].initial: {exc}") from None
+    worst = float(np.max(np.abs(proj.dq)))
+    limit = model.integrator.max_initial_correction
+    if worst > limit:
+        raise ConstraintError(
+            f"object.grasps: closing the loop from arms[].initial needs a joint correction of {worst:.4g} rad "
+            f"(> integrator.max_initial_correction = {limit:g} rad); check the grasps and initial angles")
+    return proj
+
+
+def _rhs(model: Model):
+    """dy/dt for y = [θ; θ̇]; wraps failures with the time and configuration."""
+    n = model.n_total
+    warned = []
+
+    def rhs(t, y):
+        q, qd = y[:n], y[n:]
+        try:
+            _, acc = forward(model, q, qd, torque_at(model.torques, t))
+        except ConstraintError as exc:
+            raise SimulationError(f"simulation failed at {_describe(t, q)}: {exc}") from None
+        if acc.rank < model.rows.shape[0] * (model.r - 1):
+            reason = f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {acc.rank}, cond {acc.cond:.3g})"
+            if model.integrator.on_rank_deficiency == "error":
+                raise SimulationError(f"simulation failed at {_describe(t, q)}: {reason}")
+            if not warned:
+                warned.append(t)
+                warnings.warn(f"at {_describe(t, q)}: {reason}; using minimum-norm grasp wrenches",
+                              ConstraintRankWarning, stacklevel=2)
+        return np.concatenate([qd, acc.qdd])
+
+    return rhs
+
+
+def _projector(model: Model):
+    n, tol = model.n_total, model.integrator.projection_tol
+
+    def project(t, y):
+        try:
+            q, _ = project_positions(model, y[:n], tol)
+        except ConstraintError as exc:
+            raise SimulationError(f"simulation failed at {_describe(t, y[:n])}: projection: {exc}") from None
+        return np.concatenate([q, project_velocities(model, q, y[n:])])
+
+    return project
+
+
+def output_times(duration: float, dt: float) -> np.ndarray:
+    """0, dt, 2dt, … up to and including `duration` (the last interval may be shorter)."""
+    k = int(np.floor(duration / dt + 1e-9))
+    t = dt * np.arange(k + 1)
+    return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)
+
+
+def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None) -> SimResult:
+    """Integrate the closed chain from its consistent initial state over `duration` s (default the
+    scenario's) with the scenario's integrator settings (or `settings`)."""
+    if settings is not None:
+        model = replace(model, integrator=settings)
+    s = model.integrator
+    start = time.perf_counter()
+    init = initial_state(model)
+    t_out = output_times(model.duration if duration is None else duration, s.output_dt)
+    project = _projector(model) if s.stabilization == "projection" else None
+    try:
+        Y, stats = integrate(_rhs(model), np.concatenate([init.q, init.qd]), t_out, method=s.method,
+                             rtol=s.rtol, atol=s.atol, step=s.step, project=project)
+    except IntegrationError as exc:
+        n = model.n_total
+        raise SimulationError(f"simulation failed at {_describe(exc.t, exc.y[:n])}: {exc.reason}") from None
+    return _sample(model, t_out, Y, init, stats, time.perf_counter() - start)
+
+
+def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:
+    """Evaluate every reported quantity at the output samples."""
+    n, N, r = model.n_total, len(t), model.r
+    out = {k: np.zeros((N,) + shape) for k, shape in [
+        ("qdd", (n,)), ("tau", (n,)), ("object_pos", (3,)), ("object_quat", (4,)), ("object_twist", (6,)),
+        ("object_acc", (6,)), ("grasp_wrench", (r, 6)), ("internal_wrench", (r, 6)), ("residual_pos", ()),
+        ("residual_vel", ()), ("cond", ())]}
+    for i, (ti, y) in enumerate(zip(t, Y)):
+        q, qd = y[:n], y[n:]
+        tau = torque_at(model.torques, ti)
+        terms, acc = forward(model, q, qd, tau)
+        W = [grasp_matrix(s) for s in terms.s]
+        out["qdd"][i], out["tau"][i] = acc.qdd, tau
+        out["object_pos"][i], out["object_quat"][i] = terms.obj.p_C, rot_to_quat(terms.obj.R_o)
+        out["object_twist"][i], out["object_acc"][i] = terms.v_o, acc.vd_o
+        out["grasp_wrench"][i], out["internal_wrench"][i] = acc.F_e, internal_wrench(W, acc.F_e)
+        out["residual_pos"][i] = np.max(np.abs(position_residual(model, q)))
+        out["residual_vel"][i] = np.max(np.abs(terms.Lam_qd))
+        out["cond"][i] = acc.cond
+    return SimResult(model, t, Y[:, :n], Y[:, n:], initial=init, stats=stats, wall_time=wall, **out)

@@ -1,0 +1,86 @@
+"""Rotation and 3-vector helpers shared by every stage (pure NumPy, no I/O).
+
+Conventions: rotation matrices R map body-frame coordinates to world coordinates; quaternions are
+[w, x, y, z] with w >= 0 when canonicalised; roll-pitch-yaw angles (rad) give
+R = Rz(yaw) Ry(pitch) Rx(roll) (fixed-axis x, then y, then z).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v×], shape (3, 3): skew(v) @ u == cross(v, u)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def axis_angle_to_rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' formula R = I + sinφ [a×] + (1 − cosφ)[a×]², `axis` a unit 3-vector, angle in rad."""
+    K = skew(axis)
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
+
+
+def rpy_to_rot(rpy: np.ndarray) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) for rpy = (roll, pitch, yaw) in rad."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+def quat_to_rot(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion q = [w, x, y, z] (normalised here)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def rot_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] (w >= 0) of rotation matrix R (Shepperd's method)."""
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * np.sqrt(1.0 + t)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = np.empty(4)
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def rot_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector φ (rad, |φ| <= π) with exp([φ×]) = R; accurate near the identity."""
+    c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
+    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = np.linalg.norm(w)
+    angle = np.arctan2(s, c)
+    if s < 1e-12:
+        if c > 0:
+            return w
+        # angle ≈ π: axis from the symmetric part
+        B = 0.5 * (R + np.eye(3))
+        axis = B[int(np.argmax(np.diag(B)))]
+        return np.pi * axis / np.linalg.norm(axis)
+    return w * (angle / s)
+
+
+_I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (…, 3), broadcasting; a lean replacement of np.cross for tiny arrays."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a.take(_I1, -1) * b.take(_I2, -1) - a.take(_I2, -1) * b.take(_I1, -1)

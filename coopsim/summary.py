@@ -1,0 +1,59 @@
+"""Plain-data summaries of results, shared by the CLI's text and JSON outputs (no I/O here)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .simulate import SimResult
+
+
+def simulation_summary(res: SimResult) -> dict:
+    """JSON-ready summary of a forward simulation (SI units; wall_time_s is the only
+    non-deterministic entry)."""
+    m, init = res.model, res.initial
+    return {
+        "scenario": m.name,
+        "arms": [a.name for a in m.arms],
+        "joints": m.n_total,
+        "constraint_rows": "planar" if m.plane is not None else "spatial",
+        "duration_s": float(res.t[-1]),
+        "samples": len(res.t),
+        "integrator": m.integrator.method,
+        "stabilization": m.integrator.stabilization,
+        "initial_correction": {
+            "max_abs_dq_rad": float(np.max(np.abs(init.dq))),
+            "max_abs_dqd_rad_s": float(np.max(np.abs(init.dqd))),
+            "dq_rad": init.dq.tolist(),
+            "residual_before": init.residual_before,
+            "residual_after": init.residual_after,
+            "iterations": init.iterations,
+        },
+        "final_q_rad": res.q[-1].tolist(),
+        "final_object_position_m": res.object_pos[-1].tolist(),
+        "max_constraint_residual": float(np.max(res.residual_pos)),
+        "max_velocity_residual": float(np.max(res.residual_vel)),
+        "max_condition_number": float(np.max(res.cond)),
+        "max_internal_force_N": float(np.max(np.linalg.norm(res.internal_wrench[:, :, :3], axis=2))),
+        "rhs_evaluations": res.stats.n_rhs,
+        "steps_accepted": res.stats.n_accepted,
+        "steps_rejected": res.stats.n_rejected,
+        "wall_time_s": res.wall_time,
+    }
+
+
+def format_simulation_summary(s: dict) -> str:
+    """Short human-readable version of `simulation_summary`."""
+    ic = s["initial_correction"]
+    lines = [
+        f"scenario        {s['scenario']}: {len(s['arms'])} arms, {s['joints']} joints, {s['constraint_rows']} constraint rows",
+        f"initial state   loop-closure residual {ic['residual_before']:.3g} -> {ic['residual_after']:.3g} "
+        f"(max joint correction {ic['max_abs_dq_rad']:.3g} rad, {ic['iterations']} Gauss-Newton steps)",
+        f"integration     {s['integrator']} + {s['stabilization']}, {s['duration_s']:g} s, {s['steps_accepted']} steps "
+        f"({s['steps_rejected']} rejected), {s['rhs_evaluations']} evaluations, {s['wall_time_s']:.2f} s wall",
+        f"final q (rad)   [{', '.join(f'{x:.6f}' for x in s['final_q_rad'])}]",
+        f"final object    [{', '.join(f'{x:.6f}' for x in s['final_object_position_m'])}] m",
+        f"constraints     max |phi| {s['max_constraint_residual']:.3g}, max |Lambda qd| {s['max_velocity_residual']:.3g}, "
+        f"max cond {s['max_condition_number']:.3g}",
+        f"internal force  max {s['max_internal_force_N']:.4g} N",
+    ]
+    return "\n".join(lines)

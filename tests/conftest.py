@@ -1,0 +1,117 @@
+"""Shared fixtures and independent MuJoCo references for the stage tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenarios"
+
+
+@pytest.fixture(scope="session")
+def paper():
+    return load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
+
+
+@pytest.fixture(scope="session")
+def spatial():
+    return load_scenario(SCENARIOS / "spatial_6r_pair.yaml")
+
+
+class MujocoReference:
+    """MuJoCo's own open-chain quantities for a coopsim model (arms, and the object on its carrier
+    when with_object=True; no welds), in coopsim's stacked joint order."""
+
+    def __init__(self, model, with_object: bool):
+        spec = build_spec(model, with_object=with_object)
+        for eq in list(spec.equalities):
+            spec.delete(eq)
+        self.m = spec.compile()
+        self.d = mujoco.MjData(self.m)
+        self.qadr = qpos_address(self.m, model)
+        self.dadr = dof_address(self.m, model)
+
+    def set_state(self, q, qd):
+        self.d.qpos[self.qadr] = q
+        self.d.qvel[self.dadr] = qd
+        mujoco.mj_forward(self.m, self.d)
+
+    def mass_matrix(self):
+        M = np.zeros((self.m.nv, self.m.nv))
+        mujoco.mj_fullM(self.m, self.d, M)
+        return M[np.ix_(self.dadr, self.dadr)]
+
+    def bias(self):
+        return self.d.qfrc_bias[self.dadr].copy()
+
+    def site_jacobian(self, name):
+        """(J (6, n) of the site's point [v; ω], J̇q̇ (6,)) in coopsim's joint order."""
+        sid = self.m.site(name).id
+        body = self.m.site_bodyid[sid]
+        point = self.d.site_xpos[sid].copy()
+        jp, jr = np.zeros((3, self.m.nv)), np.zeros((3, self.m.nv))
+        mujoco.mj_jac(self.m, self.d, jp, jr, point, body)
+        dp, dr = np.zeros((3, self.m.nv)), np.zeros((3, self.m.nv))
+        mujoco.mj_jacDot(self.m, self.d, dp, dr, point, body)
+        J = np.vstack([jp, jr])[:, self.dadr]
+        Jd = np.vstack([dp, dr])[:, self.dadr]
+        return J, Jd @ self.d.qvel[self.dadr]
+
+
+def random_states(model, count: int, seed: int):
+    """`count` random (q, qd): angles uniform in [−π, π], rates standard normal (rad/s)."""
+    rng = np.random.default_rng(seed)
+    n = model.n_total
+    return [(rng.uniform(-np.pi, np.pi, n), rng.normal(size=n)) for _ in range(count)]
+
+
+def rel_err(a, b) -> float:
+    """max |a − b| / max(1, max |b|): relative for large values, absolute near zero."""
+    a, b = np.asarray(a), np.asarray(b)
+    return float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b))))
+
+
+def consistent_states(model, count: int, seed: int, spread: float = 0.4):
+    """`count` random states on the loop-closure manifold: q0 + N(0, spread²) and N(0, 1) rates,
+    projected with coopsim's Gauss–Newton projection (draws that do not converge are skipped)."""
+    from coopsim.closed_chain import ConstraintError
+    from coopsim.manifold import project_positions, project_velocities
+
+    rng = np.random.default_rng(seed)
+    states = []
+    for _ in range(20 * count):
+        try:
+            q, _ = project_positions(model, model.q0 + rng.normal(scale=spread, size=model.n_total), 1e-13)
+        except ConstraintError:
+            continue
+        states.append((q, project_velocities(model, q, rng.normal(size=model.n_total))))
+        if len(states) == count:
+            return states
+    raise RuntimeError("could not draw enough consistent states")
+
+
+def mujoco_kkt_acceleration(model, ref: "MujocoReference", q, qd, tau):
+    """θ̈ from the KKT system built from MuJoCo's open chain (object attached to its carrier):
+    [M Gᵀ; G 0][θ̈; λ] = [τ − bias; −Ġθ̇], G = S (J_EE,m − J_grasp,m) for every arm m but the carrier."""
+    ref.set_state(q, qd)
+    M, bias = ref.mass_matrix(), ref.bias()
+    G, gamma = [], []
+    for m in range(model.r):
+        if m == model.object.carrier:
+            continue
+        J_ee, a_ee = ref.site_jacobian(f"a{m}_ee")
+        J_g, a_g = ref.site_jacobian(f"grasp{m}")
+        G.append(model.rows @ (J_ee - J_g))
+        gamma.append(model.rows @ (a_ee - a_g))
+    G, gamma = np.vstack(G), np.concatenate(gamma)
+    n, k = M.shape[0], G.shape[0]
+    K = np.block([[M, G.T], [G, np.zeros((k, k))]])
+    sol = np.linalg.solve(K, np.concatenate([tau - bias, -gamma]))
+    return sol[:n]

@@ -1,0 +1,45 @@
+"""Stage 1 — kinematics against MuJoCo's forward kinematics and Jacobians (mj_jac, mj_jacDot)."""
+
+import numpy as np
+import pytest
+
+from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian
+from conftest import MujocoReference, random_states, rel_err
+
+TOL_POSE = 1e-12  # m, dimensionless rotation entries
+TOL_JAC = 1e-9    # relative
+
+
+@pytest.mark.parametrize("scenario", ["paper", "spatial"])
+def test_ee_pose_jacobian_and_bias_match_mujoco(scenario, request):
+    model = request.getfixturevalue(scenario)
+    ref = MujocoReference(model, with_object=False)
+    worst = {"pose": 0.0, "J": 0.0, "Jdqd": 0.0, "com": 0.0}
+    for q, qd in random_states(model, 20, seed=1):
+        ref.set_state(q, qd)
+        for m, (arm, sl) in enumerate(zip(model.arms, model.dof_slices)):
+            pose = arm_pose(arm, q[sl])
+            sid = ref.m.site(f"a{m}_ee").id
+            worst["pose"] = max(worst["pose"], rel_err(pose.p_ee, ref.d.site_xpos[sid]),
+                                rel_err(pose.R_ee, ref.d.site_xmat[sid].reshape(3, 3)))
+            bodies = [ref.m.body(f"a{m}_l{i}").id for i in range(arm.n)]
+            worst["com"] = max(worst["com"], rel_err(pose.c, ref.d.xipos[bodies]))
+            J_ref, Jd_ref = ref.site_jacobian(f"a{m}_ee")
+            worst["J"] = max(worst["J"], rel_err(ee_jacobian(pose), J_ref[:, sl]))
+            worst["Jdqd"] = max(worst["Jdqd"], rel_err(ee_bias_acceleration(pose, qd[sl]), Jd_ref))
+    assert worst["pose"] <= TOL_POSE, f"end-effector pose differs from MuJoCo's site by {worst['pose']:.3g}"
+    assert worst["com"] <= TOL_POSE, f"link centres of mass differ from MuJoCo's xipos by {worst['com']:.3g}"
+    assert worst["J"] <= TOL_JAC, f"EE Jacobian differs from mj_jac by {worst['J']:.3g}"
+    assert worst["Jdqd"] <= TOL_JAC, f"J̇θ̇ differs from mj_jacDot by {worst['Jdqd']:.3g}"
+
+
+def test_bias_acceleration_matches_finite_difference_of_jacobian(spatial):
+    """J̇θ̇ = d/dt (J(θ(t))) θ̇ by central differences along θ(t) = θ + t θ̇ (step 1e-6 s)."""
+    arm, sl = spatial.arms[0], spatial.dof_slices[0]
+    worst = 0.0
+    for q, qd in random_states(spatial, 20, seed=2):
+        q, qd = q[sl], qd[sl]
+        h = 1e-6
+        dJ = (ee_jacobian(arm_pose(arm, q + h * qd)) - ee_jacobian(arm_pose(arm, q - h * qd))) / (2 * h)
+        worst = max(worst, rel_err(ee_bias_acceleration(arm_pose(arm, q), qd), dJ @ qd))
+    assert worst <= 1e-8, f"J̇θ̇ differs from the finite difference by {worst:.3g}"
