@@ -8,31 +8,11 @@ end-effector and each grasp on the object.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import mujoco
 import numpy as np
 
-from .model import ArmModel, Model
+from .model import ArmModel, Model, MujocoSettings
 from .spatial import rot_to_quat
-
-
-@dataclass(frozen=True)
-class MujocoSettings:
-    """timestep s; integrator 'RK4' | 'Euler' | 'implicit' | 'implicitfast'; weld solref
-    [timeconst s, dampratio] (default: timeconst = 2·timestep, critical damping) and solimp
-    [d0, d_width, width m, midpoint, power] (impedance close to 1: as stiff as the step allows);
-    Newton solver with `tolerance` and `iterations`."""
-
-    timestep: float = 1e-3
-    integrator: str = "RK4"
-    weld_solref: tuple[float, float] | None = None
-    weld_solimp: tuple[float, ...] = (0.9999, 0.9999, 0.001, 0.5, 2.0)
-    tolerance: float = 1e-12
-    iterations: int = 200
-
-    def solref(self) -> tuple[float, float]:
-        return self.weld_solref if self.weld_solref is not None else (2.0 * self.timestep, 1.0)
 
 
 _INTEGRATORS = {"RK4": mujoco.mjtIntegrator.mjINT_RK4, "Euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -72,7 +52,7 @@ def _visual_box(body, size: np.ndarray, pos: np.ndarray, rgba=(0.6, 0.6, 0.7, 1.
 def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_object: bool = True,
                with_geoms: bool = True) -> mujoco.MjSpec:
     """MjSpec of the scene (with_object=False: the open arms alone, for stage tests)."""
-    st = settings or MujocoSettings()
+    st = settings or model.mujoco
     spec = mujoco.MjSpec()
     spec.modelname = model.name
     spec.option.timestep = st.timestep
@@ -81,7 +61,7 @@ def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_obj
     spec.option.solver = mujoco.mjtSolver.mjSOL_NEWTON
     spec.option.tolerance = st.tolerance
     spec.option.iterations = st.iterations
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_REFSAFE
     spec.compiler.autolimits = True
     last = [_add_arm(spec.worldbody, arm, m, with_geoms)[-1] for m, arm in enumerate(model.arms)]
     for m, arm in enumerate(model.arms):
@@ -110,15 +90,15 @@ def _add_object(spec, model: Model, last: list, with_geoms: bool, st: MujocoSett
         if m == c:
             continue
         arm = model.arms[m]
-        # pose of arm m's last link in the object frame: (grasp pose) ∘ (EE pose in the link)⁻¹
-        R_ol = obj.grasp_rot[m] @ arm.ee_rot.T
-        p_ol = obj.grasp_pos[m] - R_ol @ arm.ee_pos
+        # MuJoCo welds the point `relpose[:3]` of body1 to the point `anchor` of body2 and holds
+        # body2's orientation in body1 at `relpose[3:]`: both points are the grasp point.
+        R_ol = obj.grasp_rot[m] @ arm.ee_rot.T  # arm m's last link in the object frame
         eq = spec.add_equality(name=f"weld{m}", type=mujoco.mjtEq.mjEQ_WELD,
                                objtype=mujoco.mjtObj.mjOBJ_BODY, name1="object", name2=f"a{m}_l{arm.n - 1}")
         data = np.zeros(11)
-        data[0:3] = arm.ee_pos             # anchor: the weld point, in body2 (arm m's last link)
-        data[3:6] = p_ol                   # relpose: body2 in body1 (object) frame
-        data[6:10] = rot_to_quat(R_ol)
+        data[0:3] = arm.ee_pos             # anchor: the grasp point in body2 (arm m's last link)
+        data[3:6] = obj.grasp_pos[m]       # the same point in body1 (the object)
+        data[6:10] = rot_to_quat(R_ol)     # body2's orientation in body1
         data[10] = 1.0                     # torquescale
         eq.data = np.concatenate([data, np.zeros(len(eq.data) - 11)])
         eq.solref, eq.solimp = list(st.solref()), list(st.weld_solimp)

@@ -110,6 +110,42 @@ class IntegratorSettings:
     on_rank_deficiency: str = "warn"
 
 
+@dataclass(frozen=True)
+class MujocoSettings:
+    """The MuJoCo twin's numerics: timestep s; integrator 'RK4' | 'Euler' | 'implicit' |
+    'implicitfast'; weld solref [timeconst s, dampratio] and solimp [d0, d_width, width m, midpoint,
+    power]; Newton solver `tolerance`, `iterations`.
+
+    MuJoCo enforces a weld as J q̈ = −b J q̇ − k r (b = 2/timeconst, k = 1/timeconst² at critical
+    damping, impedance d → 1), without the J̇q̇ term, so the weld yields by about
+    timeconst² · |J̇q̇|. The default timeconst is therefore one timestep (None), with MuJoCo's
+    `refsafe` clamp to 2·timestep disabled: RK4 stays stable down to about timestep/2.8."""
+
+    timestep: float = 1e-3
+    integrator: str = "RK4"
+    weld_solref: tuple[float, float] | None = None
+    weld_solimp: tuple[float, ...] = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+    tolerance: float = 1e-12
+    iterations: int = 200
+
+    def solref(self) -> tuple[float, float]:
+        return self.weld_solref if self.weld_solref is not None else (self.timestep, 1.0)
+
+
+@dataclass(frozen=True)
+class ValidationThresholds:
+    """Agreement the native model and the MuJoCo twin must reach over the run (max over samples and
+    joints): joint angle rad, joint rate rad/s, object position m, object orientation rad, MuJoCo weld
+    violation (max |efc_pos| of the welds, m or rad), native loop-closure residual."""
+
+    max_angle_error: float = 1e-6
+    max_rate_error: float = 1e-5
+    max_object_position_error: float = 1e-6
+    max_object_orientation_error: float = 1e-6
+    max_weld_violation: float = 1e-6
+    max_native_residual: float = 1e-10
+
+
 @dataclass(frozen=True, eq=False)
 class Model:
     """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
@@ -129,6 +165,8 @@ class Model:
     torques: tuple[TorqueTable, ...]
     motors: Motors
     integrator: IntegratorSettings
+    mujoco: MujocoSettings = MujocoSettings()
+    validation: ValidationThresholds = ValidationThresholds()
 
     @property
     def r(self) -> int:

@@ -14,8 +14,8 @@ import numpy as np
 import yaml
 
 from .kinematics import arm_pose
-from .model import (ArmModel, CoopsimError, IntegratorSettings, Model, Motors, ObjectModel,
-                    TorqueTable)
+from .model import (ArmModel, CoopsimError, IntegratorSettings, Model, Motors, MujocoSettings,
+                    ObjectModel, TorqueTable, ValidationThresholds)
 from .spatial import quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
@@ -306,6 +306,32 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
     return s
 
 
+def _mujoco(sec: _Section | None) -> MujocoSettings:
+    if sec is None:
+        return MujocoSettings()
+    d = MujocoSettings()
+    solref = sec.array("weld_solref", (2,), default=None, positive=True) if sec.has("weld_solref") else None
+    s = MujocoSettings(
+        timestep=sec.number("timestep", d.timestep, positive=True),
+        integrator=sec.string("integrator", ("RK4", "Euler", "implicit", "implicitfast"), d.integrator),
+        weld_solref=None if solref is None else (float(solref[0]), float(solref[1])),
+        weld_solimp=tuple(float(x) for x in sec.array("weld_solimp", (5,), default=d.weld_solimp)),
+        tolerance=sec.number("tolerance", d.tolerance, positive=True),
+        iterations=int(sec.number("iterations", d.iterations, positive=True)),
+    )
+    sec.done()
+    return s
+
+
+def _validation(sec: _Section | None) -> ValidationThresholds:
+    if sec is None:
+        return ValidationThresholds()
+    d = ValidationThresholds()
+    s = ValidationThresholds(**{k: sec.number(k, getattr(d, k), positive=True) for k in d.__dataclass_fields__})
+    sec.done()
+    return s
+
+
 def _object(sec: _Section, arms: list[ArmModel]):
     """Object inertia and grasps; grasps given explicitly or `derive` (from the initial state)."""
     mass, com, inertia, box = _body(sec)
@@ -375,6 +401,8 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
         root.fail("arms", f"arm names must be unique, got {names}")
     mass, inertia, box, order, grasp, pose = _object(root.section("object"), arms)
     integrator = _integrator(root.section("integrator", default=None))
+    mujoco_settings = _mujoco(root.section("mujoco", default=None))
+    validation = _validation(root.section("validation", default=None))
     root.done()
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
     grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
@@ -382,7 +410,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
     planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
     return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
-                 tuple(torques), motors, integrator)
+                 tuple(torques), motors, integrator, mujoco_settings, validation)
 
 
 def _arm_poses(arms: list[ArmModel], q: np.ndarray):
