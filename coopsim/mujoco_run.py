@@ -21,7 +21,9 @@ from .model import CoopsimError, Model, torque_at
 class TwinResult:
     """MuJoCo twin trajectory sampled at t (N,) s: q, qd, qdd, tau (N, n) in coopsim's joint order;
     object_pos (N, 3) m, object_quat (N, 4) [w, x, y, z], object_twist (N, 6) [v_C; ω] world axes;
-    weld_violation (N,) max |efc_pos| over the weld rows (m or rad); wall_time s (not logged)."""
+    weld_violation (N,) max |efc_pos| over the weld rows (m or rad); link_pos (N, n, 3) and
+    link_quat (N, n, 4) MuJoCo's link frame poses (xpos, xquat), joints stacked as q;
+    wall_time s (not logged)."""
 
     t: np.ndarray
     q: np.ndarray
@@ -32,6 +34,8 @@ class TwinResult:
     object_quat: np.ndarray
     object_twist: np.ndarray
     weld_violation: np.ndarray
+    link_pos: np.ndarray
+    link_quat: np.ndarray
     wall_time: float
 
 
@@ -64,12 +68,14 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray) -
     qadr, dadr = qpos_address(m, model), dof_address(m, model)
     ctrl = np.array([m.actuator(f"a{a}_m{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)])
     obj = m.body("object").id
+    links = np.array([m.body(f"a{a}_l{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)])
     weld_rows = lambda: d.efc_type[: d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY  # noqa: E731
     steps = _steps_per_sample(t_out, m.opt.timestep)
     N, n = len(t_out), model.n_total
     out = {k: np.zeros((N,) + s) for k, s in [("q", (n,)), ("qd", (n,)), ("qdd", (n,)), ("tau", (n,)),
                                             ("object_pos", (3,)), ("object_quat", (4,)),
-                                            ("object_twist", (6,)), ("weld_violation", ())]}
+                                            ("object_twist", (6,)), ("weld_violation", ()),
+                                            ("link_pos", (n, 3)), ("link_quat", (n, 4))]}
     d.qpos[qadr], d.qvel[dadr], d.time = q0, qd0, t_out[0]
     start = time.perf_counter()
     vel = np.zeros(6)
@@ -84,6 +90,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray) -
             out["tau"][i] = d.ctrl[ctrl]
             out["object_pos"][i], out["object_quat"][i] = d.xpos[obj], d.xquat[obj]
             out["object_twist"][i] = np.concatenate([vel[3:], vel[:3]])
+            out["link_pos"][i], out["link_quat"][i] = d.xpos[links], d.xquat[links]
             efc = d.efc_pos[: d.nefc][weld_rows()]
             out["weld_violation"][i] = np.max(np.abs(efc)) if efc.size else 0.0
     wall = time.perf_counter() - start
