@@ -60,9 +60,9 @@ def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
     return np.round(k).astype(int)
 
 
-def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray) -> TwinResult:
+def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
-    model.mujoco.timestep)."""
+    model.mujoco.timestep); `progress(fraction)` is called after each sample."""
     m = build_spec(model).compile()
     d = mujoco.MjData(m)
     qadr, dadr = qpos_address(m, model), dof_address(m, model)
@@ -93,5 +93,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray) -
             out["link_pos"][i], out["link_quat"][i] = d.xpos[links], d.xquat[links]
             efc = d.efc_pos[: d.nefc][weld_rows()]
             out["weld_violation"][i] = np.max(np.abs(efc)) if efc.size else 0.0
+            if progress is not None:
+                progress((i + 1) / N)
     wall = time.perf_counter() - start
     return TwinResult(t=np.asarray(t_out, dtype=float), wall_time=wall, **out)

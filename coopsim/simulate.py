@@ -91,13 +91,16 @@ def initial_state(model: Model) -> Projection:
     return proj
 
 
-def _rhs(model: Model):
-    """dy/dt for y = [θ; θ̇]; wraps failures with the time and configuration."""
+def _rhs(model: Model, progress=None):
+    """dy/dt for y = [θ; θ̇]; wraps failures with the time and configuration; reports the fraction
+    of the run done to `progress` (called with t / duration)."""
     n = model.n_total
     warned = []
 
     def rhs(t, y):
         q, qd = y[:n], y[n:]
+        if progress is not None:
+            progress(min(1.0, t / model.duration) if model.duration > 0 else 1.0)
         try:
             _, acc = forward(model, q, qd, torque_at(model.torques, t))
         except ConstraintError as exc:
@@ -135,18 +138,22 @@ def output_times(duration: float, dt: float) -> np.ndarray:
     return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)
 
 
-def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None) -> SimResult:
+def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None,
+             progress=None) -> SimResult:
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
-    scenario's) with the scenario's integrator settings (or `settings`)."""
+    scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
+    called as the run advances."""
     if settings is not None:
         model = replace(model, integrator=settings)
+    if duration is not None:
+        model = replace(model, duration=duration)
     s = model.integrator
     start = time.perf_counter()
     init = initial_state(model)
-    t_out = output_times(model.duration if duration is None else duration, s.output_dt)
+    t_out = output_times(model.duration, s.output_dt)
     project = _projector(model) if s.stabilization == "projection" else None
     try:
-        Y, stats = integrate(_rhs(model), np.concatenate([init.q, init.qd]), t_out, method=s.method,
+        Y, stats = integrate(_rhs(model, progress), np.concatenate([init.q, init.qd]), t_out, method=s.method,
                              rtol=s.rtol, atol=s.atol, step=s.step, project=project)
     except IntegrationError as exc:
         n = model.n_total
