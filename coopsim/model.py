@@ -114,7 +114,8 @@ class IntegratorSettings:
 class MujocoSettings:
     """The MuJoCo twin's numerics: timestep s; integrator 'RK4' | 'Euler' | 'implicit' |
     'implicitfast'; weld solref [timeconst s, dampratio] and solimp [d0, d_width, width m, midpoint,
-    power]; Newton solver `tolerance`, `iterations`.
+    power]; Newton solver `tolerance`, `iterations`; object_mass_scale: a deliberate error in the
+    twin's object mass and inertia (1 = none), to prove the harness detects a wrong twin.
 
     MuJoCo enforces a weld as J q̈ = −b J q̇ − k r (b = 2/timeconst, k = 1/timeconst² at critical
     damping, impedance d → 1), without the J̇q̇ term, so the weld yields by about
@@ -127,6 +128,7 @@ class MujocoSettings:
     weld_solimp: tuple[float, ...] = (0.9999, 0.9999, 0.001, 0.5, 2.0)
     tolerance: float = 1e-12
     iterations: int = 200
+    object_mass_scale: float = 1.0
 
     def solref(self) -> tuple[float, float]:
         return self.weld_solref if self.weld_solref is not None else (self.timestep, 1.0)

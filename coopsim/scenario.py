@@ -318,6 +318,7 @@ def _mujoco(sec: _Section | None) -> MujocoSettings:
         weld_solimp=tuple(float(x) for x in sec.array("weld_solimp", (5,), default=d.weld_solimp)),
         tolerance=sec.number("tolerance", d.tolerance, positive=True),
         iterations=int(sec.number("iterations", d.iterations, positive=True)),
+        object_mass_scale=sec.number("object_mass_scale", d.object_mass_scale, positive=True),
     )
     sec.done()
     return s
