@@ -25,6 +25,11 @@ def spatial():
     return load_scenario(SCENARIOS / "spatial_6r_pair.yaml")
 
 
+@pytest.fixture(scope="session")
+def three_arms():
+    return load_scenario(SCENARIOS / "planar_3arm_vertical.yaml")
+
+
 class MujocoReference:
     """MuJoCo's own open-chain quantities for a coopsim model (arms, and the object on its carrier
     when with_object=True; no welds), in coopsim's stacked joint order."""

@@ -11,7 +11,7 @@ TOL_QDD = 1e-9        # relative to max(1, |θ̈|)
 TOL_CONSTRAINT = 1e-10  # |Λθ̈ + Λ̇θ̇|, m/s² and rad/s²
 
 
-@pytest.mark.parametrize("scenario", ["paper", "spatial"])
+@pytest.mark.parametrize("scenario", ["paper", "spatial", "three_arms"])
 def test_accelerations_match_mujoco_kkt(scenario, request):
     model = request.getfixturevalue(scenario)
     ref = MujocoReference(model, with_object=True)
@@ -27,7 +27,7 @@ def test_accelerations_match_mujoco_kkt(scenario, request):
     assert worst_res <= TOL_CONSTRAINT, f"constraint acceleration residual {worst_res:.3g}"
 
 
-@pytest.mark.parametrize("scenario", ["paper", "spatial"])
+@pytest.mark.parametrize("scenario", ["paper", "spatial", "three_arms"])
 def test_grasp_wrenches_balance_the_object(scenario, request):
     """Σ W_m F_e^m = M_o v̇_o + b_o (eqs. 4–6, 11) in the scene's rows, and each arm's equation
     I_m θ̈_m + h_m = τ_m − J_mᵀ F_e^m (eq. 10) holds with the reported wrenches."""
