@@ -35,6 +35,55 @@ def _cmd_mjcf(args) -> int:
     return 0
 
 
+def _cmd_run(args) -> int:
+    from pathlib import Path
+
+    from .atomic import write_text_atomic
+    from .compare import format_comparison
+    from .harness import cross_validate
+    from .log import file_sha256, read_mcap, write_run_log
+    from .plots import comparison_plots
+    from .progress import ProgressBar
+    from .scenario import load_scenario
+    from .summary import run_summary
+
+    model = load_scenario(args.scenario)
+    out = Path(args.out or Path("out") / model.name)
+    out.mkdir(parents=True, exist_ok=True)
+    bar = ProgressBar()
+    cv = cross_validate(model, duration=args.duration, progress=bar)
+    bar.close()
+    log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
+        "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+        "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
+    plots = comparison_plots(read_mcap(log_path), out)
+    summary = run_summary(cv, log_path, plots)
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(format_comparison(cv.comparison))
+        for failure in cv.comparison.failures():
+            print(f"  FAIL: {failure}")
+        print(f"wall time: native {cv.native.wall_time:.2f} s, MuJoCo {cv.twin.wall_time:.2f} s")
+        print(f"wrote {log_path}, {out / 'summary.json'} and {len(plots)} plots in {out}")
+    return 0 if cv.comparison.passed else 1
+
+
+def _cmd_plot(args) -> int:
+    from pathlib import Path
+
+    from .log import read_mcap
+    from .plots import comparison_plots
+
+    log_path = Path(args.log)
+    if not log_path.is_file():
+        raise CoopsimError(f"{log_path}: log file not found")
+    for path in comparison_plots(read_mcap(log_path), Path(args.out or log_path.parent)):
+        print(path)
+    return 0
+
+
 def _cmd_validate(args) -> int:
     from .compare import format_comparison
     from .harness import cross_validate
@@ -93,6 +142,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")
     p.set_defaults(func=_cmd_simulate)
 
+    p = sub.add_parser("run", help="run the native model and the MuJoCo twin: MCAP log, plots, summary.json",
+                       description=("Run SCENARIO through the native model and its MuJoCo twin with the same "
+                                    "torques; write DIR/NAME.mcap, comparison plots and summary.json; exit 0 "
+                                    "only if the two agree within the scenario's thresholds."))
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
+    p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
+    p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("plot", help="comparison plots from an existing MCAP log",
+                       description="Draw the comparison plots of LOG (an MCAP file written by `coopsim run`).")
+    p.add_argument("log", help="MCAP log file")
+    p.add_argument("--out", default=None, help="output folder (default: the log's folder)")
+    p.set_defaults(func=_cmd_plot)
+
     p = sub.add_parser("validate", help="cross-validate scenarios against their MuJoCo twins",
                        description=("Run the native model and the MuJoCo twin of each SCENARIO (default: "
                                     "scenarios/*.yaml) and compare them; exit 0 only if all agree."))
@@ -115,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         warnings.simplefilter("default")
         try:
             return args.func(args)
-        except CoopsimError as exc:
+        except (CoopsimError, OSError) as exc:
             print(f"coopsim: error: {exc}", file=sys.stderr)
             return 2
 

@@ -41,6 +41,20 @@ def simulation_summary(res: SimResult) -> dict:
     }
 
 
+def run_summary(cv, log_path, plots) -> dict:
+    """summary.json of `coopsim run`: the native summary, the agreement metrics, both wall times and
+    the files written."""
+    return {
+        "native": simulation_summary(cv.native),
+        "agreement": cv.comparison.as_dict(),
+        "wall_time_s": {"native": cv.native.wall_time, "mujoco": cv.twin.wall_time,
+                        "native_over_mujoco": cv.native.wall_time / cv.twin.wall_time},
+        "mujoco": {"timestep_s": cv.native.model.mujoco.timestep, "integrator": cv.native.model.mujoco.integrator,
+                   "weld_solref": list(cv.native.model.mujoco.solref())},
+        "files": {"log": str(log_path), "plots": [str(p) for p in plots]},
+    }
+
+
 def format_simulation_summary(s: dict) -> str:
     """Short human-readable version of `simulation_summary`."""
     ic = s["initial_correction"]
