@@ -101,10 +101,15 @@ def _rhs(model: Model, progress=None):
         q, qd = y[:n], y[n:]
         if progress is not None:
             progress(min(1.0, t / model.duration) if model.duration > 0 else 1.0)
+        tau = torque_at(model.torques, t)
         try:
-            _, acc = forward(model, q, qd, torque_at(model.torques, t))
+            with np.errstate(invalid="ignore", over="ignore"):
+                _, acc = forward(model, q, qd, tau)
         except ConstraintError as exc:
             raise SimulationError(f"simulation failed at {_describe(t, q)}: {exc}") from None
+        if not np.all(np.isfinite(acc.qdd)):
+            raise SimulationError(f"simulation failed at {_describe(t, q)}: non-finite joint accelerations "
+                                  f"(torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to {np.max(np.abs(qd)):.3g} rad/s)")
         if acc.rank < model.rows.shape[0] * (model.r - 1):
             reason = f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {acc.rank}, cond {acc.cond:.3g})"
             if model.integrator.on_rank_deficiency == "error":

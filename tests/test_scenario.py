@@ -61,6 +61,8 @@ CASES = [
     (["arms", 0, "links", 0, "inertial"], {"mass": 1.0, "inertia": [1, 1, 1, 0, 0, 0]},
      r"arms\[0\]\.links\[0\]\.box: give exactly one of box or inertial"),
     (["arms"], [PAPER["arms"][0]], r"arms: expected a list of at least 2 entries"),
+    (["object"], {"inertial": {"mass": -18.84, "inertia": [0.27, 0.26, 0.02, 0, 0, 0]}, "grasps": "derive"},
+     r"object\.inertial\.mass: must be positive"),
 ]
 
 

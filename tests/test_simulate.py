@@ -91,3 +91,9 @@ def test_results_are_deterministic(paper):
     b = simulate(replace(paper, duration=0.5))
     for field in ("q", "qd", "qdd", "object_pos", "grasp_wrench", "internal_wrench"):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
+
+
+def test_non_finite_dynamics_stop_with_time_configuration_and_reason(paper):
+    huge = tuple(TorqueTable(np.zeros(1), np.full((1, a.n), 1e308)) for a in paper.arms)
+    with pytest.raises(SimulationError, match=r"failed at t=.* s, q=\[.*\] rad: non-finite"):
+        simulate(replace(paper, torques=huge, duration=0.1))
