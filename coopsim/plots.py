@@ -1,0 +1,174 @@
+"""Comparison plots of a run log (native model vs MuJoCo twin), PNG via matplotlib's Agg canvas.
+
+Every function takes a :class:`coopsim.log.LogData` (from :func:`coopsim.log.read_mcap`), so a fresh
+run and a stored log are plotted by the same code. Topics used: /native/joint_state, /native/object,
+/native/constraint and, when present, their /mujoco counterparts (without them only the native model
+is drawn). Arms and joint names come from the log's "model" metadata record when it is there.
+Differences |native − mujoco| are drawn on log axes (exact zeros are left out: a log axis cannot show
+them); when the twin is sampled at other times it is interpolated linearly onto the native times.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .atomic import atomic_path
+from .log import LogData
+
+NATIVE, TWIN = "/native", "/mujoco"
+FILES = ("joint_angles.png", "joint_rates.png", "object_motion.png", "constraint_violation.png")
+_AXES = ("x", "y", "z")
+
+
+def _arm_groups(log: LogData, n: int) -> list[tuple[str, slice]]:
+    """(arm name, joint slice) per arm from the "model" metadata record; one group without it."""
+    rec = log.metadata.get("model", {})
+    try:
+        names, dofs = json.loads(rec["arms"]), json.loads(rec["dofs"])
+    except (KeyError, ValueError):
+        return [("joints", slice(0, n))]
+    if sum(dofs) != n:
+        return [("joints", slice(0, n))]
+    ends = np.cumsum([0] + list(dofs))
+    return [(str(a), slice(int(s), int(e))) for a, s, e in zip(names, ends[:-1], ends[1:])]
+
+
+def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[str]:
+    if joint_names is not None:
+        if len(joint_names) != n:
+            raise ValueError(f"joint_names: expected {n} names, got {len(joint_names)}")
+        return list(joint_names)
+    try:
+        names = json.loads(log.metadata["model"]["joint_names"])
+        if len(names) == n:
+            return [str(s) for s in names]
+    except (KeyError, ValueError):
+        pass
+    return [f"q{i}" for i in range(n)]
+
+
+def _aligned(t: np.ndarray, t_other: np.ndarray, x_other: np.ndarray) -> np.ndarray:
+    """x_other (M, ...) sampled at t_other, at the times t (N,) (exact when the times agree)."""
+    if np.array_equal(t, t_other):
+        return x_other
+    flat = x_other.reshape(len(t_other), -1)
+    cols = [np.interp(t, t_other, c) for c in flat.T]
+    return np.stack(cols, axis=-1).reshape((len(t),) + x_other.shape[1:])
+
+
+def _twin(log: LogData, topic: str, key: str, t: np.ndarray) -> np.ndarray | None:
+    """The twin's field on the native times, or None when the log has no twin topic."""
+    d = log.topics.get(TWIN + topic)
+    return None if d is None else _aligned(t, d["t"], d[key])
+
+
+def _log_plot(ax, t: np.ndarray, y: np.ndarray, label: str, **kw) -> bool:
+    """Plot positive values of y on a log axis; return whether anything was drawn."""
+    y = np.where(y > 0, y, np.nan)
+    if not np.any(np.isfinite(y)):
+        return False
+    ax.semilogy(t, y, label=label, **kw)
+    return True
+
+
+def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
+    ax.set_ylabel(ylabel)
+    ax.set_xlabel("time (s)")
+    ax.grid(True, which="both", alpha=0.3)
+    if drawn:
+        ax.legend(fontsize="small", ncol=2)
+    else:
+        ax.text(0.5, 0.5, "difference exactly zero", ha="center", va="center", transform=ax.transAxes)
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    FigureCanvasAgg(fig)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    return path
+
+
+def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list[str]) -> Figure:
+    nat = log.topics[NATIVE + "/joint_state"]
+    t, x = nat["t"], nat[key]
+    y = _twin(log, "/joint_state", key, t)
+    groups = _arm_groups(log, x.shape[1])
+    rows = 1 if y is None else 2
+    fig = Figure(figsize=(5.5 * len(groups), 3.6 * rows))
+    axes = fig.subplots(rows, len(groups), squeeze=False)
+    for col, (arm, sl) in enumerate(groups):
+        ax = axes[0, col]
+        for j in range(sl.start, sl.stop):
+            line, = ax.plot(t, x[:, j], label=f"{labels[j]} native")
+            if y is not None:
+                ax.plot(t, y[:, j], "--", color=line.get_color(), label=f"{labels[j]} mujoco")
+        ax.set(title=f"{arm}: joint {quantity}", xlabel="time (s)", ylabel=f"{quantity} ({unit})")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize="small", ncol=2)
+        if y is not None:
+            ax = axes[1, col]
+            drawn = [_log_plot(ax, t, np.abs(x[:, j] - y[:, j]), labels[j]) for j in range(sl.start, sl.stop)]
+            ax.set_title(f"{arm}: |native − mujoco|")
+            _finish_log_axis(ax, any(drawn), f"|Δ {quantity}| ({unit})")
+    fig.suptitle(f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"))
+    return fig
+
+
+def _object_figure(log: LogData) -> Figure:
+    nat = log.topics[NATIVE + "/object"]
+    t = nat["t"]
+    pos, twist = _twin(log, "/object", "position", t), _twin(log, "/object", "twist", t)
+    parts = [("position", "", "m", nat["position"], pos),
+             ("velocity", "v", "m/s", nat["twist"][:, :3], None if twist is None else twist[:, :3])]
+    rows = 1 if pos is None else 2
+    fig = Figure(figsize=(11, 3.8 * rows))
+    axes = fig.subplots(rows, 2, squeeze=False)
+    for col, (name, sym, unit, x, y) in enumerate(parts):
+        ax = axes[0, col]
+        for k, c in enumerate(_AXES):
+            line, = ax.plot(t, x[:, k], label=f"{sym}{c} native")
+            if y is not None:
+                ax.plot(t, y[:, k], "--", color=line.get_color(), label=f"{sym}{c} mujoco")
+        ax.set(title=f"Object centre-of-mass {name}", xlabel="time (s)", ylabel=f"{name} ({unit})")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize="small", ncol=2)
+        if y is not None:
+            ax = axes[1, col]
+            drawn = [_log_plot(ax, t, np.abs(x[:, k] - y[:, k]), f"{sym}{c}") for k, c in enumerate(_AXES)]
+            ax.set_title(f"Object {name}: |native − mujoco|")
+            _finish_log_axis(ax, any(drawn), f"|Δ {name}| ({unit})")
+    fig.suptitle("Object motion" + ("" if rows == 1 else ": native model vs MuJoCo twin"))
+    return fig
+
+
+def _constraint_figure(log: LogData) -> Figure:
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
+    nat = log.topics[NATIVE + "/constraint"]
+    drawn = [_log_plot(ax, nat["t"], nat["residual_pos"], "native loop-closure residual max |Φ|")]
+    twin = log.topics.get(TWIN + "/constraint")
+    if twin is not None:
+        drawn.append(_log_plot(ax, twin["t"], np.abs(twin["weld_violation"]), "MuJoCo weld violation", ls="--"))
+    ax.set_title("Constraint violation")
+    _finish_log_axis(ax, any(drawn), "violation (m or rad)")
+    return fig
+
+
+def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[Path]:
+    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png into
+    out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
+    (n,) labels the joints (default: the log's model metadata, else q0, q1, …)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
+    labels = _joint_labels(log, n, joint_names)
+    figures = [_joint_figure(log, "angle", "angle", "rad", labels),
+               _joint_figure(log, "rate", "rate", "rad/s", labels),
+               _object_figure(log), _constraint_figure(log)]
+    return [_save(fig, out / name) for fig, name in zip(figures, FILES)]

@@ -1,0 +1,60 @@
+"""Comparison plots from a run log: four PNGs, with and without the MuJoCo twin."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import matplotlib.image as mpimg
+import pytest
+
+from coopsim.log import read_mcap, write_run_log
+from coopsim.mujoco_run import run_twin
+from coopsim.plots import FILES, comparison_plots
+from coopsim.simulate import simulate
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def logs(paper, tmp_path_factory):
+    model = dataclasses.replace(paper, duration=0.2)
+    res = simulate(model)
+    tw = run_twin(model, res.initial.q, res.initial.qd, res.t)
+    folder = tmp_path_factory.mktemp("logs")
+    both = read_mcap(write_run_log(folder / "both.mcap", model, res, tw))
+    native = read_mcap(write_run_log(folder / "native.mcap", model, res, None))
+    return both, native
+
+
+def _check_pngs(paths, folder):
+    assert [p.name for p in paths] == list(FILES)
+    assert sorted(p.name for p in folder.iterdir()) == sorted(FILES)  # no temporary files left
+    for p in paths:
+        assert p.read_bytes()[:8] == PNG_SIGNATURE
+        img = mpimg.imread(p)
+        assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 400
+
+
+def test_comparison_plots_of_both_models(logs, tmp_path):
+    both, _ = logs
+    out = tmp_path / "plots"
+    _check_pngs(comparison_plots(both, out), out)
+
+
+def test_native_only_log_is_plotted(logs, tmp_path):
+    both, native = logs
+    assert "/mujoco/joint_state" not in native.topics
+    paths = comparison_plots(native, tmp_path)
+    _check_pngs(paths, tmp_path)
+    # without the difference rows the joint figure is shorter than the comparison one
+    full = comparison_plots(both, tmp_path / "both")
+    assert mpimg.imread(paths[0]).shape[0] < mpimg.imread(full[0]).shape[0]
+
+
+def test_plots_replace_existing_files_and_check_joint_names(logs, tmp_path):
+    both, _ = logs
+    (tmp_path / "joint_angles.png").write_bytes(b"stale")
+    paths = comparison_plots(both, tmp_path, joint_names=[f"j{i}" for i in range(6)])
+    assert paths[0].read_bytes()[:8] == PNG_SIGNATURE
+    with pytest.raises(ValueError, match="joint_names: expected 6 names, got 2"):
+        comparison_plots(both, tmp_path, joint_names=["a", "b"])
