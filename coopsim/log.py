@@ -604,7 +604,8 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
     scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model (arm names,
     joints per arm, joint names), native.integrator, mujoco, validation, and for a native result
     native.initial_projection (dq, dqd, residual before/after, iterations) and native.integrator_stats.
-    Other `extra` entries: a dict value becomes its own record, anything else goes to record "extra"."""
+    Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
+    {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
     extra = dict(extra or {})
     scenario = {"name": model.name}
     file = extra.pop("scenario_file", None)
@@ -631,7 +632,7 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
     rest = {}
     for k, v in extra.items():
         if isinstance(v, dict):
-            meta[str(k)] = _record(v)
+            meta.setdefault(str(k), {}).update(_record(v))
         else:
             rest[str(k)] = _meta_value(v)
     if rest:

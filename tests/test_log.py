@@ -244,6 +244,9 @@ def test_metadata_records(run, logged):
     assert float(meta["mujoco"]["timestep"]) == model.mujoco.timestep
     assert json.loads(meta["model"]["dofs"]) == [a.n for a in model.arms]
     assert meta["extra"] == {"note": "test"}
+    merged = L.run_metadata(model, None, {"scenario": {"file": "s.yaml", "sha256": "ab"}, "agreement": {"q": 1e-9}})
+    assert merged["scenario"] == {"name": model.name, "file": "s.yaml", "sha256": "ab"}
+    assert merged["agreement"] == {"q": "1e-09"} and "native.initial_projection" not in merged
 
 
 # -- atomicity ------------------------------------------------------------------------------------
