@@ -15,24 +15,17 @@ import numpy as np
 
 from .mjcf import build_spec, dof_address, qpos_address
 from .model import CoopsimError, Model, torque_at
+from .results import SampledMotion
 
 
 @dataclass(frozen=True, eq=False)
-class TwinResult:
+class TwinResult(SampledMotion):
     """MuJoCo twin trajectory sampled at t (N,) s: q, qd, qdd, tau (N, n) in coopsim's joint order;
     object_pos (N, 3) m, object_quat (N, 4) [w, x, y, z], object_twist (N, 6) [v_C; ω] world axes;
     weld_violation (N,) max |efc_pos| over the weld rows (m or rad); link_pos (N, n, 3) and
     link_quat (N, n, 4) MuJoCo's link frame poses (xpos, xquat), joints stacked as q;
     wall_time s (not logged)."""
 
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    tau: np.ndarray
-    object_pos: np.ndarray
-    object_quat: np.ndarray
-    object_twist: np.ndarray
     weld_violation: np.ndarray
     link_pos: np.ndarray
     link_quat: np.ndarray

@@ -22,6 +22,7 @@ from .grasp import grasp_matrix, internal_wrench
 from .integrate import IntegrationError, IntegratorStats, integrate
 from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
 from .model import CoopsimError, IntegratorSettings, Model, torque_at
+from .results import SampledMotion
 from .spatial import rot_to_quat
 
 
@@ -34,7 +35,7 @@ class ConstraintRankWarning(RuntimeWarning):
 
 
 @dataclass(frozen=True, eq=False)
-class SimResult:
+class SimResult(SampledMotion):
     """Sampled trajectory (N samples, n joints stacked arm by arm, r arms), SI units, world axes.
     t (N,) s; q, qd, qdd (N, n) rad, rad/s, rad/s²; tau (N, n) N·m;
     object_pos (N, 3) m (centre of mass); object_quat (N, 4) [w, x, y, z]; object_twist (N, 6)
@@ -45,14 +46,6 @@ class SimResult:
     wall_time s (not deterministic: never logged as data)."""
 
     model: Model
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    tau: np.ndarray
-    object_pos: np.ndarray
-    object_quat: np.ndarray
-    object_twist: np.ndarray
     object_acc: np.ndarray
     grasp_wrench: np.ndarray
     internal_wrench: np.ndarray
@@ -185,4 +178,4 @@ def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats,
         out["residual_pos"][i] = np.max(np.abs(position_residual(model, q)))
         out["residual_vel"][i] = np.max(np.abs(terms.Lam_qd))
         out["cond"][i] = acc.cond
-    return SimResult(model, t, Y[:, :n], Y[:, n:], initial=init, stats=stats, wall_time=wall, **out)
+    return SimResult(model=model, t=t, q=Y[:, :n], qd=Y[:, n:], initial=init, stats=stats, wall_time=wall, **out)
