@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
@@ -71,6 +72,15 @@ class TorqueTable:
 
     times: np.ndarray
     values: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueFunction:
+    """Joint torques given as a function of time: fn(t) -> stacked τ (n_total,) N·m. Used in place of
+    the per-arm tables when the torque is itself computed at the integrator's stage times (e.g. the
+    inverse-dynamics torques of a trajectory, replayed through the forward dynamics)."""
+
+    fn: Callable[[float], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,6 +159,43 @@ class ValidationThresholds:
 
 
 @dataclass(frozen=True, eq=False)
+class ObjectMotion:
+    """A prescribed object motion (scenario `inverse.object_motion`): waypoint times (w,) s strictly
+    increasing, positions (w, 3) m of the centre of mass C and rotations (w, 3, 3) world←object; the
+    object rests at every waypoint and moves between them along a straight line and a single-axis
+    rotation with the time law `time_law` ('quintic': s = 10u³ − 15u⁴ + 6u⁵, zero rate and
+    acceleration at both ends; 'cubic': s = 3u² − 2u³, zero rate only); sampled every output_dt s.
+    initial_guess (n_total,) rad: joint angles that pick the inverse-kinematics branch at the first
+    waypoint (None: the scenario's initial angles)."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    rotations: np.ndarray
+    time_law: str = "quintic"
+    output_dt: float = 1e-2
+    initial_guess: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class InverseSettings:
+    """Inverse dynamics and load capacity (scenario `inverse`). trajectory: 'forward' (the joint
+    trajectory of the forward run, the paper's choice) or 'object_motion' (object_motion, through
+    closed-chain inverse kinematics); nonsqueezing_masses (r,) relative virtual masses of the
+    Erhart–Hirche non-squeezing distribution (None: the shares whose centroid is the object's centre of
+    mass, as equal as possible); payload_position (3,) m, object frame: where the point payload of the
+    payload capacity sits (None: no payload capacity); internal_force_bound N and
+    internal_moment_bound N·m: bounds on every internal-wrench component (grasp-line frame) of the
+    bounded minimum-energy resolution (None: half the minimum-energy distribution's peak)."""
+
+    trajectory: str = "forward"
+    object_motion: ObjectMotion | None = None
+    nonsqueezing_masses: np.ndarray | None = None
+    payload_position: np.ndarray | None = None
+    internal_force_bound: float | None = None
+    internal_moment_bound: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
 class Model:
     """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
     a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
@@ -164,11 +211,12 @@ class Model:
     q0: np.ndarray
     qd0: np.ndarray
     duration: float
-    torques: tuple[TorqueTable, ...]
+    torques: tuple[TorqueTable, ...] | TorqueFunction
     motors: Motors
     integrator: IntegratorSettings
     mujoco: MujocoSettings = MujocoSettings()
     validation: ValidationThresholds = ValidationThresholds()
+    inverse: InverseSettings = InverseSettings()
 
     @property
     def r(self) -> int:
@@ -184,8 +232,11 @@ class Model:
         return tuple(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:]))
 
 
-def torque_at(tables: tuple[TorqueTable, ...], t: float) -> np.ndarray:
-    """Stacked joint torques τ(t) (n_total,) N·m, linear between table rows, held outside."""
+def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> np.ndarray:
+    """Stacked joint torques τ(t) (n_total,) N·m, linear between table rows, held outside (or the
+    value of a TorqueFunction at t)."""
+    if isinstance(tables, TorqueFunction):
+        return np.asarray(tables.fn(t), dtype=float)
     parts = []
     for tab in tables:
         if len(tab.times) == 1:

@@ -14,8 +14,8 @@ import numpy as np
 import yaml
 
 from .kinematics import arm_pose
-from .model import (ArmModel, CoopsimError, IntegratorSettings, Model, Motors, MujocoSettings,
-                    ObjectModel, TorqueTable, ValidationThresholds)
+from .model import (ArmModel, CoopsimError, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
+                    ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
 from .spatial import quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
@@ -333,6 +333,46 @@ def _validation(sec: _Section | None) -> ValidationThresholds:
     return s
 
 
+def _inverse(sec: _Section | None, n: int, r: int) -> InverseSettings:
+    """The optional `inverse` section: trajectory to invert, object motion, non-squeezing virtual
+    masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion)."""
+    if sec is None:
+        return InverseSettings()
+    trajectory = sec.string("trajectory", ("forward", "object_motion"), "forward")
+    om = sec.section("object_motion", default=None)
+    motion = None
+    if om is not None:
+        law = om.string("time_law", ("quintic", "cubic"), "quintic")
+        dt = om.number("output_dt", 1e-2, positive=True)
+        guess = om.angles("initial_guess", (n,)) if om.has("initial_guess") or om.has("initial_guess_deg") else None
+        times, pos, rot = [], [], []
+        for wp in om.items("waypoints", min_len=2):
+            times.append(wp.number("time", nonneg=True))
+            pos.append(wp.array("position", (3,)))
+            rot.append(_rotation(wp))
+            wp.done()
+        if np.any(np.diff(times) <= 0):
+            om.fail("waypoints", f"times must be strictly increasing, got {times}")
+        om.done()
+        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess)
+    if trajectory == "object_motion" and motion is None:
+        sec.fail("object_motion", "trajectory: object_motion needs an object_motion section")
+    masses = sec.array("nonsqueezing_masses", (r,), positive=True) if sec.has("nonsqueezing_masses") else None
+    payload = sec.section("payload", default=None)
+    payload_pos = None
+    if payload is not None:
+        payload_pos = payload.array("position", (3,))
+        payload.done()
+    bound = sec.section("internal_bound", default=None)
+    force = moment = None
+    if bound is not None:
+        force = bound.number("force", None, nonneg=True) if bound.has("force") else None
+        moment = bound.number("moment", None, nonneg=True) if bound.has("moment") else None
+        bound.done()
+    sec.done()
+    return InverseSettings(trajectory, motion, masses, payload_pos, force, moment)
+
+
 def _object(sec: _Section, arms: list[ArmModel]):
     """Object inertia and grasps; grasps given explicitly or `derive` (from the initial state)."""
     mass, com, inertia, box = _body(sec)
@@ -404,6 +444,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     integrator = _integrator(root.section("integrator", default=None))
     mujoco_settings = _mujoco(root.section("mujoco", default=None))
     validation = _validation(root.section("validation", default=None))
+    inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms))
     root.done()
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
     grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
@@ -411,7 +452,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
     planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
     return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
-                 tuple(torques), motors, integrator, mujoco_settings, validation)
+                 tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse)
 
 
 def _arm_poses(arms: list[ArmModel], q: np.ndarray):

@@ -1,0 +1,279 @@
+"""Stage 9 — dynamic load carrying capacity (DLCC, paper sec. 3.3, eq. 36) and beyond.
+
+Along a fixed trajectory the net object wrench is affine in the carried mass μ:
+  * 'scaled': the object scaled at constant geometry (density × μ/m_o): Y = μ Y/m_o (M_o, b_o ∝ m_o);
+  * 'payload': a point payload of mass μ at a fixed point of the object: Y = Y_o + μ Y_P.
+Every resolution whose distribution is linear in the net wrench ('paper', 'nonsqueezing',
+'min_energy' — with fixed virtual bodies and weights) therefore gives torques τ(μ) = a + μ b, and the
+motor lines of eq. 36,
+    τ_min(θ̇) = −τ_s − (τ_s/ω_s) θ̇  <=  τ  <=  τ_max(θ̇) = τ_s − (τ_s/ω_s) θ̇,
+cut μ to an interval per joint and sample. The capacity is the upper end of their intersection, in
+closed form (no bisection); the constraint that sets it names the motor that saturates first and when.
+
+Beyond the paper:
+  * `lp_capacity`: the largest μ for which *some* distribution f with A f = y(μ) keeps every torque
+    within its lines — a linear program per sample (HiGHS); the capacity is the smallest over the
+    samples. It bounds every resolution's capacity from above (each resolution is one such f).
+  * `optimise_weights`: the energy weights Q that maximise the minimum-energy capacity (the paper's
+    closing suggestion), by Nelder–Mead on log Q from equal weights and from the paper's heuristic.
+  * `energy_stress_curve`: energy of the bounded-internal-wrench minimum-energy QP against its bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .inverse import (InverseProblem, Resolution, _bound_rows, distribute, energy, internal_operator,
+                      min_energy_distribution, nonsqueezing_metric, resolve, torques_of)
+from .model import Model, Motors
+
+MODES = ("scaled", "payload")
+
+
+@dataclass(frozen=True)
+class Capacity:
+    """Dynamic load carrying capacity along a trajectory. mass kg: the largest carried mass (the whole
+    object's for 'scaled', the payload's for 'payload'; inf: unbounded); lower kg: the smallest (0
+    unless the motors cannot move a lighter load); feasible: lower <= mass; joint: stacked index of the
+    motor that saturates first (at `mass`); sample, time s: when; side: 'upper' (τ_max line) or
+    'lower' (τ_min line); note: why it is infeasible, if so."""
+
+    mass: float
+    lower: float
+    feasible: bool
+    joint: int | None
+    sample: int | None
+    time: float | None
+    side: str | None
+    note: str = ""
+
+
+def torque_limits(motors: Motors, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(τ_min, τ_max) (N, n) N·m of eq. 36 at joint rates qd (N, n): ∓τ_s − (τ_s/ω_s) θ̇ (infinite
+    stall torque: no limit; infinite no-load speed: a flat line)."""
+    ts, ws = motors.stall_torque, motors.no_load_speed
+    slope = np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
+    drop = np.nan_to_num(slope * qd)
+    return -ts - drop, ts - drop
+
+
+def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """(y₀, y₁) (N, k): the net object wrench is y₀ + μ y₁ for carried mass μ."""
+    if mode == "scaled":
+        return np.zeros_like(prob.y), prob.y_unit
+    if mode == "payload":
+        if prob.y_payload is None:
+            raise ValueError("payload capacity needs the problem built with a payload position")
+        return prob.y, prob.y_payload
+    raise ValueError(f"unknown capacity mode {mode!r}; expected one of {', '.join(MODES)}")
+
+
+def affine_torques(prob: InverseProblem, res: Resolution, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b) (N, n): τ(μ) = a + μ b for resolution `res` (two evaluations, exact for linear ones)."""
+    y0, y1 = mass_line(prob, mode)
+    a = torques_of(prob, distribute(prob, y0, res))
+    return a, torques_of(prob, distribute(prob, y0 + y1, res)) - a
+
+
+def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, t: np.ndarray,
+                    joints: np.ndarray | None = None) -> Capacity:
+    """Closed-form capacity of τ(μ) = a + μ b (N, n) within lo <= τ <= hi (N, n), μ >= 0, over the
+    joints selected by the boolean mask `joints` (default all). Per constraint: b > 0 gives
+    (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs lo <= a <= hi."""
+    sel = np.ones(a.shape[1], bool) if joints is None else joints
+    a, b, lo, hi = a[:, sel], b[:, sel], lo[:, sel], hi[:, sel]
+    idx = np.flatnonzero(sel)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where(b > 0, (hi - a) / b, np.where(b < 0, (lo - a) / b, np.inf))
+        dn = np.where(b > 0, (lo - a) / b, np.where(b < 0, (hi - a) / b, -np.inf))
+    flat = (b == 0) & ((a < lo) | (a > hi))
+    up = np.where(flat, -np.inf, up)
+    up = np.where(np.isnan(up), np.inf, up)
+    i, j = np.unravel_index(int(np.argmin(up)), up.shape)
+    mass = float(up[i, j])
+    lower = max(0.0, float(np.max(dn)))
+    feasible = lower <= mass
+    side = "upper" if b[i, j] > 0 else "lower"
+    if not np.isfinite(mass):
+        return Capacity(mass, lower, mass > 0, None, None, None, None,
+                        "" if mass > 0 else "a torque is outside its limits at every mass")
+    return Capacity(mass, lower, feasible, int(idx[j]), int(i), float(t[i]), side,
+                    "" if feasible else "no mass keeps every torque within its limits")
+
+
+def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
+                    passive_tol: float = 1e-9) -> Capacity:
+    """DLCC of resolution `res` (closed form). Passive joints must carry no torque: 'min_energy' and
+    'bounded' enforce it; for the others a passive torque above passive_tol N·m makes it infeasible."""
+    a, b = affine_torques(prob, res, mode)
+    lo, hi = torque_limits(motors, prob.qd)
+    passive = res.passive
+    cap = affine_capacity(a, b, lo, hi, prob.t, ~passive)
+    if np.any(passive) and res.method not in ("min_energy", "bounded"):
+        if np.max(np.abs(a[:, passive])) > passive_tol or np.max(np.abs(b[:, passive])) > passive_tol:
+            return replace(cap, feasible=False, note=f"'{res.method}' puts torque on passive joints")
+    return cap
+
+
+# ------------------------------------------------------------------------------------------------
+# Beyond the paper
+# ------------------------------------------------------------------------------------------------
+
+def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: str = "scaled",
+                internal_bound: tuple[float, float] | None = None, Mstar: np.ndarray | None = None,
+                definition: str = "nonsqueezing", zero_feasible: bool = False) -> Capacity:
+    """Capacity over all distributions: per sample the LP max μ s.t. A f − μ y₁ = y₀,
+    τ_min <= τ_arms + Jᵀ f <= τ_max (active joints), Jᵀf = −τ_arms (passive rows), μ >= 0, and with
+    `internal_bound` = (N, N·m) every internal-wrench component (grasp-line frames, `definition`)
+    within ±bound; the capacity is the smallest per-sample maximum. The per-sample feasible sets are
+    intervals, so their intersection is [max lower, min upper]: the lower ends are 0 when
+    `zero_feasible` (a resolution is known to be feasible at μ = 0), else found by a second LP. The
+    motor reported is the one whose line has the largest dual value at the binding sample."""
+    from scipy.optimize import linprog
+
+    y0, y1 = mass_line(prob, mode)
+    lo, hi = torque_limits(motors, prob.qd)
+    act = ~passive
+    L = None if internal_bound is None else internal_operator(prob, definition, Mstar)
+    N, m = len(prob.t), prob.r * prob.k
+    upper, lower, joints, sides = np.zeros(N), np.zeros(N), np.full(N, -1), np.zeros(N, bool)
+    for i in range(N):
+        JT = prob.JT[i]
+        A_ub = np.vstack([np.hstack([JT[act], np.zeros((act.sum(), 1))]),
+                          np.hstack([-JT[act], np.zeros((act.sum(), 1))])])
+        b_ub = np.concatenate([hi[i, act] - prob.tau_arms[i, act], prob.tau_arms[i, act] - lo[i, act]])
+        if L is not None:
+            res_b = Resolution("bounded", np.ones(len(act)), passive, np.ones(prob.r), np.zeros((prob.r, 3, 3)),
+                               internal_bound[0], internal_bound[1], definition)
+            C, bound = _bound_rows(prob, i, L[i], res_b)
+            A_ub = np.vstack([A_ub, np.hstack([C, np.zeros((len(C), 1))]), np.hstack([-C, np.zeros((len(C), 1))])])
+            b_ub = np.concatenate([b_ub, bound, bound])
+        finite = np.isfinite(b_ub)
+        A_ub, b_ub = A_ub[finite], b_ub[finite]
+        A_eq = np.vstack([np.hstack([prob.A[i], -y1[i][:, None]]),
+                          np.hstack([JT[passive], np.zeros((passive.sum(), 1))])])
+        b_eq = np.concatenate([y0[i], -prob.tau_arms[i, passive]])
+        bounds = [(None, None)] * m + [(0, None)]
+        c = np.zeros(m + 1)
+        c[-1] = -1.0
+        lp = {"A_ub": A_ub if len(b_ub) else None, "b_ub": b_ub if len(b_ub) else None, "A_eq": A_eq,
+              "b_eq": b_eq, "bounds": bounds, "method": "highs"}
+        sol = linprog(c, **lp)
+        if sol.status == 3:
+            upper[i] = np.inf
+        elif sol.status == 2:
+            upper[i] = -np.inf
+        elif sol.status == 0:
+            upper[i] = sol.x[-1]
+            marg = np.zeros(len(finite))
+            marg[finite] = np.abs(sol.ineqlin.marginals) if len(b_ub) else 0.0
+            marg = marg[:2 * act.sum()]                     # τ_max rows, then τ_min rows
+            if np.any(marg > 0):
+                k = int(np.argmax(marg))
+                joints[i], sides[i] = int(np.flatnonzero(act)[k % act.sum()]), k >= act.sum()
+        else:
+            raise RuntimeError(f"LP failed at t={prob.t[i]:.6g} s: {sol.message}")
+        if not zero_feasible and sol.status == 0:
+            c[-1] = 1.0
+            low = linprog(c, **lp)
+            lower[i] = low.x[-1] if low.status == 0 else np.inf
+            c[-1] = -1.0
+    i = int(np.argmin(upper))
+    mass, low = float(upper[i]), float(np.max(lower))
+    feasible = low <= mass
+    if not np.isfinite(mass):
+        return Capacity(mass, low, mass > 0, None, None, None, None, "" if mass > 0 else "infeasible LP")
+    j = int(joints[i])
+    side = None if j < 0 else ("lower" if sides[i] else "upper")
+    return Capacity(mass, low, feasible, j if j >= 0 else None, i, float(prob.t[i]), side,
+                    "" if feasible else "no mass is feasible at every sample")
+
+
+def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
+                     max_evals: int = 400) -> tuple[np.ndarray, Capacity]:
+    """Energy weights (n,) maximising the minimum-energy capacity (weights are scale-free: normalised
+    to a geometric mean of 1 over the active joints), with that capacity. Nelder–Mead on log-weights
+    (clipped to ±ln 10⁴) from equal weights and from the paper's suggestion (weight ×10 on the motor
+    that saturates first); the better of the two is kept."""
+    from scipy.optimize import minimize
+
+    act = ~res.passive
+    lo, hi = torque_limits(motors, prob.qd)
+    y0, y1 = mass_line(prob, mode)
+
+    def capacity_of(logw):
+        w = np.ones(len(act))
+        w[act] = np.exp(np.clip(logw, -np.log(1e4), np.log(1e4)))
+        a = torques_of(prob, min_energy_distribution(prob, y0, w, res.passive))
+        b = torques_of(prob, min_energy_distribution(prob, y0 + y1, w, res.passive)) - a
+        return w, affine_capacity(a, b, lo, hi, prob.t, act)
+
+    def objective(logw):
+        cap = capacity_of(logw)[1]
+        return -cap.mass if cap.feasible else 1e6
+
+    base = capacity_of(np.zeros(act.sum()))[1]
+    starts = [np.zeros(act.sum())]
+    if base.joint is not None and act[base.joint]:
+        s = np.zeros(act.sum())
+        s[int(np.sum(act[:base.joint]))] = np.log(10.0)
+        starts.append(s)
+    best = None
+    for x0 in starts:
+        opt = minimize(objective, x0, method="Nelder-Mead",
+                       options={"maxfev": max_evals, "xatol": 1e-4, "fatol": 1e-9, "adaptive": True})
+        if best is None or opt.fun < best.fun:
+            best = opt
+    logw = np.clip(best.x, -np.log(1e4), np.log(1e4))
+    logw -= logw.mean()
+    w, cap = capacity_of(logw)
+    return w, cap
+
+
+def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float, float],
+                        fractions=(1.0, 0.75, 0.5, 0.25, 0.1, 0.0)) -> list[dict]:
+    """Energy of the bounded minimum-energy resolution for bounds = fraction × peak (peak = the
+    minimum-energy distribution's peak internal-wrench components, N and N·m): a list of
+    {fraction, force_bound_N, moment_bound_Nm, energy, max_internal_force_N, max_internal_moment_Nm}."""
+    out = []
+    for frac in fractions:
+        r = replace(res, method="bounded", force_bound=frac * peak[0], moment_bound=frac * peak[1])
+        result = resolve(prob, r)
+        F_I = result.internal_nonsqueezing if res.bound_definition == "nonsqueezing" else result.internal_paper
+        out.append({"fraction": frac, "force_bound_N": frac * peak[0], "moment_bound_Nm": frac * peak[1],
+                    "energy": energy(result),
+                    "max_internal_force_N": float(np.max(np.linalg.norm(F_I[..., :3], axis=-1))),
+                    "max_internal_moment_Nm": float(np.max(np.linalg.norm(F_I[..., 3:], axis=-1)))})
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# Models at another mass (independent brute-force checks)
+# ------------------------------------------------------------------------------------------------
+
+def scaled_model(model: Model, mass: float) -> Model:
+    """The model with its object scaled to `mass` kg at constant geometry (inertia ∝ mass)."""
+    obj = model.object
+    return replace(model, object=replace(obj, mass=float(mass), inertia=obj.inertia * (mass / obj.mass)))
+
+
+def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
+    """The model whose object also carries a point mass `mass` kg at `position` (object frame, m): the
+    composite's frame sits at the new centre of mass (same axes), inertia by the parallel-axis rule."""
+    obj = model.object
+    total = obj.mass + mass
+    shift = mass * np.asarray(position, dtype=float) / total          # new centre, old object frame
+    d0, d1 = -shift, position - shift
+
+    def steiner(m, d):
+        return m * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+
+    inertia = obj.inertia + steiner(obj.mass, d0) + steiner(mass, d1)
+    return replace(model, object=replace(obj, mass=total, inertia=inertia, grasp_pos=obj.grasp_pos - shift))
+
+
+def nonsqueezing_metric_of(prob: InverseProblem, res: Resolution) -> np.ndarray:
+    """M* of `res` on `prob` (re-exported for the CLI)."""
+    return nonsqueezing_metric(prob, res.masses, res.inertias)

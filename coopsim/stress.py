@@ -1,0 +1,151 @@
+"""Stage 8 — object stress: what an internal wrench does to the object (issue #4, paper sec. 3.2).
+
+Two views, both at every sample:
+  * the internal wrench of one arm (at the centre of mass C, world axes; either definition, see
+    `coopsim.inverse`) resolved in that arm's grasp-line frame: axial force (squeeze < 0 < stretch),
+    shear force, torsion (moment about the grasp line) and bending moment;
+  * for a box object, the section loads along its grasp axis — the wrench one part of the object
+    exerts on the other across a plane cut, from the Newton–Euler equations of the part (exact for a
+    rigid body: a cut splits it in two, so the resultant is statically determined) — and from them
+    estimates of the peak normal and shear stress of the rectangular cross-section.
+
+In a planar scene only the in-plane rows S are modelled (in-plane force, moment about the normal):
+out-of-plane loads (the weight of a horizontal-plane scene) are carried by the joint bearings and
+reported as zero, so torsion and out-of-plane bending are zero there.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .spatial import cross
+
+
+class SectionLoads(NamedTuple):
+    """Section resultants at the cuts xi (c,) m (object-frame coordinate along the box axis `axis`),
+    per sample (N, c): axial N (N, tension > 0), shear V (N, magnitude), torsion T (N·m, signed,
+    about the axis), bending M (N·m, magnitude); peak_normal, peak_shear (N,) Pa: the largest over
+    the cuts of |N|/A + |M₁|/Z₁ + |M₂|/Z₂ and 1.5|V|/A + |T|(3b + 1.8c)/(b²c²) (b ≥ c the section's
+    sides; Roark's torsion formula)."""
+
+    xi: np.ndarray
+    axis: int
+    axial: np.ndarray
+    shear: np.ndarray
+    torsion: np.ndarray
+    bending: np.ndarray
+    peak_normal: np.ndarray
+    peak_shear: np.ndarray
+
+
+def grasp_line_axes(p_grasp: np.ndarray, p_C: np.ndarray) -> np.ndarray:
+    """Unit axis e_m (r, 3) of each arm's grasp line, pointing from the object's inside towards grasp m:
+    for r = 2 the line through both grasp points (e₂ = −e₁ = (p₂ − p₁)/|p₂ − p₁|); for r > 2 the line
+    from C to the grasp point. A force of the arm along +e_m stretches the object."""
+    if len(p_grasp) == 2:
+        d = p_grasp[1] - p_grasp[0]
+        e = d / np.linalg.norm(d)
+        return np.array([-e, e])
+    d = p_grasp - p_C
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def line_frame(e: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
+    """Rows (3, 3) of a right-handed frame whose first axis is e: in a planar scene (normal given) the
+    second axis is normal × e (in-plane shear direction) and the third the normal; otherwise the
+    second is perpendicular to e and to the world axis least aligned with it."""
+    if normal is not None:
+        e2 = np.cross(normal, e)
+        e2 /= np.linalg.norm(e2)
+        return np.array([e, e2, np.cross(e, e2)])
+    ref = np.eye(3)[int(np.argmin(np.abs(e)))]
+    e2 = np.cross(ref, e)
+    e2 /= np.linalg.norm(e2)
+    return np.array([e, e2, np.cross(e, e2)])
+
+
+def decompose_internal(F_I: np.ndarray, axes: np.ndarray) -> dict[str, np.ndarray]:
+    """Internal wrench F_I (…, r, 6) [f; n] at C resolved along the grasp-line axes (…, r, 3):
+    axial = f·e (N; > 0 stretch, < 0 squeeze), shear = |f − (f·e)e| (N), torsion = n·e (N·m),
+    bending = |n − (n·e)e| (N·m). Returns arrays of shape (…, r)."""
+    f, n = F_I[..., :3], F_I[..., 3:]
+    axial = np.einsum("...i,...i->...", f, axes)
+    torsion = np.einsum("...i,...i->...", n, axes)
+    shear = np.linalg.norm(f - axial[..., None] * axes, axis=-1)
+    bending = np.linalg.norm(n - torsion[..., None] * axes, axis=-1)
+    return {"axial": axial, "shear": shear, "torsion": torsion, "bending": bending}
+
+
+def grasp_axis(box: np.ndarray, grasp_pos: np.ndarray) -> int:
+    """Index of the box axis (object frame) along which the grasp points lie farthest apart."""
+    spread = grasp_pos.max(axis=0) - grasp_pos.min(axis=0)
+    return int(np.argmax(spread / np.maximum(box, 1e-300)))
+
+
+def piece_inertia(mass: float, size: np.ndarray) -> np.ndarray:
+    """Inertia (3, 3) of a solid box of `mass` and `size` (3,) about its centre, box axes."""
+    a2 = size ** 2
+    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
+
+
+def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.ndarray, twist: np.ndarray,
+                  acc: np.ndarray, gravity: np.ndarray, F_e: np.ndarray, rows: np.ndarray,
+                  cuts: int = 81) -> SectionLoads:
+    """Section loads of a uniform box object (mass kg, size box (3,) m, frame at its centre) along the
+    box axis a holding the grasps, at `cuts` planes evenly inside (−L/2, L/2), over N samples.
+
+    For the part x_a < ξ (mass m_p = m(ξ + L/2)/L, centre c at ((ξ − L/2)/2) e_a, inertia K_p), with
+    ρ = R_o c, a_c = a_C + ω̇ × ρ + ω × (ω × ρ) and the grasp wrenches F_e^m (at the grasp points p_m)
+    of the grasps on that part, the wrench the other part exerts on it at the section centre
+    p_s = R_o ξ e_a (relative to C) is
+        F_cut = m_p (a_c − g) − Σ f_m,
+        N_cut = K_p ω̇ + ω × K_p ω + (ρ − p_s) × m_p (a_c − g) − Σ [n_m + (p_m − p_s) × f_m].
+    Resolved in the section frame (e_a and the two other box axes): axial = F_cut·e_a (tension > 0),
+    shear, torsion = N_cut·e_a, bending. Inputs per sample: R_o (N, 3, 3), twist [v; ω] and acc
+    [a_C; ω̇] (N, 6), F_e (N, r, 6); grasp_pos (r, 3) object frame; rows S (k, 6) restrict loads to
+    the modelled rows (planar: in-plane force, moment about the normal)."""
+    a = grasp_axis(box, grasp_pos)
+    L = box[a]
+    xi = np.linspace(-L / 2, L / 2, cuts + 2)[1:-1]
+    P = rows.T @ rows                                   # projector on the modelled rows (6, 6)
+    N = len(R_o)
+    out = {k: np.zeros((N, cuts)) for k in ("axial", "shear", "torsion", "bending", "m1", "m2")}
+    others = [i for i in range(3) if i != a]
+    for j, x in enumerate(xi):
+        frac = (x + L / 2) / L
+        size = box.copy()
+        size[a] = x + L / 2
+        c = np.zeros(3)
+        c[a] = (x - L / 2) / 2
+        ps = np.zeros(3)
+        ps[a] = x
+        Kp_body = piece_inertia(mass * frac, size)
+        on_piece = grasp_pos[:, a] < x
+        for i in range(N):
+            R, w, dw = R_o[i], twist[i, 3:], acc[i, 3:]
+            rho, p_s = R @ c, R @ ps
+            a_c = acc[i, :3] + cross(dw, rho) + cross(w, cross(w, rho))
+            Kp = R @ Kp_body @ R.T
+            inert_f = mass * frac * (a_c - gravity)
+            force = inert_f.copy()
+            moment = Kp @ dw + cross(w, Kp @ w) + cross(rho - p_s, inert_f)
+            for m in np.flatnonzero(on_piece):
+                pm = R @ grasp_pos[m]
+                force -= F_e[i, m, :3]
+                moment -= F_e[i, m, 3:] + cross(pm - p_s, F_e[i, m, :3])
+            wrench = P @ np.concatenate([force, moment])
+            fl, ml = R.T @ wrench[:3], R.T @ wrench[3:]   # box axes
+            out["axial"][i, j], out["torsion"][i, j] = fl[a], ml[a]
+            out["shear"][i, j] = np.hypot(fl[others[0]], fl[others[1]])
+            out["bending"][i, j] = np.hypot(ml[others[0]], ml[others[1]])
+            out["m1"][i, j], out["m2"][i, j] = ml[others[0]], ml[others[1]]
+    d1, d2 = box[others[0]], box[others[1]]
+    area = d1 * d2
+    Z1, Z2 = d1 * d2 ** 2 / 6.0, d2 * d1 ** 2 / 6.0    # a moment about axis 1 varies the stress along axis 2
+    normal = np.abs(out["axial"]) / area + np.abs(out["m1"]) / Z1 + np.abs(out["m2"]) / Z2
+    b, t = max(d1, d2), min(d1, d2)
+    shear = 1.5 * out["shear"] / area + np.abs(out["torsion"]) * (3 * b + 1.8 * t) / (b * b * t * t)
+    return SectionLoads(xi, a, out["axial"], out["shear"], out["torsion"], out["bending"],
+                        normal.max(axis=1), shear.max(axis=1))

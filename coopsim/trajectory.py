@@ -1,0 +1,226 @@
+"""Stage 6 — trajectories to invert: joint motions (θ, θ̇, θ̈) of the closed chain.
+
+Two sources (issue #4, paper sec. 3.2):
+  * the joint trajectory of a forward run (the paper's choice): θ, θ̇ are the integrator's values and
+    θ̈ the closed-chain forward dynamics at the samples, so all three are exact at the samples;
+  * a prescribed object motion: pose waypoints of the object's centre of mass C with a smooth time
+    law, turned into joint motions of every arm by closed-chain inverse kinematics. θ comes from
+    Newton's method on the loop-closure rows, θ̇ and θ̈ from the differential kinematics
+    S J_m θ̇_m = S v_EE,m and S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m) (the same rows S as the forward model),
+    so the three are consistent (no finite differences).
+
+Between samples a trajectory is the quintic Hermite interpolant of (θ, θ̇, θ̈) at the two ends
+(`trajectory_at`): C², exact at the samples, error O(h⁶) in between. Twists [v; ω] and accelerations
+[a; ω̇] are in world axes; SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .closed_chain import ConstraintError, arm_poses
+from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian
+from .model import ArmModel, CoopsimError, Model, ObjectMotion
+from .spatial import axis_angle_to_rot, cross, rot_log
+
+
+class TrajectoryError(CoopsimError):
+    """A prescribed motion cannot be turned into joint motions (out of reach, singular, redundant)."""
+
+
+@dataclass(frozen=True, eq=False)
+class JointTrajectory:
+    """Joint motion of the closed chain sampled at t (N,) s: q (N, n) rad, qd (N, n) rad/s, qdd (N, n)
+    rad/s², stacked arm after arm and mutually consistent; source: 'forward' | 'object_motion'."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    source: str
+
+
+def from_simulation(res) -> JointTrajectory:
+    """The trajectory of a forward run (`coopsim.simulate.SimResult`): its samples as they are."""
+    return JointTrajectory(res.t.copy(), res.q.copy(), res.qd.copy(), res.qdd.copy(), "forward")
+
+
+def trajectory_at(traj: JointTrajectory, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(θ, θ̇, θ̈) (n,) at time t (clamped to the sampled span): the quintic Hermite polynomial through
+    (θ, θ̇, θ̈) at the ends of the sample interval holding t, evaluated from the nearer end (so the
+    sample values come back to rounding)."""
+    ts = traj.t
+    t = min(max(float(t), ts[0]), ts[-1])
+    i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
+    h = ts[i + 1] - ts[i]
+    u = (t - ts[i]) / h
+    a, b = (traj.q[i], traj.qd[i], traj.qdd[i]), (traj.q[i + 1], traj.qd[i + 1], traj.qdd[i + 1])
+    if u <= 0.5:
+        return hermite_quintic(a, b, u, h)
+    q, qd, qdd = hermite_quintic((b[0], -b[1], b[2]), (a[0], -a[1], a[2]), 1.0 - u, h)
+    return q, -qd, qdd
+
+
+def hermite_quintic(start, end, u: float, h: float):
+    """Quintic Hermite polynomial through start = (θ₀, θ̇₀, θ̈₀) at u = 0 and end = (θ₁, θ̇₁, θ̈₁) at u = 1
+    on an interval of h s: (θ, θ̇, θ̈) at u. With Δ = θ₁ − θ₀ and θ = Σ c_k uᵏ: c₀ = θ₀, c₁ = hθ̇₀,
+    c₂ = h²θ̈₀/2, c₃ = 10Δ − 6hθ̇₀ − 4hθ̇₁ − 3h²θ̈₀/2 + h²θ̈₁/2, c₄ = −15Δ + 8hθ̇₀ + 7hθ̇₁ + 3h²θ̈₀/2 − h²θ̈₁,
+    c₅ = 6Δ − 3hθ̇₀ − 3hθ̇₁ − h²θ̈₀/2 + h²θ̈₁/2."""
+    p0, v0, a0 = start[0], h * start[1], h * h * start[2]
+    p1, v1, a1 = end[0], h * end[1], h * h * end[2]
+    d = p1 - p0
+    c = [p0, v0, 0.5 * a0,
+         10 * d - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
+         -15 * d + 8 * v0 + 7 * v1 + 1.5 * a0 - a1,
+         6 * d - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1]
+    q = sum(ci * u ** k for k, ci in enumerate(c))
+    qd = sum(k * ci * u ** (k - 1) for k, ci in enumerate(c) if k >= 1) / h
+    qdd = sum(k * (k - 1) * ci * u ** (k - 2) for k, ci in enumerate(c) if k >= 2) / (h * h)
+    return q, qd, qdd
+
+
+def time_law(kind: str, u: float) -> tuple[float, float, float]:
+    """(s, ds/du, d²s/du²) of the normalised time law on u ∈ [0, 1]: 'quintic' s = 10u³ − 15u⁴ + 6u⁵
+    (rest-to-rest with zero acceleration at the ends), 'cubic' s = 3u² − 2u³ (zero rate at the ends)."""
+    if kind == "quintic":
+        return (10 * u**3 - 15 * u**4 + 6 * u**5, 30 * u**2 - 60 * u**3 + 30 * u**4,
+                60 * u - 180 * u**2 + 120 * u**3)
+    if kind == "cubic":
+        return 3 * u**2 - 2 * u**3, 6 * u - 6 * u**2, 6 - 12 * u
+    raise ValueError(f"unknown time law {kind!r}")
+
+
+def object_motion_at(motion: ObjectMotion, t: float):
+    """Object state at time t (clamped to the waypoint span): p_C (3,), R_o (3, 3), twist [v_C; ω] (6,)
+    and acceleration [a_C; ω̇] (6,). On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a:
+    p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ) with φ = log(R_aᵀ R_b) (one fixed axis), so
+    v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ, a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ."""
+    ts = motion.times
+    t = min(max(float(t), ts[0]), ts[-1])
+    i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
+    T = ts[i + 1] - ts[i]
+    s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
+    dp = motion.positions[i + 1] - motion.positions[i]
+    Ra = motion.rotations[i]
+    phi = rot_log(Ra.T @ motion.rotations[i + 1])
+    angle = float(np.linalg.norm(phi))
+    R = Ra @ axis_angle_to_rot(phi / angle, s * angle) if angle > 0 else Ra.copy()
+    w_axis = Ra @ phi
+    twist = np.concatenate([ds / T * dp, ds / T * w_axis])
+    acc = np.concatenate([dds / T**2 * dp, dds / T**2 * w_axis])
+    return motion.positions[i] + s * dp, R, twist, acc
+
+
+def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndarray, acc: np.ndarray):
+    """End-effector targets of every arm for an object state: lists of p_EE (3,), R_EE (3, 3), twist
+    [v_EE; ω] (6,) and acceleration [a_EE; ω̇] (6,), with ρ = p_EE − p_C:
+    v_EE = v_C + ω × ρ, a_EE = a_C + ω̇ × ρ + ω × (ω × ρ) (eq. 3 and its derivative)."""
+    obj, w, dw = model.object, twist[3:], acc[3:]
+    out = []
+    for m in range(model.r):
+        rho = R_o @ obj.grasp_pos[m]
+        v = twist[:3] + cross(w, rho)
+        a = acc[:3] + cross(dw, rho) + cross(w, cross(w, rho))
+        out.append((p_C + rho, R_o @ obj.grasp_rot[m], np.concatenate([v, w]), np.concatenate([a, dw])))
+    return out
+
+
+def pose_error(arm: ArmModel, q: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """[p_EE(θ) − p; log(R_EE(θ) Rᵀ)] (6,), m and rad, world axes."""
+    pose = arm_pose(arm, q)
+    return np.concatenate([pose.p_ee - p, rot_log(pose.R_ee @ R.T)])
+
+
+def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
+           tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7) -> np.ndarray:
+    """Joint angles (n,) putting the end-effector frame at (p, R) in the rows S (k × 6, k = n): Newton
+    steps Δθ = −(S J)⁻¹ S e(θ) from `guess` (which picks the branch) until max |S e| <= tol.
+    Raises ConstraintError when S J is singular (σ_min/σ_max < sing_tol) or Newton does not converge."""
+    q = guess.astype(float).copy()
+    for _ in range(max_iter):
+        e = S @ pose_error(arm, q, p, R)
+        if np.max(np.abs(e)) <= tol:
+            return q
+        SJ = S @ ee_jacobian(arm_pose(arm, q))
+        sv = np.linalg.svd(SJ, compute_uv=False)
+        if sv[-1] < sing_tol * sv[0]:
+            raise ConstraintError(f"singular Jacobian (σ_min/σ_max = {sv[-1] / sv[0]:.2g})")
+        q -= np.linalg.solve(SJ, e)
+    raise ConstraintError(f"Newton did not converge (max |error| {np.max(np.abs(e)):.3g} after {max_iter} steps)")
+
+
+def arm_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray):
+    """(θ̇, θ̈, det S J) of one arm from its end-effector twist and acceleration (differential
+    kinematics in the rows S): S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇)."""
+    pose = arm_pose(arm, q)
+    SJ = S @ ee_jacobian(pose)
+    qd = np.linalg.solve(SJ, S @ twist)
+    qdd = np.linalg.solve(SJ, S @ (acc - ee_bias_acceleration(pose, qd)))
+    return qd, qdd, float(np.linalg.det(SJ))
+
+
+def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: float = 1e-9) -> JointTrajectory:
+    """Closed-chain inverse kinematics of a prescribed object motion, sampled every motion.output_dt
+    from the first to the last waypoint. Each arm is solved by continuation: Newton from the previous
+    sample's angles advanced by θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch
+    chosen at the start is kept. Raises TrajectoryError naming the time and arm when a target is out
+    of reach, an arm's Jacobian is singular, det(S J) changes sign between samples (a singularity is
+    crossed), or a target leaves the plane of motion of a planar scene."""
+    from .simulate import output_times
+
+    S = model.rows
+    _check_square(model, S)
+    t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
+    guess = model.q0 if motion.initial_guess is None else motion.initial_guess
+    N, n = len(t_out), model.n_total
+    q, qd, qdd = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, n))
+    dets = np.zeros((N, model.r))
+    for i, t in enumerate(t_out):
+        p_C, R_o, tw, ac = object_motion_at(motion, t)
+        if i:
+            h = t - t_out[i - 1]
+            guess = q[i - 1] + h * qd[i - 1] + 0.5 * h * h * qdd[i - 1]
+        for m, (arm, sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.arms, model.dof_slices,
+                                                             grasp_targets(model, p_C, R_o, tw, ac))):
+            q[i, sl] = _solve_arm(arm, S, p, R, guess[sl], t, p_C)
+            full = np.max(np.abs(pose_error(arm, q[i, sl], p, R)))
+            if full > plane_tol:
+                raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
+                                      f"leaves the plane of motion by {full:.3g} (m or rad)")
+            qd[i, sl], qdd[i, sl], dets[i, m] = arm_rates(arm, S, q[i, sl], tw_m, ac_m)
+            if i and np.sign(dets[i, m]) != np.sign(dets[i - 1, m]):
+                raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} crosses a singularity between "
+                                      f"t={t_out[i - 1]:.6g} s and t={t:.6g} s (det S J changes sign)")
+    return JointTrajectory(t_out, q, qd, qdd, "object_motion")
+
+
+def _check_square(model: Model, S: np.ndarray):
+    for arm in model.arms:
+        if arm.n != S.shape[0]:
+            raise TrajectoryError(
+                f"inverse.object_motion: arm {arm.name!r} has {arm.n} joints for {S.shape[0]} constrained "
+                f"rows; closed-chain inverse kinematics needs as many joints as rows (no redundant arms)")
+
+
+def _solve_arm(arm: ArmModel, S: np.ndarray, p, R, guess, t, p_C) -> np.ndarray:
+    reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
+    dist = float(np.linalg.norm(p - (arm.base_pos + arm.base_rot @ arm.joint_pos[0])))
+    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
+    if dist > reach * (1 + 1e-12):
+        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
+                              f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
+    try:
+        return arm_ik(arm, S, p, R, guess)
+    except ConstraintError as exc:
+        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} cannot follow the path {where}: "
+                              f"{exc}") from None
+
+
+def object_pose_of(model: Model, q: np.ndarray):
+    """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q."""
+    from .closed_chain import carrier_object
+
+    obj = carrier_object(model, arm_poses(model, q))
+    return obj.p_C, obj.R_o

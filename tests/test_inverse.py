@@ -1,0 +1,239 @@
+"""Stage 7 — inverse dynamics: every resolution moves the chain along the trajectory, leaves the internal
+wrench it promises, the minimum-energy one costs least, and replaying its torques reproduces the motion."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from coopsim import inverse as inv
+from coopsim.closed_chain import chain_terms, forward_dynamics
+from coopsim.spatial import cross
+from inverse_cases import problem, run
+
+PAPER = "paper_planar_2x3"
+
+
+def _results(name=PAPER):
+    m, _, _ = run(name)
+    P = problem(name)
+    out = {}
+    for method in ("paper", "nonsqueezing", "min_energy"):
+        out[method] = inv.resolve(P, inv.resolution_for(m, method))
+    return m, P, out
+
+
+@pytest.mark.parametrize("method", ["paper", "nonsqueezing", "min_energy"])
+def test_torques_give_the_trajectory_accelerations(method):
+    """Forward dynamics (eqs. 25–27) of each resolution's torques returns the trajectory's θ̈ at every
+    20th sample of the paper run, and the object balance A f = y holds."""
+    m, P, res = _results()
+    worst = 0.0
+    for i in range(0, len(P.t), 20):
+        acc = forward_dynamics(m, chain_terms(m, P.q[i], P.qd[i]), res[method].tau[i])
+        worst = max(worst, float(np.max(np.abs(acc.qdd - P.qdd[i]))))
+    balance = np.max(np.abs(np.einsum("nij,nj->ni", P.A, res[method].f) - P.y))
+    assert worst <= 1e-10, f"θ̈ off by {worst:.3g} rad/s²"
+    assert balance <= 1e-12
+
+
+def test_zero_internal_force_resolutions_leave_no_internal_wrench():
+    """Acceptance: 'paper' leaves a paper-definition internal wrench <= 1e-9 (N, N·m) at every sample of
+    the 5 s paper run, 'nonsqueezing' a non-squeezing one <= 1e-9; neither is zero by the other's
+    definition: the two differ by an internal wrench, whose peak component is 0.0610 by either."""
+    _, _, res = _results()
+    assert np.max(np.abs(res["paper"].internal_paper)) <= 1e-9
+    assert np.max(np.abs(res["nonsqueezing"].internal_nonsqueezing)) <= 1e-9
+    assert np.max(np.abs(res["paper"].internal_nonsqueezing)) == pytest.approx(0.06097, rel=1e-3)
+    assert np.max(np.abs(res["nonsqueezing"].internal_paper)) == pytest.approx(0.06097, rel=1e-3)
+
+
+def test_forward_input_torques_are_recovered_as_a_distribution():
+    """The forward run's own torques are one distribution: [Jᵀ; A] f = [τ − τ_arms; y] is consistent
+    (residual <= 1e-12) and its grasp wrenches are the simulation's (<= 1e-12 N, N·m)."""
+    m, res, _ = run(PAPER)
+    P = problem(PAPER)
+    f, resid = inv.distribution_of_torques(P, res.tau)
+    assert np.max(resid) <= 1e-12
+    assert np.max(np.abs(inv.grasp_wrenches(P, f) - res.grasp_wrench)) <= 1e-12
+
+
+def test_minimum_energy_costs_least_at_every_sample():
+    """Acceptance: ½τᵀQτ of 'min_energy' <= that of 'paper', 'nonsqueezing', the forward input,
+    'bounded' and 200 random feasible distributions per sample (relative slack 1e-12)."""
+    m, P, res = _results()
+    run_res = run(PAPER)[1]
+    R = inv.resolution_for(m, "min_energy")
+    cmin = res["min_energy"].cost
+    others = [res["paper"].cost, res["nonsqueezing"].cost, inv.cost_of(run_res.tau, R.weights)]
+    fb, mb = inv.default_bounds(P, R)
+    sub = slice(0, len(P.t), 25)
+    Pb = _subproblem(P, sub)
+    others_sub = [inv.resolve(Pb, replace(R, method="bounded", force_bound=fb, moment_bound=mb)).cost]
+    for other in others:
+        assert np.all(cmin <= other * (1 + 1e-12) + 1e-15)
+    for other in others_sub:
+        assert np.all(cmin[sub] <= other * (1 + 1e-12) + 1e-15)
+    rng = np.random.default_rng(3)
+    f0 = res["min_energy"].f
+    for i in range(0, len(P.t), 50):
+        N = _null(P.A[i])
+        f = f0[i] + rng.normal(scale=0.5, size=(200, N.shape[1])) @ N.T
+        tau = P.tau_arms[i] + f @ P.JT[i].T
+        assert np.min(0.5 * tau**2 @ R.weights) >= cmin[i] * (1 - 1e-12)
+
+
+def _null(A):
+    _, s, Vt = np.linalg.svd(A)
+    return Vt[len(s):].T
+
+
+def _subproblem(P, sl):
+    fields = {k: getattr(P, k) for k in P.__dataclass_fields__}
+    for k in ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "W", "p_C", "R_o", "twist", "acc", "p_grasp"):
+        fields[k] = fields[k][sl]
+    if fields["y_payload"] is not None:
+        fields["y_payload"] = fields["y_payload"][sl]
+    return inv.InverseProblem(**fields)
+
+
+def test_paper_energy_form_equals_grasp_wrench_form():
+    """Eqs. 33–35 as the paper writes them (A = W J⁻ᵀ, τ = Q⁻¹Aᵀλ, +Y) give the grasp-wrench form's
+    torques to 1e-12 N·m, with unequal weights too."""
+    m, P, _ = _results()
+    w = np.array([1.0, 2.0, 0.5, 3.0, 1.0, 0.25])
+    R = replace(inv.resolution_for(m, "min_energy"), weights=w)
+    tau = inv.resolve(P, R).tau
+    assert np.max(np.abs(inv.min_energy_torques_jacobian_form(P, P.y, w) - tau)) <= 1e-12
+
+
+def test_nonsqueezing_matches_erhart_hirche_closed_form():
+    """With the virtual centroid at C (paper bar: m₁* = m₂* = m/2), G⁺ᴹ is E&H's block form: in the
+    plane f_i = (m_i*/m*) f_o − m_i* (n_o/J*_zz) r_i × ẑ and n_i = (J_i*_zz/J*_zz) n_o, J* = Σ J_i* + m_i* |r_i|²."""
+    m, P, res = _results()
+    R = inv.resolution_for(m, "nonsqueezing")
+    assert R.masses == pytest.approx([m.object.mass / 2] * 2, rel=1e-14)
+    f = res["nonsqueezing"].f.reshape(len(P.t), 2, 3)
+    worst = 0.0
+    z = np.array([0.0, 0.0, 1.0])
+    for i in range(0, len(P.t), 10):
+        r_i = P.p_grasp[i] - P.p_C[i]
+        Jz = [R.inertias[k][2, 2] for k in range(2)]
+        Jstar = sum(Jz) + sum(R.masses[k] * r_i[k] @ r_i[k] for k in range(2))
+        fo, no = P.y[i, :2], P.y[i, 2]
+        for k in range(2):
+            fk = R.masses[k] / sum(R.masses) * fo - R.masses[k] * no / Jstar * cross(r_i[k], z)[:2]
+            nk = Jz[k] / Jstar * no
+            worst = max(worst, np.max(np.abs(f[i, k, :2] - fk)), abs(f[i, k, 2] - nk))
+    assert worst <= 1e-12
+
+
+def test_paper_inverse_puts_a_bending_pair_in_the_object():
+    """For a pure net force the paper's W⁺ gives each arm f/2 plus a moment s_m × f/2 at its EE; the
+    non-squeezing definition sees exactly that pair as internal: F_I^m = [0; s_m × f/2]."""
+    m, P, _ = _results()
+    y = np.zeros_like(P.y)
+    y[:, :2] = [3.0, -2.0]
+    f = inv.paper_distribution(P, y)
+    R = inv.resolution_for(m, "nonsqueezing")
+    F_I = inv.internal_wrench(P, f, "nonsqueezing", inv.nonsqueezing_metric(P, R.masses, R.inertias))
+    s = P.p_C[:, None, :] - P.p_grasp
+    expect = cross(s, np.array([3.0, -2.0, 0.0]) / 2)
+    assert np.max(np.abs(F_I[..., :3])) <= 1e-12
+    assert np.max(np.abs(F_I[..., 3:] - expect)) <= 1e-12
+
+
+def test_passive_joint_by_flag_and_by_large_weight():
+    """A passive joint (arm 1, joint 3): the flag gives τ = 0 to 1e-12 N·m with the object still moved;
+    a weight of 10⁸ instead of the flag gives torques within 1e-6 N·m of the flagged ones."""
+    m, P, _ = _results()
+    passive = np.zeros(6, bool)
+    passive[2] = True
+    R = replace(inv.resolution_for(m, "min_energy"), passive=passive)
+    flagged = inv.resolve(P, R)
+    assert np.max(np.abs(flagged.tau[:, 2])) <= 1e-12
+    assert np.max(np.abs(np.einsum("nij,nj->ni", P.A, flagged.f) - P.y)) <= 1e-12
+    heavy = inv.resolve(P, replace(inv.resolution_for(m, "min_energy"), weights=np.where(passive, 1e8, 1.0)))
+    assert np.max(np.abs(heavy.tau - flagged.tau)) <= 1e-6
+
+
+def test_minimum_energy_with_a_singular_or_non_square_jacobian():
+    """The grasp-wrench form needs no J⁻ᵀ: with arm 2's S J made singular (its last column zeroed: a
+    joint that cannot act on the grasp), or with an extra joint column (a 4-joint arm 1), it still
+    balances the object (<= 1e-12) and costs no more than the paper distribution; the Jacobian form
+    cannot even be evaluated there."""
+    m, P, _ = _results()
+    sub = _subproblem(P, slice(0, len(P.t), 50))
+    w = np.ones(6)
+    JT = sub.JT.copy()
+    JT[:, 5, :] = 0.0
+    sing = replace(sub, JT=JT)
+    f = inv.min_energy_distribution(sing, sing.y, w, np.zeros(6, bool))
+    assert np.max(np.abs(np.einsum("nij,nj->ni", sing.A, f) - sing.y)) <= 1e-12
+    cost = inv.cost_of(inv.torques_of(sing, f), w)
+    assert np.all(cost <= inv.cost_of(inv.torques_of(sing, inv.paper_distribution(sing, sing.y)), w) + 1e-15)
+    with pytest.raises(np.linalg.LinAlgError):
+        inv.min_energy_torques_jacobian_form(sing, sing.y, w)
+    extra = np.concatenate([sub.JT[:, :3], sub.JT[:, 2:3] * 0.5, sub.JT[:, 3:]], axis=1)
+    wide = replace(sub, JT=extra, tau_arms=np.insert(sub.tau_arms, 3, 0.0, axis=1))
+    f = inv.min_energy_distribution(wide, wide.y, np.ones(7), np.zeros(7, bool))
+    assert np.max(np.abs(np.einsum("nij,nj->ni", wide.A, f) - wide.y)) <= 1e-12
+
+
+def test_bounded_resolution_spans_minimum_energy_to_nonsqueezing():
+    """'bounded' with an infinite bound is 'min_energy', with a zero bound 'nonsqueezing' (1e-9 N·m);
+    with half the peak every internal component (grasp-line frame) stays within the bound (+1e-9) and
+    the cost lies between; an independent SLSQP solve of a sample finds no cheaper point (1e-9)."""
+    m, P, _ = _results()
+    sub = _subproblem(P, slice(0, len(P.t), 25))
+    R = inv.resolution_for(m, "min_energy")
+    free = inv.resolve(sub, replace(R, method="bounded"))
+    assert np.max(np.abs(free.tau - inv.resolve(sub, R).tau)) <= 1e-9
+    tight = inv.resolve(sub, replace(R, method="bounded", force_bound=0.0, moment_bound=0.0))
+    assert np.max(np.abs(tight.tau - inv.resolve(sub, replace(R, method="nonsqueezing")).tau)) <= 1e-9
+    fb, mb = inv.default_bounds(P, R)
+    half = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
+    mid = inv.resolve(sub, half)
+    Mstar = inv.nonsqueezing_metric(sub, R.masses, R.inertias)
+    L = inv.internal_operator(sub, "nonsqueezing", Mstar)
+    for i in range(len(sub.t)):
+        C, bound = inv._bound_rows(sub, i, L[i], half)
+        assert np.all(np.abs(C @ mid.f[i]) <= bound + 1e-9)
+    assert np.all(mid.cost >= free.cost * (1 - 1e-12)) and np.all(mid.cost <= tight.cost * (1 + 1e-12))
+    i = int(np.argmax(mid.cost - free.cost))
+    C, bound = inv._bound_rows(sub, i, L[i], half)
+    obj = lambda f: 0.5 * np.sum(R.weights * (sub.tau_arms[i] + sub.JT[i] @ f) ** 2)  # noqa: E731
+    cons = [{"type": "eq", "fun": lambda f: sub.A[i] @ f - sub.y[i]},
+            {"type": "ineq", "fun": lambda f: bound - C @ f}, {"type": "ineq", "fun": lambda f: bound + C @ f}]
+    ref = minimize(obj, tight.f[i], constraints=cons, method="SLSQP", options={"ftol": 1e-15, "maxiter": 500})
+    assert mid.cost[i] <= ref.fun + 1e-9
+
+
+def test_virtual_masses_centroid_and_fallback():
+    """Two grasps at ±0.2 m: equal halves, centroid at C; grasps at −0.1 and 0.3: 3:1 shares (lever
+    rule); three grasps with C on the segment of two of them (the 3-arm plate): equal shares, the
+    centroid 0.05 m from C is reported."""
+    m_, off = inv.virtual_masses(np.array([[-0.2, 0, 0], [0.2, 0, 0]]), 10.0)
+    assert m_ == pytest.approx([5.0, 5.0], rel=1e-14) and np.max(np.abs(off)) <= 1e-15
+    m_, off = inv.virtual_masses(np.array([[-0.1, 0, 0], [0.3, 0, 0]]), 8.0)
+    assert m_ == pytest.approx([6.0, 2.0], rel=1e-12) and np.max(np.abs(off)) <= 1e-15
+    m_, off = inv.virtual_masses(np.array([[-0.15, 0, 0], [0.15, 0, 0], [0.0, 0, 0.15]]), 3.0)
+    assert m_ == pytest.approx([1.0, 1.0, 1.0], rel=1e-14) and off == pytest.approx([0, 0, 0.05], abs=1e-15)
+
+
+@pytest.mark.parametrize("method", ["paper", "nonsqueezing", "min_energy", "bounded"])
+def test_replaying_the_torques_reproduces_the_paper_run(method):
+    """Acceptance: each resolution's torques, evaluated at the integrator's stage times and fed back
+    through the forward dynamics from the run's first state, reproduce the 5 s paper trajectory to
+    <= 1e-8 rad (and 1e-8 rad/s)."""
+    m, _, traj = run(PAPER)
+    R = inv.resolution_for(m, "min_energy")
+    if method == "bounded":
+        fb, mb = inv.default_bounds(problem(PAPER), R)
+        R = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
+    else:
+        R = replace(R, method=method)
+    rep = inv.replay(m, traj, R)
+    assert rep.max_angle_error <= 1e-8, f"{method}: replay off by {rep.max_angle_error:.3g} rad"
+    assert rep.max_rate_error <= 1e-8
