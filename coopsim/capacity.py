@@ -21,12 +21,12 @@ Beyond the paper:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .inverse import (InverseProblem, Resolution, _bound_rows, distribute, energy, internal_operator,
-                      min_energy_distribution, nonsqueezing_metric, resolve, torques_of)
+                      min_energy_distribution, resolve, torques_of)
 from .model import Model, Motors
 
 MODES = ("scaled", "payload")
@@ -38,7 +38,8 @@ class Capacity:
     object's for 'scaled', the payload's for 'payload'; inf: unbounded); lower kg: the smallest (0
     unless the motors cannot move a lighter load); feasible: lower <= mass; joint: stacked index of the
     motor that saturates first (at `mass`); sample, time s: when; side: 'upper' (τ_max line) or
-    'lower' (τ_min line); note: why it is infeasible, if so."""
+    'lower' (τ_min line); note: why it is infeasible, if so; per_sample (N,) kg: the largest mass
+    each sample alone allows (the capacity is their minimum when every sample allows 0)."""
 
     mass: float
     lower: float
@@ -48,6 +49,7 @@ class Capacity:
     time: float | None
     side: str | None
     note: str = ""
+    per_sample: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 def torque_limits(motors: Motors, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -96,11 +98,12 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
     lower = max(0.0, float(np.max(dn)))
     feasible = lower <= mass
     side = "upper" if b[i, j] > 0 else "lower"
+    per_sample = np.min(up, axis=1)
     if not np.isfinite(mass):
         return Capacity(mass, lower, mass > 0, None, None, None, None,
-                        "" if mass > 0 else "a torque is outside its limits at every mass")
+                        "" if mass > 0 else "a torque is outside its limits at every mass", per_sample)
     return Capacity(mass, lower, feasible, int(idx[j]), int(i), float(t[i]), side,
-                    "" if feasible else "no mass keeps every torque within its limits")
+                    "" if feasible else "no mass keeps every torque within its limits", per_sample)
 
 
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
@@ -184,11 +187,11 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
     mass, low = float(upper[i]), float(np.max(lower))
     feasible = low <= mass
     if not np.isfinite(mass):
-        return Capacity(mass, low, mass > 0, None, None, None, None, "" if mass > 0 else "infeasible LP")
+        return Capacity(mass, low, mass > 0, None, None, None, None, "" if mass > 0 else "infeasible LP", upper)
     j = int(joints[i])
     side = None if j < 0 else ("lower" if sides[i] else "upper")
     return Capacity(mass, low, feasible, j if j >= 0 else None, i, float(prob.t[i]), side,
-                    "" if feasible else "no mass is feasible at every sample")
+                    "" if feasible else "no mass is feasible at every sample", upper)
 
 
 def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
@@ -274,6 +277,24 @@ def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
     return replace(model, object=replace(obj, mass=total, inertia=inertia, grasp_pos=obj.grasp_pos - shift))
 
 
-def nonsqueezing_metric_of(prob: InverseProblem, res: Resolution) -> np.ndarray:
-    """M* of `res` on `prob` (re-exported for the CLI)."""
-    return nonsqueezing_metric(prob, res.masses, res.inertias)
+def brute_force_check(model: Model, traj, res: Resolution, mode: str, capacity: Capacity,
+                      payload_position: np.ndarray | None = None, rel: float = 1e-6) -> dict:
+    """Independent check of a closed-form capacity: rebuild the model with the object scaled to (or
+    carrying a payload of) capacity·(1 ∓ rel), rerun the inverse dynamics from scratch with the same
+    resolution, and measure the largest excess of a torque over its motor line (N·m; < 0: within).
+    Returns {below_excess, above_excess, above_joint, above_time, ok} (ok: below < 0 < above)."""
+    from .inverse import inverse_problem
+
+    lo, hi = torque_limits(model.motors, traj.qd)
+    out = {}
+    for key, factor in (("below", 1 - rel), ("above", 1 + rel)):
+        mass = capacity.mass * factor
+        m2 = scaled_model(model, mass) if mode == "scaled" else payload_model(model, payload_position, mass)
+        tau = resolve(inverse_problem(m2, traj), res).tau
+        excess = np.maximum(tau - hi, lo - tau)[:, ~res.passive]
+        i, j = np.unravel_index(int(np.argmax(excess)), excess.shape)
+        out[f"{key}_excess"] = float(excess[i, j])
+        if key == "above":
+            out["above_joint"], out["above_time"] = int(np.flatnonzero(~res.passive)[j]), float(traj.t[i])
+    out["ok"] = out["below_excess"] < 0 < out["above_excess"]
+    return out

@@ -108,6 +108,62 @@ def _cmd_validate(args) -> int:
     return 0 if ok else 1
 
 
+def _cmd_inverse(args) -> int:
+    from pathlib import Path
+
+    from .atomic import write_text_atomic
+    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names
+    from .log import read_mcap, run_metadata, write_mcap
+    from .plots_inverse import inverse_plots
+    from .scenario import load_scenario
+
+    model = load_scenario(args.scenario)
+    methods = ("paper", "nonsqueezing", "min_energy", "bounded") if args.method == "all" else (args.method,)
+    study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
+                          bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
+    summary = inverse_summary(study)
+    out = Path(args.out or Path("out") / model.name)
+    log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
+        "scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)},
+        "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0], "moment_bound_Nm": study.bounds[1]}}))
+    plots = inverse_plots(read_mcap(log_path), out)
+    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
+    write_text_atomic(out / "inverse.json", json.dumps(summary, indent=2) + "\n")
+    print(json.dumps(summary, indent=2) if args.json else
+          format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
+    return 0
+
+
+def _cmd_capacity(args) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from .atomic import write_text_atomic
+    from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
+                                 format_capacity_summary, joint_names)
+    from .log import read_mcap, run_metadata, write_mcap
+    from .plots_inverse import capacity_plots
+    from .scenario import load_scenario
+
+    model = load_scenario(args.scenario)
+    payload = None if args.payload is None else np.array(args.payload, dtype=float)
+    study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
+                           optimise=not args.no_optimise, check=args.check)
+    summary = capacity_summary(study)
+    out = Path(args.out or Path("out") / model.name)
+    meta = {"scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)}}
+    log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
+                          run_metadata(model, None, meta | capacity_metadata(summary)))
+    plots = capacity_plots(read_mcap(log_path), out)
+    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
+    write_text_atomic(out / "capacity.json", json.dumps(summary, indent=2) + "\n")
+    print(json.dumps(summary, indent=2) if args.json else
+          format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
+    ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
+    return 0 if ok else 1
+
+
 def _scenario_paths(given: list[str]) -> list[str]:
     """The given scenario files, or every bundled `scenarios/*.yaml` when none is given."""
     from pathlib import Path
@@ -171,6 +227,45 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--out", default="models", help="output folder (default: models)")
     p.set_defaults(func=_cmd_mjcf)
+
+    p = sub.add_parser("inverse", help="inverse dynamics with redundancy resolution, internal wrench, object stress",
+                       description=("Invert SCENARIO's trajectory (its forward run, or its prescribed object motion "
+                                    "through closed-chain IK) with each redundancy resolution; print torques, "
+                                    "energy, internal wrench and object stress; write DIR/inverse.mcap, plots and "
+                                    "inverse.json."))
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--method", default="all", choices=("all", "paper", "nonsqueezing", "min_energy", "bounded"),
+                   help="resolution (default: all): paper W+ (eq. 30), Erhart-Hirche non-squeezing, weighted "
+                        "minimum energy (eqs. 33-35), minimum energy with a bounded internal wrench")
+    p.add_argument("--bound-force", type=float, default=None,
+                   help="internal-force bound of 'bounded', N (default: scenario, else half the minimum-energy peak)")
+    p.add_argument("--bound-moment", type=float, default=None,
+                   help="internal-moment bound of 'bounded', N·m (default: scenario, else half the minimum-energy peak)")
+    p.add_argument("--replay", action="store_true",
+                   help="feed each resolution's torques back through the forward dynamics and report the error")
+    p.add_argument("--no-curve", action="store_true", help="skip the energy-against-bound sweep")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
+    p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary")
+    p.set_defaults(func=_cmd_inverse)
+
+    p = sub.add_parser("capacity", help="dynamic load carrying capacity (DLCC) of each resolution, LP bound",
+                       description=("Largest object mass (scaled at constant geometry; with --payload or the "
+                                    "scenario's inverse.payload also a point payload) each resolution carries along "
+                                    "SCENARIO's trajectory within the motor torque-speed lines (eq. 36), in closed "
+                                    "form; the LP bound over all distributions; energy weights that maximise it. "
+                                    "Writes DIR/capacity.mcap, plots and capacity.json."))
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--payload", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="point payload position in the object frame, m")
+    p.add_argument("--no-lp", action="store_true", help="skip the LP bound")
+    p.add_argument("--no-optimise", action="store_true", help="skip the weight optimisation")
+    p.add_argument("--check", action="store_true",
+                   help="brute-force check: rerun the inverse dynamics at (1 -/+ 1e-6) x each capacity; exit 1 if off")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
+    p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary")
+    p.set_defaults(func=_cmd_capacity)
     return parser
 
 

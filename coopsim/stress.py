@@ -113,34 +113,32 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
     N = len(R_o)
     out = {k: np.zeros((N, cuts)) for k in ("axial", "shear", "torsion", "bending", "m1", "m2")}
     others = [i for i in range(3) if i != a]
+    w, dw = twist[:, 3:], acc[:, 3:]
+    Rt = np.swapaxes(R_o, 1, 2)
+    p_m = np.einsum("nij,mj->nmi", R_o, grasp_pos)      # grasp points relative to C (N, r, 3)
     for j, x in enumerate(xi):
         frac = (x + L / 2) / L
         size = box.copy()
         size[a] = x + L / 2
-        c = np.zeros(3)
-        c[a] = (x - L / 2) / 2
-        ps = np.zeros(3)
-        ps[a] = x
-        Kp_body = piece_inertia(mass * frac, size)
-        on_piece = grasp_pos[:, a] < x
-        for i in range(N):
-            R, w, dw = R_o[i], twist[i, 3:], acc[i, 3:]
-            rho, p_s = R @ c, R @ ps
-            a_c = acc[i, :3] + cross(dw, rho) + cross(w, cross(w, rho))
-            Kp = R @ Kp_body @ R.T
-            inert_f = mass * frac * (a_c - gravity)
-            force = inert_f.copy()
-            moment = Kp @ dw + cross(w, Kp @ w) + cross(rho - p_s, inert_f)
-            for m in np.flatnonzero(on_piece):
-                pm = R @ grasp_pos[m]
-                force -= F_e[i, m, :3]
-                moment -= F_e[i, m, 3:] + cross(pm - p_s, F_e[i, m, :3])
-            wrench = P @ np.concatenate([force, moment])
-            fl, ml = R.T @ wrench[:3], R.T @ wrench[3:]   # box axes
-            out["axial"][i, j], out["torsion"][i, j] = fl[a], ml[a]
-            out["shear"][i, j] = np.hypot(fl[others[0]], fl[others[1]])
-            out["bending"][i, j] = np.hypot(ml[others[0]], ml[others[1]])
-            out["m1"][i, j], out["m2"][i, j] = ml[others[0]], ml[others[1]]
+        c, ps = np.zeros(3), np.zeros(3)
+        c[a], ps[a] = (x - L / 2) / 2, x
+        rho, p_s = R_o @ c, R_o @ ps                    # (N, 3)
+        a_c = acc[:, :3] + cross(dw, rho) + cross(w, cross(w, rho))
+        Kp = R_o @ piece_inertia(mass * frac, size) @ Rt
+        inert_f = mass * frac * (a_c - gravity)
+        force = inert_f.copy()
+        moment = (np.einsum("nij,nj->ni", Kp, dw) + cross(w, np.einsum("nij,nj->ni", Kp, w))
+                  + cross(rho - p_s, inert_f))
+        for m in np.flatnonzero(grasp_pos[:, a] < x):
+            force -= F_e[:, m, :3]
+            moment -= F_e[:, m, 3:] + cross(p_m[:, m] - p_s, F_e[:, m, :3])
+        wrench = np.concatenate([force, moment], axis=1) @ P.T
+        fl = np.einsum("nji,nj->ni", R_o, wrench[:, :3])   # box axes
+        ml = np.einsum("nji,nj->ni", R_o, wrench[:, 3:])
+        out["axial"][:, j], out["torsion"][:, j] = fl[:, a], ml[:, a]
+        out["shear"][:, j] = np.hypot(fl[:, others[0]], fl[:, others[1]])
+        out["bending"][:, j] = np.hypot(ml[:, others[0]], ml[:, others[1]])
+        out["m1"][:, j], out["m2"][:, j] = ml[:, others[0]], ml[:, others[1]]
     d1, d2 = box[others[0]], box[others[1]]
     area = d1 * d2
     Z1, Z2 = d1 * d2 ** 2 / 6.0, d2 * d1 ** 2 / 6.0    # a moment about axis 1 varies the stress along axis 2

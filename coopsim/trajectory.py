@@ -30,6 +30,10 @@ class TrajectoryError(CoopsimError):
     """A prescribed motion cannot be turned into joint motions (out of reach, singular, redundant)."""
 
 
+class SingularJacobian(ConstraintError):
+    """An arm's Jacobian in the constrained rows lost rank during inverse kinematics."""
+
+
 @dataclass(frozen=True, eq=False)
 class JointTrajectory:
     """Joint motion of the closed chain sampled at t (N,) s: q (N, n) rad, qd (N, n) rad/s, qdd (N, n)
@@ -146,7 +150,7 @@ def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np
         SJ = S @ ee_jacobian(arm_pose(arm, q))
         sv = np.linalg.svd(SJ, compute_uv=False)
         if sv[-1] < sing_tol * sv[0]:
-            raise ConstraintError(f"singular Jacobian (σ_min/σ_max = {sv[-1] / sv[0]:.2g})")
+            raise SingularJacobian(f"singular Jacobian (σ_min/σ_max = {sv[-1] / sv[0]:.2g})")
         q -= np.linalg.solve(SJ, e)
     raise ConstraintError(f"Newton did not converge (max |error| {np.max(np.abs(e)):.3g} after {max_iter} steps)")
 
@@ -213,9 +217,11 @@ def _solve_arm(arm: ArmModel, S: np.ndarray, p, R, guess, t, p_C) -> np.ndarray:
                               f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
     try:
         return arm_ik(arm, S, p, R, guess)
+    except SingularJacobian as exc:
+        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} meets a singularity {where}: {exc}") from None
     except ConstraintError as exc:
-        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} cannot follow the path {where}: "
-                              f"{exc}") from None
+        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
+                              f"no joint angles reach its grasp ({exc})") from None
 
 
 def object_pose_of(model: Model, q: np.ndarray):

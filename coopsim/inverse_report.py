@@ -1,0 +1,372 @@
+"""Studies behind `coopsim inverse` and `coopsim capacity`: every stage run in order on one scenario,
+plain-data summaries for the text and JSON outputs, and the MCAP series (no I/O here).
+
+    scenario → trajectory (forward run or object-motion IK) → InverseProblem
+      → resolutions (paper, nonsqueezing, min_energy, bounded; plus the forward input torques)
+      → object stress (grasp-line components, box section loads) → [replay]
+      → capacity (closed form per resolution, LP bound, optimised weights, [brute-force check])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import capacity as cap
+from .inverse import (METHODS, InverseResult, Replay, default_bounds, distribution_of_torques, energy,
+                      inverse_problem, replay, resolution_for, resolve, result_of, virtual_masses)
+from .model import Model
+from .stress import SectionLoads, decompose_internal, grasp_line_axes, section_loads
+from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
+
+DEFINITIONS = ("paper", "nonsqueezing")
+
+
+def trajectory_of(model: Model, duration: float | None = None):
+    """(JointTrajectory, SimResult or None): the scenario's trajectory to invert — its forward run
+    (`duration` overrides the scenario's) or the IK of its prescribed object motion."""
+    if model.inverse.trajectory == "object_motion":
+        return object_motion_trajectory(model, model.inverse.object_motion), None
+    from .simulate import simulate
+
+    res = simulate(model, duration=duration)
+    return from_simulation(res), res
+
+
+def joint_names(model: Model) -> list[str]:
+    return [f"{a.name} joint {i + 1}" for a in model.arms for i in range(a.n)]
+
+
+@dataclass(frozen=True, eq=False)
+class InverseStudy:
+    """Everything `coopsim inverse` reports: model, traj, sim (forward run or None), problem,
+    resolutions {method: Resolution}, results {method: InverseResult} ('forward' = the forward run's
+    input torques when there is one), components {method: {definition: {axial, shear, torsion,
+    bending} (N, r)}}, stress {method: SectionLoads} (box objects), limits (τ_min, τ_max) (N, n),
+    replays {method: Replay}, curve: energy–stress trade-off (list of dicts), bounds (N, N·m)."""
+
+    model: Model
+    traj: JointTrajectory
+    sim: object
+    problem: object
+    resolutions: dict
+    results: dict
+    components: dict
+    stress: dict
+    limits: tuple
+    replays: dict
+    curve: list
+    bounds: tuple
+
+
+def inverse_study(model: Model, methods=METHODS, duration: float | None = None, with_replay: bool = False,
+                  bounds: tuple[float | None, float | None] = (None, None), curve: bool = True) -> InverseStudy:
+    """Run the inverse dynamics of the scenario with every method in `methods`."""
+    traj, sim = trajectory_of(model, duration)
+    prob = inverse_problem(model, traj)
+    base = resolution_for(model, "min_energy")
+    f_b = bounds[0] if bounds[0] is not None else model.inverse.internal_force_bound
+    m_b = bounds[1] if bounds[1] is not None else model.inverse.internal_moment_bound
+    if f_b is None or m_b is None:
+        d_f, d_m = default_bounds(prob, base)
+        f_b, m_b = (d_f if f_b is None else f_b), (d_m if m_b is None else m_b)
+    resolutions = {k: replace(base, method=k, force_bound=f_b, moment_bound=m_b) for k in methods}
+    results: dict[str, InverseResult] = {}
+    if sim is not None:
+        f, _ = distribution_of_torques(prob, sim.tau)
+        results["forward"] = result_of(prob, "forward", f, base)
+    for k, res in resolutions.items():
+        results[k] = resolve(prob, res)
+    components, stress = {}, {}
+    axes = np.array([grasp_line_axes(pg, pc) for pg, pc in zip(prob.p_grasp, prob.p_C)])
+    box = np.any(model.object.box > 0)
+    for k, r in results.items():
+        components[k] = {d: decompose_internal(getattr(r, f"internal_{d}"), axes) for d in DEFINITIONS}
+        if box:
+            stress[k] = section_loads(model.object.mass, model.object.box, model.object.grasp_pos, prob.R_o,
+                                      prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows)
+    replays = {k: replay(model, traj, res) for k, res in resolutions.items()} if with_replay else {}
+    trade = []
+    if curve:
+        peak = default_bounds(prob, base, fraction=1.0)
+        trade = cap.energy_stress_curve(prob, base, peak)
+    return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
+                        cap.torque_limits(model.motors, traj.qd), replays, trade, (f_b, m_b))
+
+
+def _trajectory_summary(model: Model, traj: JointTrajectory) -> dict:
+    return {"source": traj.source, "start_s": float(traj.t[0]), "end_s": float(traj.t[-1]),
+            "samples": len(traj.t), "max_abs_rate_rad_s": np.max(np.abs(traj.qd), axis=0).tolist(),
+            "max_abs_acceleration_rad_s2": np.max(np.abs(traj.qdd), axis=0).tolist()}
+
+
+def inverse_summary(study: InverseStudy) -> dict:
+    """JSON-ready summary of an inverse study (SI units)."""
+    m = study.model
+    e_min = energy(study.results["min_energy"]) if "min_energy" in study.results else None
+    methods = {}
+    for k, r in study.results.items():
+        e = energy(r)
+        entry = {
+            "energy": e,
+            "energy_ratio_to_min_energy": None if not e_min else e / e_min,
+            "max_abs_torque_Nm": np.max(np.abs(r.tau), axis=0).tolist(),
+            "max_torque_norm_Nm": float(np.max(np.linalg.norm(r.tau, axis=1))),
+            "max_cost": float(np.max(r.cost)),
+            "internal": {},
+        }
+        for d in DEFINITIONS:
+            F_I, comp = getattr(r, f"internal_{d}"), study.components[k][d]
+            entry["internal"][d] = {
+                "max_abs_component": float(np.max(np.abs(F_I))),
+                "max_force_N": float(np.max(np.linalg.norm(F_I[..., :3], axis=-1))),
+                "max_moment_Nm": float(np.max(np.linalg.norm(F_I[..., 3:], axis=-1))),
+                "max_stretch_N": float(max(0.0, np.max(comp["axial"]))),
+                "max_squeeze_N": float(max(0.0, -np.min(comp["axial"]))),
+                "max_shear_N": float(np.max(comp["shear"])),
+                "max_torsion_Nm": float(np.max(np.abs(comp["torsion"]))),
+                "max_bending_Nm": float(np.max(comp["bending"])),
+            }
+        if k in study.stress:
+            s = study.stress[k]
+            entry["stress"] = {"peak_normal_Pa": float(np.max(s.peak_normal)), "peak_shear_Pa": float(np.max(s.peak_shear)),
+                               "max_axial_N": float(np.max(np.abs(s.axial))), "max_bending_Nm": float(np.max(s.bending))}
+        if np.any(m.motors.passive):
+            entry["max_abs_passive_torque_Nm"] = float(np.max(np.abs(r.tau[:, m.motors.passive])))
+        if k in study.replays:
+            rep = study.replays[k]
+            entry["replay"] = {"max_angle_error_rad": rep.max_angle_error, "max_rate_error_rad_s": rep.max_rate_error}
+        methods[k] = entry
+    masses, offset = virtual_masses(m.object.grasp_pos, m.object.mass, m.inverse.nonsqueezing_masses)
+    return {
+        "scenario": m.name,
+        "joints": joint_names(m),
+        "trajectory": _trajectory_summary(m, study.traj),
+        "energy_definition": "integral of 0.5 tau^T Q tau dt (trapezoidal), Q = diag(energy_weights)",
+        "nonsqueezing": {"virtual_masses_kg": masses.tolist(), "centroid_offset_m": offset.tolist()},
+        "bounded": {"force_bound_N": study.bounds[0], "moment_bound_Nm": study.bounds[1],
+                    "definition": "nonsqueezing"},
+        "methods": methods,
+        "energy_stress_curve": study.curve,
+    }
+
+
+def format_inverse_summary(s: dict) -> str:
+    """Short text version of `inverse_summary`."""
+    tr = s["trajectory"]
+    lines = [f"scenario        {s['scenario']}: {tr['source']} trajectory, {tr['start_s']:g}..{tr['end_s']:g} s, "
+             f"{tr['samples']} samples",
+             f"non-squeezing   virtual masses {', '.join(f'{x:.4g}' for x in s['nonsqueezing']['virtual_masses_kg'])} kg, "
+             f"centroid offset {np.linalg.norm(s['nonsqueezing']['centroid_offset_m']):.3g} m",
+             f"bounded         |internal| <= {s['bounded']['force_bound_N']:.4g} N, {s['bounded']['moment_bound_Nm']:.4g} N·m "
+             f"(grasp-line components, non-squeezing definition)",
+             "",
+             f"{'method':<14}{'energy':>11}{'ratio':>8}{'max|tau|':>10}{'F_I paper':>11}{'F_I E&H':>10}"
+             f"{'sigma max':>11}{'replay':>10}",
+             f"{'':<14}{'N²m²s':>11}{'':>8}{'N·m':>10}{'N, N·m':>11}{'N, N·m':>10}{'Pa':>11}{'rad':>10}"]
+    for k, e in s["methods"].items():
+        ratio = e["energy_ratio_to_min_energy"]
+        lines.append(
+            f"{k:<14}{e['energy']:>11.4g}{'' if ratio is None else f'{ratio:.3f}':>8}{e['max_torque_norm_Nm']:>10.4g}"
+            f"{e['internal']['paper']['max_abs_component']:>11.3g}{e['internal']['nonsqueezing']['max_abs_component']:>10.3g}"
+            f"{e['stress']['peak_normal_Pa'] if 'stress' in e else float('nan'):>11.4g}"
+            f"{e['replay']['max_angle_error_rad'] if 'replay' in e else float('nan'):>10.2g}")
+    if s["energy_stress_curve"]:
+        lines += ["", "energy against the internal-wrench bound (bounded minimum energy):"]
+        for c in s["energy_stress_curve"]:
+            lines.append(f"  {c['fraction']:>5.2f} x peak: |F_I| <= {c['force_bound_N']:.4g} N, {c['moment_bound_Nm']:.4g} N·m"
+                         f"  energy {c['energy']:.5g}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------
+# Capacity
+# ------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class CapacityStudy:
+    """Everything `coopsim capacity` reports: caps {(method, mode): Capacity}, tau_at {(method, mode):
+    τ (N, n) at the capacity}, lp {mode: Capacity}, optimised (weights, Capacity, τ at it) or None,
+    energies {method: energy at the nominal mass}, checks {(method, mode): brute-force check} or {}."""
+
+    model: Model
+    traj: JointTrajectory
+    problem: object
+    modes: tuple
+    caps: dict
+    tau_at: dict
+    lp: dict
+    optimised: tuple | None
+    energies: dict
+    checks: dict
+    limits: tuple
+    payload_position: np.ndarray | None
+
+
+def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
+                   optimise: bool = True, check: bool = False, methods=("paper", "nonsqueezing", "min_energy")) -> CapacityStudy:
+    """DLCC of every linear resolution along the scenario's trajectory (object scaled at constant
+    geometry; with a payload position also as a point payload), the LP bound, the optimised weights."""
+    traj, _ = trajectory_of(model, duration)
+    payload = payload_position if payload_position is not None else model.inverse.payload_position
+    prob = inverse_problem(model, traj, payload)
+    modes = ("scaled",) if payload is None else cap.MODES
+    caps, tau_at, checks, energies = {}, {}, {}, {}
+    for k in methods:
+        res = resolution_for(model, k)
+        energies[k] = energy(resolve(prob, res))
+        for mode in modes:
+            c = cap.method_capacity(prob, res, model.motors, mode)
+            caps[k, mode] = c
+            a, b = cap.affine_torques(prob, res, mode)
+            tau_at[k, mode] = a + (c.mass if np.isfinite(c.mass) else 0.0) * b
+            if check and c.feasible and np.isfinite(c.mass):
+                checks[k, mode] = cap.brute_force_check(model, traj, res, mode, c, payload)
+    zero_ok = all(caps[k, m].feasible and caps[k, m].lower == 0.0 for k in methods for m in modes)
+    lp = {mode: cap.lp_capacity(prob, model.motors, model.motors.passive, mode, zero_feasible=zero_ok)
+          for mode in modes} if with_lp else {}
+    optimised = None
+    if optimise:
+        base = resolution_for(model, "min_energy")
+        w, c = cap.optimise_weights(prob, base, model.motors)
+        a, b = cap.affine_torques(prob, replace(base, weights=w), "scaled")
+        optimised = (w, c, a + c.mass * b)
+    return CapacityStudy(model, traj, prob, modes, caps, tau_at, lp, optimised, energies, checks,
+                         cap.torque_limits(model.motors, traj.qd), payload)
+
+
+def _capacity_entry(model: Model, c: cap.Capacity) -> dict:
+    names = joint_names(model)
+    return {"mass_kg": c.mass, "lower_kg": c.lower, "feasible": bool(c.feasible),
+            "saturating_motor": None if c.joint is None else names[c.joint],
+            "stacked_joint": c.joint, "time_s": c.time, "line": None if c.side is None else
+            ("tau_max" if c.side == "upper" else "tau_min"), "note": c.note}
+
+
+def capacity_summary(study: CapacityStudy) -> dict:
+    """JSON-ready summary of a capacity study (SI units)."""
+    m = study.model
+    out = {
+        "scenario": m.name,
+        "joints": joint_names(m),
+        "trajectory": _trajectory_summary(m, study.traj),
+        "assumptions": {
+            "scaled": "the whole object scaled at constant geometry (density), mass_kg is the object's mass; "
+                      "the trajectory is held fixed",
+            "payload": None if study.payload_position is None else
+            f"a point mass at {list(map(float, study.payload_position))} m (object frame) added to the nominal "
+            f"{m.object.mass:.6g} kg object; mass_kg is the payload's",
+            "motor_lines": "eq. 36: tau_max = tau_s - (tau_s/omega_s) qd, tau_min = -tau_s - (tau_s/omega_s) qd",
+            "nonsqueezing": "virtual bodies fixed at the nominal object's",
+        },
+        "nominal_object_mass_kg": m.object.mass,
+        "capacity": {mode: {k: _capacity_entry(m, c) for (k, md), c in study.caps.items() if md == mode}
+                     for mode in study.modes},
+        "lp_bound": {mode: _capacity_entry(m, c) for mode, c in study.lp.items()},
+        "energy": {k: e for k, e in study.energies.items()},
+    }
+    if "min_energy" in study.energies:
+        e = study.energies["min_energy"]
+        out["energy_ratio_to_min_energy"] = {k: v / e for k, v in study.energies.items()}
+    if study.optimised is not None:
+        w, c, _ = study.optimised
+        equal = study.caps.get(("min_energy", "scaled"))
+        out["optimised_weights"] = {"weights": w.tolist(), **_capacity_entry(m, c),
+                                    "equal_weights_mass_kg": None if equal is None else equal.mass}
+    if study.checks:
+        out["brute_force_check"] = {f"{k}/{mode}": v for (k, mode), v in study.checks.items()}
+    return out
+
+
+def format_capacity_summary(s: dict) -> str:
+    """Short text version of `capacity_summary`."""
+    lines = [f"scenario        {s['scenario']}: {s['trajectory']['source']} trajectory, "
+             f"{s['trajectory']['start_s']:g}..{s['trajectory']['end_s']:g} s; nominal object {s['nominal_object_mass_kg']:.4g} kg"]
+    for mode, caps in s["capacity"].items():
+        what = "object mass (scaled at constant geometry)" if mode == "scaled" else "payload mass"
+        lines += ["", f"DLCC, {what}:"]
+        rows = list(caps.items()) + ([("LP bound", s["lp_bound"][mode])] if mode in s["lp_bound"] else [])
+        if mode == "scaled" and "optimised_weights" in s:
+            rows.append(("optimised Q", s["optimised_weights"]))
+        for k, c in rows:
+            where = (f"{c['saturating_motor']} on {c['line']} at t={c['time_s']:.4g} s" if c["saturating_motor"]
+                     else c["note"] or "-")
+            ok = "" if c["feasible"] else "  (infeasible)"
+            lines.append(f"  {k:<14}{c['mass_kg']:>10.4f} kg   first saturates: {where}{ok}")
+    if "energy_ratio_to_min_energy" in s:
+        lines += ["", "energy relative to the minimum-energy distribution: " + ", ".join(
+            f"{k} {v:.3f}" for k, v in s["energy_ratio_to_min_energy"].items())]
+    if "optimised_weights" in s:
+        lines.append("optimised weights Q: [" + ", ".join(f"{x:.4g}" for x in s["optimised_weights"]["weights"]) + "]")
+    if "brute_force_check" in s:
+        bad = [k for k, v in s["brute_force_check"].items() if not v["ok"]]
+        lines.append(f"brute-force check at (1 ± 1e-6) x capacity: {'all agree' if not bad else 'FAILED: ' + ', '.join(bad)}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------
+# MCAP series
+# ------------------------------------------------------------------------------------------------
+
+def inverse_series(study: InverseStudy) -> list:
+    """Series for the MCAP log: /inverse/trajectory (θ, θ̇, θ̈, motor lines), and per method
+    /inverse/<method>/torque (τ, ½τᵀQτ, |τ|), /inverse/<method>/grasp_wrench (F_e), and
+    /inverse/<method>/internal (both definitions and the grasp-line components of each), plus
+    /inverse/<method>/stress (box section peaks) when the object is a box."""
+    from .log import Series
+
+    t = study.traj.t
+    lo, hi = study.limits
+    out = [Series("/inverse/trajectory", "coopsim.inverse.Trajectory", t,
+                  {"q": study.traj.q, "qd": study.traj.qd, "qdd": study.traj.qdd, "tau_min": lo, "tau_max": hi})]
+    for k, r in study.results.items():
+        out.append(Series(f"/inverse/{k}/torque", "coopsim.inverse.Torque", t,
+                          {"tau": r.tau, "cost": r.cost, "torque_norm": np.linalg.norm(r.tau, axis=1)}))
+        out.append(Series(f"/inverse/{k}/grasp_wrench", "coopsim.inverse.GraspWrench", t, {"wrench": r.grasp_wrench}))
+        fields = {}
+        for d in DEFINITIONS:
+            fields[d] = getattr(r, f"internal_{d}")
+            for part, v in study.components[k][d].items():
+                fields[f"{d}_{part}"] = v
+        out.append(Series(f"/inverse/{k}/internal", "coopsim.inverse.Internal", t, fields))
+        if k in study.stress:
+            s: SectionLoads = study.stress[k]
+            out.append(Series(f"/inverse/{k}/stress", "coopsim.inverse.Stress", t,
+                              {"peak_normal": s.peak_normal, "peak_shear": s.peak_shear,
+                               "max_axial": np.max(np.abs(s.axial), axis=1), "max_bending": np.max(s.bending, axis=1)}))
+    return out
+
+
+def capacity_series(study: CapacityStudy) -> list:
+    """Series for the MCAP log: /capacity/limits (θ̇, motor lines) and per method and mode
+    /capacity/<method>/<mode> (τ at the capacity, the largest mass each sample allows), likewise
+    /capacity/lp/<mode> and /capacity/optimised/scaled."""
+    from .log import Series
+
+    t = study.traj.t
+    lo, hi = study.limits
+    out = [Series("/capacity/limits", "coopsim.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
+    for (k, mode), c in study.caps.items():
+        out.append(Series(f"/capacity/{k}/{mode}", "coopsim.capacity.AtCapacity", t,
+                          {"tau": study.tau_at[k, mode], "per_sample_mass": c.per_sample}))
+    for mode, c in study.lp.items():
+        out.append(Series(f"/capacity/lp/{mode}", "coopsim.capacity.LP", t, {"per_sample_mass": c.per_sample}))
+    if study.optimised is not None:
+        w, c, tau = study.optimised
+        out.append(Series("/capacity/optimised/scaled", "coopsim.capacity.AtCapacity", t,
+                          {"tau": tau, "per_sample_mass": c.per_sample}))
+    return out
+
+
+def capacity_metadata(summary: dict) -> dict:
+    """MCAP metadata records of a capacity study: one per method and mode ("capacity.<method>.<mode>")."""
+    recs = {}
+    for mode, caps in summary["capacity"].items():
+        for k, c in caps.items():
+            recs[f"capacity.{k}.{mode}"] = c
+    for mode, c in summary["lp_bound"].items():
+        recs[f"capacity.lp.{mode}"] = c
+    if "optimised_weights" in summary:
+        recs["capacity.optimised.scaled"] = summary["optimised_weights"]
+    return recs

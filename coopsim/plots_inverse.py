@@ -1,0 +1,191 @@
+"""Plots of inverse-dynamics and capacity logs, in the spirit of the paper's Figs. 6–8 (PNG, Agg).
+
+Every function takes a :class:`coopsim.log.LogData` read back from the MCAP file the CLI wrote, so a
+fresh study and a stored log are drawn by the same code. Topics: /inverse/trajectory,
+/inverse/<method>/{torque,internal,stress} (`coopsim inverse`), /capacity/limits,
+/capacity/<method>/<mode>, /capacity/lp/<mode> and the capacity.<method>.<mode> metadata records
+(`coopsim capacity`). Joint names come from the "joints" entry of the "study" metadata record.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .atomic import atomic_path
+from .log import LogData
+
+STYLE = {"forward": dict(color="black", ls="--", lw=1.2), "paper": dict(color="tab:blue"),
+         "nonsqueezing": dict(color="tab:green"), "min_energy": dict(color="tab:red"),
+         "bounded": dict(color="tab:purple"), "optimised": dict(color="tab:orange"),
+         "lp": dict(color="tab:gray", ls=":", lw=1.5)}
+LABEL = {"forward": "forward-dynamics input", "paper": "zero internal (paper W⁺)",
+         "nonsqueezing": "zero internal (non-squeezing)", "min_energy": "minimum energy",
+         "bounded": "min. energy, bounded internal", "optimised": "minimum energy, optimised Q",
+         "lp": "LP bound (any distribution)"}
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    FigureCanvasAgg(fig)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    return path
+
+
+def _joints(log: LogData, n: int) -> list[str]:
+    names = json.loads(log.metadata.get("study", {}).get("joints", "null") or "null")
+    return names if names and len(names) == n else [f"joint {i + 1}" for i in range(n)]
+
+
+def _methods(log: LogData, prefix: str, suffix: str) -> list[str]:
+    order = list(STYLE)
+    found = [k[len(prefix):-len(suffix)] for k in log.topics if k.startswith(prefix) and k.endswith(suffix)]
+    return sorted(found, key=lambda k: order.index(k) if k in order else len(order))
+
+
+def inverse_torques_figure(log: LogData) -> Figure:
+    """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint,
+    with the motor lines of eq. 36 (grey)."""
+    traj = log.topics["/inverse/trajectory"]
+    t, n = traj["t"], traj["q"].shape[1]
+    names = _joints(log, n)
+    cols = int(np.ceil(n / 2)) if n > 3 else n
+    rows = int(np.ceil(n / cols))
+    fig = Figure(figsize=(4.2 * cols, 3.0 * rows))
+    for j in range(n):
+        ax = fig.add_subplot(rows, cols, j + 1)
+        for k in _methods(log, "/inverse/", "/torque"):
+            ax.plot(t, log.topics[f"/inverse/{k}/torque"]["tau"][:, j], label=LABEL.get(k, k), **STYLE.get(k, {}))
+        lo, hi = traj["tau_min"][:, j], traj["tau_max"][:, j]
+        if np.all(np.isfinite(hi)):
+            span = max(np.max(np.abs([ln.get_ydata() for ln in ax.lines])), 1e-9)
+            if np.min(hi) < 3 * span:
+                ax.plot(t, hi, color="0.6", lw=0.8)
+                ax.plot(t, lo, color="0.6", lw=0.8)
+        ax.set_title(names[j], fontsize=9)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("τ (N·m)")
+        ax.grid(alpha=0.3)
+    fig.axes[0].legend(fontsize=7)
+    return fig
+
+
+def inverse_norms_figure(log: LogData) -> Figure:
+    """Fig. 7: the torque norm |τ| and the cost ½τᵀQτ of every resolution over time."""
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    for k in _methods(log, "/inverse/", "/torque"):
+        d = log.topics[f"/inverse/{k}/torque"]
+        ax1.plot(d["t"], d["torque_norm"], label=LABEL.get(k, k), **STYLE.get(k, {}))
+        ax2.plot(d["t"], d["cost"], label=LABEL.get(k, k), **STYLE.get(k, {}))
+    ax1.set_ylabel("|τ| (N·m)")
+    ax2.set_ylabel("½ τᵀQτ (N²·m²)")
+    for ax in (ax1, ax2):
+        ax.set_xlabel("t (s)")
+        ax.grid(alpha=0.3)
+    ax1.legend(fontsize=8)
+    return fig
+
+
+def inverse_internal_figure(log: LogData) -> Figure:
+    """What each resolution puts into the object: the largest internal force and moment over the arms
+    (non-squeezing definition, at C) and, for a box, the peak normal stress over its cross-sections."""
+    methods = _methods(log, "/inverse/", "/internal")
+    has_stress = all(f"/inverse/{k}/stress" in log.topics for k in methods)
+    rows = 3 if has_stress else 2
+    fig = Figure(figsize=(8, 2.8 * rows))
+    axes = [fig.add_subplot(rows, 1, i + 1) for i in range(rows)]
+    for k in methods:
+        d = log.topics[f"/inverse/{k}/internal"]
+        F = d["nonsqueezing"]
+        axes[0].plot(d["t"], np.max(np.linalg.norm(F[..., :3], axis=-1), axis=1), label=LABEL.get(k, k), **STYLE.get(k, {}))
+        axes[1].plot(d["t"], np.max(np.linalg.norm(F[..., 3:], axis=-1), axis=1), **STYLE.get(k, {}))
+        if has_stress:
+            s = log.topics[f"/inverse/{k}/stress"]
+            axes[2].plot(s["t"], s["peak_normal"] / 1e3, **STYLE.get(k, {}))
+    axes[0].set_ylabel("internal force (N)")
+    axes[1].set_ylabel("internal moment (N·m)")
+    if has_stress:
+        axes[2].set_ylabel("peak normal stress (kPa)")
+    for ax in axes:
+        ax.set_xlabel("t (s)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return fig
+
+
+def inverse_plots(log: LogData, out_dir: str | Path) -> list[Path]:
+    """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir."""
+    out = Path(out_dir)
+    return [_save(inverse_torques_figure(log), out / "inverse_torques.png"),
+            _save(inverse_norms_figure(log), out / "inverse_norms.png"),
+            _save(inverse_internal_figure(log), out / "inverse_internal.png")]
+
+
+def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
+    """Fig. 8: per resolution, the torque of the motor that saturates first, at the capacity mass,
+    against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation."""
+    lim = log.topics["/capacity/limits"]
+    t = lim["t"]
+    methods = _methods(log, "/capacity/", f"/{mode}")
+    methods = [k for k in methods if k != "lp"]
+    names = _joints(log, lim["qd"].shape[1])
+    cols = min(2, max(1, len(methods)))
+    rows = int(np.ceil(max(1, len(methods)) / cols))
+    fig = Figure(figsize=(5.5 * cols, 3.8 * rows))
+    for i, k in enumerate(methods):
+        ax = fig.add_subplot(rows, cols, i + 1)
+        rec = log.metadata.get(f"capacity.{k}.{mode}", {})
+        j = json.loads(rec.get("stacked_joint", "null"))
+        mass = json.loads(rec.get("mass_kg", "NaN").replace("Infinity", "1e999"))
+        if j is None:
+            ax.text(0.5, 0.5, "no saturating motor", ha="center", va="center", transform=ax.transAxes)
+            continue
+        tau = log.topics[f"/capacity/{k}/{mode}"]["tau"][:, j]
+        ax.plot(t, tau, label=f"τ at {mass:.4g} kg", **STYLE.get(k, {}))
+        ax.plot(t, lim["tau_max"][:, j], color="0.4", lw=1, label="τ_max line (eq. 36)")
+        ax.plot(t, lim["tau_min"][:, j], color="0.4", lw=1, ls="--", label="τ_min line (eq. 36)")
+        ts = json.loads(rec.get("time_s", "null"))
+        if ts is not None:
+            ax.plot([ts], [np.interp(ts, t, tau)], "o", color="black")
+        ax.set_title(f"{LABEL.get(k, k)}\n{names[j]}", fontsize=9)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("τ (N·m)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    return fig
+
+
+def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
+    """The largest mass each sample alone allows, per resolution and for the LP bound: the capacity is
+    the lowest point of each curve."""
+    fig = Figure(figsize=(8, 4))
+    ax = fig.add_subplot(1, 1, 1)
+    for k in _methods(log, "/capacity/", f"/{mode}"):
+        d = log.topics[f"/capacity/{k}/{mode}"]
+        y = np.where(np.isfinite(d["per_sample_mass"]), d["per_sample_mass"], np.nan)
+        ax.plot(d["t"], y, label=LABEL.get(k, k), **STYLE.get(k, {}))
+    ax.set_yscale("log")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("largest mass this sample allows (kg)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def capacity_plots(log: LogData, out_dir: str | Path) -> list[Path]:
+    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir."""
+    out = Path(out_dir)
+    paths = []
+    for mode in ("scaled", "payload"):
+        if not any(k.endswith(f"/{mode}") and k.startswith("/capacity/") for k in log.topics):
+            continue
+        tag = "" if mode == "scaled" else "_payload"
+        paths.append(_save(capacity_motor_figure(log, mode), out / f"capacity_motors{tag}.png"))
+        paths.append(_save(capacity_along_path_figure(log, mode), out / f"capacity_along_path{tag}.png"))
+    return paths
