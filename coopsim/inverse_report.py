@@ -292,8 +292,10 @@ def format_capacity_summary(s: dict) -> str:
         for k, c in rows:
             where = (f"{c['saturating_motor']} on {c['line']} at t={c['time_s']:.4g} s" if c["saturating_motor"]
                      else c["note"] or "-")
-            ok = "" if c["feasible"] else "  (infeasible)"
-            lines.append(f"  {k:<14}{c['mass_kg']:>10.4f} kg   first saturates: {where}{ok}")
+            if c["feasible"]:
+                lines.append(f"  {k:<14}{c['mass_kg']:>10.4f} kg   first saturates: {where}")
+            else:
+                lines.append(f"  {k:<14}{'none':>10}      {c['note'] or 'infeasible'} (binding: {where})")
     if "energy_ratio_to_min_energy" in s:
         lines += ["", "energy relative to the minimum-energy distribution: " + ", ".join(
             f"{k} {v:.3f}" for k, v in s["energy_ratio_to_min_energy"].items())]
