@@ -112,7 +112,8 @@ def _cmd_inverse(args) -> int:
     from pathlib import Path
 
     from .atomic import write_text_atomic
-    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names
+    from .inverse_report import (format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names,
+                                 json_safe)
     from .log import read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
     from .scenario import load_scenario
@@ -128,8 +129,8 @@ def _cmd_inverse(args) -> int:
         "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0], "moment_bound_Nm": study.bounds[1]}}))
     plots = inverse_plots(read_mcap(log_path), out)
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
-    write_text_atomic(out / "inverse.json", json.dumps(summary, indent=2) + "\n")
-    print(json.dumps(summary, indent=2) if args.json else
+    write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
+    print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     return 0
 
@@ -141,7 +142,7 @@ def _cmd_capacity(args) -> int:
 
     from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
-                                 format_capacity_summary, joint_names)
+                                 format_capacity_summary, joint_names, json_safe)
     from .log import read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .scenario import load_scenario
@@ -157,8 +158,8 @@ def _cmd_capacity(args) -> int:
                           run_metadata(model, None, meta | capacity_metadata(summary)))
     plots = capacity_plots(read_mcap(log_path), out)
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
-    write_text_atomic(out / "capacity.json", json.dumps(summary, indent=2) + "\n")
-    print(json.dumps(summary, indent=2) if args.json else
+    write_text_atomic(out / "capacity.json", json.dumps(json_safe(summary), indent=2) + "\n")
+    print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
     return 0 if ok else 1

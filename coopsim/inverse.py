@@ -195,9 +195,10 @@ def virtual_masses(grasp_pos: np.ndarray, mass: float, ratios: np.ndarray | None
     """Virtual masses m_i* (r,) kg of the non-squeezing distribution and the offset (3,) m of their
     centroid from C (object frame). Given `ratios`, m_i* = m_o ratios_i / Σ ratios. Otherwise the masses
     closest to equal shares m_o/r with Σ m_i* = m_o and Σ m_i* g_i = 0 (g_i the grasp positions, so the
-    centroid is C; least squares when C is off the grasps' affine hull); when that needs a mass <= 0
-    (C on or outside the border of the grasps' hull) equal shares are used. A non-zero offset means the
-    distribution is non-squeezing for a virtual body whose centre is not the object's."""
+    centroid is C; least squares when C is off the grasps' affine hull); when that needs a mass below 1 %
+    of an equal share (C on, near or outside the border of the grasps' hull: an arm would be left idle)
+    equal shares are used. A non-zero offset means the distribution is non-squeezing for a virtual body
+    whose centre is not the object's."""
     r = len(grasp_pos)
     if ratios is not None:
         m = mass * np.asarray(ratios, dtype=float) / np.sum(ratios)
@@ -206,7 +207,7 @@ def virtual_masses(grasp_pos: np.ndarray, mass: float, ratios: np.ndarray | None
         rhs = np.concatenate([[mass], np.zeros(3)])
         m0 = np.full(r, mass / r)
         m = m0 + np.linalg.lstsq(B, rhs - B @ m0, rcond=None)[0]
-        if np.any(m <= 1e-9 * mass):
+        if np.any(m < 0.01 * mass / r):
             m = m0
     return m, grasp_pos.T @ m / np.sum(m)
 

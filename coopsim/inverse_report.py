@@ -307,6 +307,18 @@ def format_capacity_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
+def json_safe(obj):
+    """A copy of a summary that strict JSON can carry: non-finite floats become the strings "Infinity",
+    "-Infinity" and "NaN" (the spellings coopsim.log uses), e.g. the capacity of unlimited motors."""
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (float, np.floating)) and not np.isfinite(obj):
+        return "NaN" if np.isnan(obj) else ("Infinity" if obj > 0 else "-Infinity")
+    return obj
+
+
 # ------------------------------------------------------------------------------------------------
 # MCAP series
 # ------------------------------------------------------------------------------------------------
