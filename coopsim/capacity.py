@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .inverse import (InverseProblem, Resolution, _bound_rows, distribute, energy, internal_operator,
+from .inverse import (InverseProblem, Resolution, internal_bound_rows, distribute, energy, internal_operator,
                       min_energy_distribution, resolve, torques_of)
 from .model import Model, Motors
 
@@ -150,7 +150,7 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
         if L is not None:
             res_b = Resolution("bounded", np.ones(len(act)), passive, np.ones(prob.r), np.zeros((prob.r, 3, 3)),
                                internal_bound[0], internal_bound[1], definition)
-            C, bound = _bound_rows(prob, i, L[i], res_b)
+            C, bound = internal_bound_rows(prob, i, L[i], res_b)
             A_ub = np.vstack([A_ub, np.hstack([C, np.zeros((len(C), 1))]), np.hstack([-C, np.zeros((len(C), 1))])])
             b_ub = np.concatenate([b_ub, bound, bound])
         finite = np.isfinite(b_ub)

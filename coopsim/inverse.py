@@ -333,7 +333,7 @@ def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Re
     sq = np.sqrt(np.where(res.passive, 0.0, res.weights))
     f = np.zeros((len(y), prob.r * prob.k))
     for i in range(len(y)):
-        C, bound = _bound_rows(prob, i, L[i], res)
+        C, bound = internal_bound_rows(prob, i, L[i], res)
         E = np.vstack([prob.A[i], prob.JT[i][res.passive]])
         e = np.concatenate([y[i], -prob.tau_arms[i][res.passive]])
         x0 = None if np.any(res.passive) else start[i]
@@ -341,7 +341,7 @@ def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Re
     return f
 
 
-def _bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
+def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
     """Rows C (m, rk) of the internal-wrench components in the grasp-line frames and their bounds (m,),
     without rows that vanish (out-of-plane) or repeat another (for r = 2 the two arms' are opposite)."""
     axes = grasp_line_axes(prob.p_grasp[i], prob.p_C[i])
@@ -421,7 +421,7 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
     L = internal_operator(prob, res.bound_definition, Mstar)
     peak_f, peak_m = 0.0, 0.0
     for i in range(len(f)):
-        C, bound = _bound_rows(prob, i, L[i], replace(res, force_bound=1.0, moment_bound=2.0))
+        C, bound = internal_bound_rows(prob, i, L[i], replace(res, force_bound=1.0, moment_bound=2.0))
         v = np.abs(C @ f[i])
         peak_f = max(peak_f, float(np.max(v[bound == 1.0], initial=0.0)))
         peak_m = max(peak_m, float(np.max(v[bound == 2.0], initial=0.0)))

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import capacity as cap
-from .inverse import (METHODS, InverseResult, Replay, default_bounds, distribution_of_torques, energy,
+from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy,
                       inverse_problem, replay, resolution_for, resolve, result_of, virtual_masses)
 from .model import Model
 from .stress import SectionLoads, decompose_internal, grasp_line_axes, section_loads

@@ -198,11 +198,11 @@ def test_bounded_resolution_spans_minimum_energy_to_nonsqueezing():
     Mstar = inv.nonsqueezing_metric(sub, R.masses, R.inertias)
     L = inv.internal_operator(sub, "nonsqueezing", Mstar)
     for i in range(len(sub.t)):
-        C, bound = inv._bound_rows(sub, i, L[i], half)
+        C, bound = inv.internal_bound_rows(sub, i, L[i], half)
         assert np.all(np.abs(C @ mid.f[i]) <= bound + 1e-9)
     assert np.all(mid.cost >= free.cost * (1 - 1e-12)) and np.all(mid.cost <= tight.cost * (1 + 1e-12))
     i = int(np.argmax(mid.cost - free.cost))
-    C, bound = inv._bound_rows(sub, i, L[i], half)
+    C, bound = inv.internal_bound_rows(sub, i, L[i], half)
     obj = lambda f: 0.5 * np.sum(R.weights * (sub.tau_arms[i] + sub.JT[i] @ f) ** 2)  # noqa: E731
     cons = [{"type": "eq", "fun": lambda f: sub.A[i] @ f - sub.y[i]},
             {"type": "ineq", "fun": lambda f: bound - C @ f}, {"type": "ineq", "fun": lambda f: bound + C @ f}]
