@@ -86,7 +86,8 @@ def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
         ax.text(0.5, 0.5, "difference exactly zero", ha="center", va="center", transform=ax.transAxes)
 
 
-def _save(fig: Figure, path: Path) -> Path:
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Lay out and write `fig` as PNG (110 dpi) atomically; returns the path."""
     FigureCanvasAgg(fig)
     fig.tight_layout()
     with atomic_path(path) as tmp:
@@ -171,4 +172,4 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     figures = [_joint_figure(log, "angle", "angle", "rad", labels),
                _joint_figure(log, "rate", "rate", "rad/s", labels),
                _object_figure(log), _constraint_figure(log)]
-    return [_save(fig, out / name) for fig, name in zip(figures, FILES)]
+    return [save_figure(fig, out / name) for fig, name in zip(figures, FILES)]

@@ -13,11 +13,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .atomic import atomic_path
 from .log import LogData
+from .plots import save_figure
 
 STYLE = {"forward": dict(color="black", ls="--", lw=1.2), "paper": dict(color="tab:blue"),
          "nonsqueezing": dict(color="tab:green"), "min_energy": dict(color="tab:red"),
@@ -27,14 +26,6 @@ LABEL = {"forward": "forward-dynamics input", "paper": "zero internal (paper Wâ
          "nonsqueezing": "zero internal (non-squeezing)", "min_energy": "minimum energy",
          "bounded": "min. energy, bounded internal", "optimised": "minimum energy, optimised Q",
          "lp": "LP bound (any distribution)"}
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    return path
 
 
 def _joints(log: LogData, n: int) -> list[str]:
@@ -122,9 +113,9 @@ def inverse_internal_figure(log: LogData) -> Figure:
 def inverse_plots(log: LogData, out_dir: str | Path) -> list[Path]:
     """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir."""
     out = Path(out_dir)
-    return [_save(inverse_torques_figure(log), out / "inverse_torques.png"),
-            _save(inverse_norms_figure(log), out / "inverse_norms.png"),
-            _save(inverse_internal_figure(log), out / "inverse_internal.png")]
+    return [save_figure(inverse_torques_figure(log), out / "inverse_torques.png"),
+            save_figure(inverse_norms_figure(log), out / "inverse_norms.png"),
+            save_figure(inverse_internal_figure(log), out / "inverse_internal.png")]
 
 
 def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
@@ -186,6 +177,6 @@ def capacity_plots(log: LogData, out_dir: str | Path) -> list[Path]:
         if not any(k.endswith(f"/{mode}") and k.startswith("/capacity/") for k in log.topics):
             continue
         tag = "" if mode == "scaled" else "_payload"
-        paths.append(_save(capacity_motor_figure(log, mode), out / f"capacity_motors{tag}.png"))
-        paths.append(_save(capacity_along_path_figure(log, mode), out / f"capacity_along_path{tag}.png"))
+        paths.append(save_figure(capacity_motor_figure(log, mode), out / f"capacity_motors{tag}.png"))
+        paths.append(save_figure(capacity_along_path_figure(log, mode), out / f"capacity_along_path{tag}.png"))
     return paths

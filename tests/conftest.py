@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import copy
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import mujoco
@@ -13,6 +17,32 @@ from coopsim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
+
+
+def run_cli(*args, cwd):
+    """The real `coopsim` command (python -m coopsim.cli) in folder `cwd`; returns CompletedProcess."""
+    return subprocess.run([sys.executable, "-m", "coopsim.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture
+def workdir(tmp_path):
+    """A temporary folder holding a copy of scenarios/."""
+    shutil.copytree(SCENARIOS, tmp_path / "scenarios")
+    return tmp_path
+
+
+def mutated(base: dict, path: list, value) -> dict:
+    """A deep copy of scenario data with `value` put at `path` (a list of keys; value None deletes)."""
+    data = copy.deepcopy(base)
+    node = data
+    for key in path[:-1]:
+        node = node[key]
+    if value is None:
+        del node[path[-1]]
+    else:
+        node[path[-1]] = value
+    return data
 
 
 @pytest.fixture(scope="session")

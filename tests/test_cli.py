@@ -1,29 +1,17 @@
 """End-to-end: the real `coopsim` command in a temporary folder, checking numbers."""
 
 import json
-import shutil
-import subprocess
-import sys
 
 import pytest
 import yaml
 
-from conftest import ROOT, SCENARIOS
+from conftest import SCENARIOS, run_cli
 
 
-def coopsim(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "coopsim.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
-
-
-@pytest.fixture
-def workdir(tmp_path):
-    shutil.copytree(SCENARIOS, tmp_path / "scenarios")
-    return tmp_path
 
 
 def test_simulate_paper_reports_the_projection(workdir):
-    out = coopsim("simulate", "scenarios/paper_planar_2x3.yaml", "--json", cwd=workdir)
+    out = run_cli("simulate", "scenarios/paper_planar_2x3.yaml", "--json", cwd=workdir)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
     assert s["duration_s"] == pytest.approx(5.0)
@@ -32,7 +20,7 @@ def test_simulate_paper_reports_the_projection(workdir):
     assert ic["residual_after"] <= 1e-12
     assert 1e-6 < ic["max_abs_dq_rad"] < 1e-4
     assert s["max_constraint_residual"] <= 1e-10
-    text = coopsim("simulate", "scenarios/paper_planar_2x3.yaml", "--duration", "0.1", cwd=workdir)
+    text = run_cli("simulate", "scenarios/paper_planar_2x3.yaml", "--duration", "0.1", cwd=workdir)
     assert "loop-closure residual 3.11e-05 -> " in text.stdout
 
 
@@ -40,14 +28,14 @@ def test_validate_fails_on_a_wrong_twin_naming_the_quantity(workdir):
     data = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())
     data["mujoco"]["object_mass_scale"] = 1.01
     (workdir / "wrong.yaml").write_text(yaml.safe_dump(data))
-    out = coopsim("validate", "wrong.yaml", "--duration", "1", cwd=workdir)
+    out = run_cli("validate", "wrong.yaml", "--duration", "1", cwd=workdir)
     assert out.returncode == 1
     assert "FAIL: joint angle error" in out.stdout
     assert "cross-validation: 0/1 scenarios agree" in out.stdout
 
 
 def test_validate_json_passes_on_the_paper_scenario(workdir):
-    out = coopsim("validate", "scenarios/paper_planar_2x3.yaml", "--duration", "1", "--json", cwd=workdir)
+    out = run_cli("validate", "scenarios/paper_planar_2x3.yaml", "--duration", "1", "--json", cwd=workdir)
     assert out.returncode == 0, out.stdout + out.stderr
     table = json.loads(out.stdout)
     metric = table["scenarios"][0]["metrics"]["joint angle error"]
@@ -58,16 +46,16 @@ def test_bad_scenario_is_one_line_and_exit_2(workdir):
     data = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())
     data["arms"][0]["links"][0]["box"]["density"] = -1
     (workdir / "bad.yaml").write_text(yaml.safe_dump(data))
-    out = coopsim("simulate", "bad.yaml", cwd=workdir)
+    out = run_cli("simulate", "bad.yaml", cwd=workdir)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0
     assert "arms[0].links[0].box.density: must be positive" in out.stderr
-    missing = coopsim("simulate", "nope.yaml", cwd=workdir)
+    missing = run_cli("simulate", "nope.yaml", cwd=workdir)
     assert missing.returncode == 2 and "scenario file not found" in missing.stderr
 
 
 def test_run_writes_log_plots_and_summary(workdir):
-    out = coopsim("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.5", "--out", "res", cwd=workdir)
+    out = run_cli("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.5", "--out", "res", cwd=workdir)
     assert out.returncode == 0, out.stdout + out.stderr
     res = workdir / "res"
     summary = json.loads((res / "summary.json").read_text())
@@ -79,16 +67,16 @@ def test_run_writes_log_plots_and_summary(workdir):
     assert pngs == ["constraint_violation.png", "joint_angles.png", "joint_rates.png", "object_motion.png"]
     log = res / "paper_planar_2x3.mcap"
     first = log.read_bytes()
-    again = coopsim("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.5", "--out", "res", cwd=workdir)
+    again = run_cli("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.5", "--out", "res", cwd=workdir)
     assert again.returncode == 0
     assert log.read_bytes() == first, "re-running must give a byte-identical log"
     assert not list(res.glob(".*.tmp")), "no temporary files left behind"
-    replot = coopsim("plot", str(log), "--out", "replot", cwd=workdir)
+    replot = run_cli("plot", str(log), "--out", "replot", cwd=workdir)
     assert replot.returncode == 0, replot.stderr
     assert len(list((workdir / "replot").glob("*.png"))) == 4
 
 
 def test_every_command_has_help(workdir):
     for cmd in ("simulate", "run", "validate", "plot", "mjcf"):
-        out = coopsim(cmd, "--help", cwd=workdir)
+        out = run_cli(cmd, "--help", cwd=workdir)
         assert out.returncode == 0 and "usage: coopsim" in out.stdout

@@ -2,27 +2,15 @@
 MCAP log and the plots."""
 
 import json
-import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import yaml
 
 from coopsim.log import read_mcap
-from conftest import SCENARIOS
+from conftest import SCENARIOS, run_cli
 
 
-def coopsim(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "coopsim.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
-
-
-@pytest.fixture
-def workdir(tmp_path):
-    shutil.copytree(SCENARIOS, tmp_path / "scenarios")
-    return tmp_path
 
 
 def test_inverse_of_the_paper_run(workdir):
@@ -30,7 +18,7 @@ def test_inverse_of_the_paper_run(workdir):
     energies as measured (0.13732, 0.085878, 0.031939 N²m²s for paper, nonsqueezing, min_energy), the
     minimum energy cheapest, replay within 1e-8 rad; inverse.mcap holds /inverse/<method>/… series equal
     to the summary, and the three plots exist."""
-    out = coopsim("inverse", "scenarios/paper_planar_2x3.yaml", "--duration", "1", "--replay", "--json",
+    out = run_cli("inverse", "scenarios/paper_planar_2x3.yaml", "--duration", "1", "--replay", "--json",
                   "--out", "res", cwd=workdir)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
@@ -58,7 +46,7 @@ def test_capacity_of_the_carry_scenario(workdir):
     32.746, nonsqueezing 32.327, min_energy 113.797 kg; payload at (0.2, 0, 0) m: 11.900, 9.615,
     85.962 kg), the brute-force check agrees, the LP bound (190.958 and 150.813 kg) is above all of
     them and the optimised weights; capacity.mcap and the plots are written."""
-    out = coopsim("capacity", "scenarios/paper_planar_2x3_carry.yaml", "--check", "--json", "--out", "res",
+    out = run_cli("capacity", "scenarios/paper_planar_2x3_carry.yaml", "--check", "--json", "--out", "res",
                   cwd=workdir)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
@@ -83,7 +71,7 @@ def test_a_path_out_of_reach_is_one_line_naming_the_field(workdir):
     data = yaml.safe_load(path.read_text())
     data["inverse"]["object_motion"]["waypoints"][1]["position"] = [1.4, 1.0, 0.0]
     path.write_text(yaml.safe_dump(data))
-    out = coopsim("inverse", path, cwd=workdir)
+    out = run_cli("inverse", path, cwd=workdir)
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1
     assert "coopsim: error: inverse.object_motion: the path leaves the workspace of arm 'arm1' at t=" in out.stderr

@@ -1,6 +1,5 @@
 """Scenario loading: the bundled files load; every malformed input fails with one line naming the field."""
 
-import copy
 
 import numpy as np
 import pytest
@@ -10,7 +9,7 @@ from coopsim.model import torque_at
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from coopsim.simulate import initial_state
 from coopsim.closed_chain import ConstraintError
-from conftest import SCENARIOS
+from conftest import SCENARIOS, mutated
 
 PAPER = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())
 
@@ -27,17 +26,6 @@ def test_paper_scenario_reproduces_table_1(paper):
     assert init.residual_after <= 1e-12
 
 
-def _mutated(path, value, base=PAPER):
-    """A copy of the scenario dict with `value` put at `path` (a list of keys; value None deletes)."""
-    data = copy.deepcopy(base)
-    node = data
-    for key in path[:-1]:
-        node = node[key]
-    if value is None:
-        del node[path[-1]]
-    else:
-        node[path[-1]] = value
-    return data
 
 
 CASES = [
@@ -69,21 +57,21 @@ CASES = [
 @pytest.mark.parametrize("path,value,message", CASES, ids=[".".join(map(str, c[0])) for c in CASES])
 def test_bad_input_names_the_field(path, value, message):
     with pytest.raises(ScenarioError, match=message) as info:
-        model_from_dict(_mutated(path, value), where="s.yaml")
+        model_from_dict(mutated(PAPER, path, value), where="s.yaml")
     assert "\n" not in str(info.value)
     assert str(info.value).startswith("s.yaml: ")
 
 
 def test_explicit_inertia_must_be_physical():
     link = {"joint": {"axis": [0, 0, 1]}, "inertial": {"mass": 1.0, "com": [0.3, 0, 0], "inertia": [1.0, 1.0, 5.0, 0, 0, 0]}}
-    data = _mutated(["arms", 0, "links", 0], link)
+    data = mutated(PAPER, ["arms", 0, "links", 0], link)
     with pytest.raises(ScenarioError, match=r"arms\[0\]\.links\[0\]\.inertial\.inertia: principal moments .* triangle"):
         model_from_dict(data, where="s.yaml")
 
 
 def test_grasp_needing_a_large_correction_is_rejected(paper):
     """A reachable but wrong grasp (0.1 m off) needs more than max_initial_correction."""
-    model = model_from_dict(_mutated(["object", "grasps", 1, "position"], [0.3, 0.0, 0.0]), where="s.yaml")
+    model = model_from_dict(mutated(PAPER, ["object", "grasps", 1, "position"], [0.3, 0.0, 0.0]), where="s.yaml")
     with pytest.raises(ConstraintError, match=r"object\.grasps: closing the loop .* needs a joint correction of"):
         initial_state(model)
 
@@ -100,8 +88,8 @@ def test_missing_and_malformed_files(tmp_path):
 def test_torque_table_and_csv_inputs(tmp_path):
     csv = tmp_path / "tau.csv"
     csv.write_text("time,t1,t2,t3\n0,0,0,0\n1,1,2,3\n")
-    data = _mutated(["arms", 0, "torque"], {"csv": "tau.csv"})
-    data = _mutated(["arms", 1, "torque"], {"table": {"time": [0, 2], "values": [[0, 0, 0], [2, 4, 6]]}}, data)
+    data = mutated(PAPER, ["arms", 0, "torque"], {"csv": "tau.csv"})
+    data = mutated(data, ["arms", 1, "torque"], {"table": {"time": [0, 2], "values": [[0, 0, 0], [2, 4, 6]]}})
     scen = tmp_path / "s.yaml"
     scen.write_text(yaml.safe_dump(data))
     model = load_scenario(scen)

@@ -1,7 +1,6 @@
 """Stage 6 — trajectories: the forward run's samples, the Hermite interpolant between them, the quintic
 time law, closed-chain inverse kinematics of a prescribed object motion, and its error reports."""
 
-import copy
 from dataclasses import replace
 
 import numpy as np
@@ -15,7 +14,7 @@ from coopsim.simulate import simulate
 from coopsim.spatial import rot_log, rpy_to_rot
 from coopsim.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
                                 object_pose_of, time_law, trajectory_at)
-from conftest import SCENARIOS
+from conftest import SCENARIOS, mutated
 from inverse_cases import model, run
 
 CARRY = "paper_planar_2x3_carry"
@@ -131,14 +130,7 @@ CARRY_YAML = yaml.safe_load((SCENARIOS / f"{CARRY}.yaml").read_text())
     (["inverse", "internal_bound"], {"force": -1.0}, r"inverse\.internal_bound\.force: must be non-negative"),
 ])
 def test_inverse_section_errors_name_the_field(path, value, message):
-    data = copy.deepcopy(CARRY_YAML)
-    node = data
-    for key in path[:-1]:
-        node = node[key]
-    if value is None:
-        del node[path[-1]]
-    else:
-        node[path[-1]] = value
+    data = mutated(CARRY_YAML, path, value)
     with pytest.raises(ScenarioError, match=message):
         model_from_dict(data, where="carry.yaml")
 
