@@ -20,8 +20,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from coopsim.atomic import atomic_path, write_text_atomic  # noqa: E402
+from coopsim.atomic import write_text_atomic  # noqa: E402
 from coopsim.mujoco_run import run_twin  # noqa: E402
+from coopsim.plots import save_figure  # noqa: E402
 from coopsim.scenario import load_scenario  # noqa: E402
 from coopsim.simulate import simulate  # noqa: E402
 
@@ -82,9 +83,7 @@ def figure(name: str, rows: list[dict], path: Path) -> None:
     ax.set_title(f"Speed against error: {name}")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 
