@@ -95,6 +95,23 @@ def save_figure(fig: Figure, path: Path) -> Path:
     return path
 
 
+def _compare_columns(axes, t, x, y, cols, labels, quantity: str, unit: str, title: str, diff_title: str) -> None:
+    """Columns `cols` of x (native, solid) and y (twin, dashed; None: none) on axes[0], and their
+    absolute difference on a log axis on axes[1] when the twin is there."""
+    ax = axes[0]
+    for j, label in zip(cols, labels):
+        line, = ax.plot(t, x[:, j], label=f"{label} native")
+        if y is not None:
+            ax.plot(t, y[:, j], "--", color=line.get_color(), label=f"{label} mujoco")
+    ax.set(title=title, xlabel="time (s)", ylabel=f"{quantity} ({unit})")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small", ncol=2)
+    if y is not None:
+        drawn = [_log_plot(axes[1], t, np.abs(x[:, j] - y[:, j]), label) for j, label in zip(cols, labels)]
+        axes[1].set_title(diff_title)
+        _finish_log_axis(axes[1], any(drawn), f"|Δ {quantity}| ({unit})")
+
+
 def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list[str]) -> Figure:
     nat = log.topics[NATIVE + "/joint_state"]
     t, x = nat["t"], nat[key]
@@ -104,19 +121,9 @@ def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list
     fig = Figure(figsize=(5.5 * len(groups), 3.6 * rows))
     axes = fig.subplots(rows, len(groups), squeeze=False)
     for col, (arm, sl) in enumerate(groups):
-        ax = axes[0, col]
-        for j in range(sl.start, sl.stop):
-            line, = ax.plot(t, x[:, j], label=f"{labels[j]} native")
-            if y is not None:
-                ax.plot(t, y[:, j], "--", color=line.get_color(), label=f"{labels[j]} mujoco")
-        ax.set(title=f"{arm}: joint {quantity}", xlabel="time (s)", ylabel=f"{quantity} ({unit})")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize="small", ncol=2)
-        if y is not None:
-            ax = axes[1, col]
-            drawn = [_log_plot(ax, t, np.abs(x[:, j] - y[:, j]), labels[j]) for j in range(sl.start, sl.stop)]
-            ax.set_title(f"{arm}: |native − mujoco|")
-            _finish_log_axis(ax, any(drawn), f"|Δ {quantity}| ({unit})")
+        cols = range(sl.start, sl.stop)
+        _compare_columns(axes[:, col], t, x, y, cols, [labels[j] for j in cols], quantity, unit,
+                         f"{arm}: joint {quantity}", f"{arm}: |native − mujoco|")
     fig.suptitle(f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"))
     return fig
 
@@ -131,19 +138,8 @@ def _object_figure(log: LogData) -> Figure:
     fig = Figure(figsize=(11, 3.8 * rows))
     axes = fig.subplots(rows, 2, squeeze=False)
     for col, (name, sym, unit, x, y) in enumerate(parts):
-        ax = axes[0, col]
-        for k, c in enumerate(_AXES):
-            line, = ax.plot(t, x[:, k], label=f"{sym}{c} native")
-            if y is not None:
-                ax.plot(t, y[:, k], "--", color=line.get_color(), label=f"{sym}{c} mujoco")
-        ax.set(title=f"Object centre-of-mass {name}", xlabel="time (s)", ylabel=f"{name} ({unit})")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize="small", ncol=2)
-        if y is not None:
-            ax = axes[1, col]
-            drawn = [_log_plot(ax, t, np.abs(x[:, k] - y[:, k]), f"{sym}{c}") for k, c in enumerate(_AXES)]
-            ax.set_title(f"Object {name}: |native − mujoco|")
-            _finish_log_axis(ax, any(drawn), f"|Δ {name}| ({unit})")
+        _compare_columns(axes[:, col], t, x, y, range(3), [f"{sym}{c}" for c in _AXES], name, unit,
+                         f"Object centre-of-mass {name}", f"Object {name}: |native − mujoco|")
     fig.suptitle("Object motion" + ("" if rows == 1 else ": native model vs MuJoCo twin"))
     return fig
 
