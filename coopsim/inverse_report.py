@@ -16,6 +16,7 @@ import numpy as np
 from . import capacity as cap
 from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy,
                       inverse_problem, replay, resolution_for, resolve, result_of, virtual_masses)
+from .log import Series, nonfinite_name
 from .model import Model
 from .stress import SectionLoads, decompose_internal, grasp_line_axes, section_loads
 from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
@@ -315,7 +316,7 @@ def json_safe(obj):
     if isinstance(obj, (list, tuple)):
         return [json_safe(v) for v in obj]
     if isinstance(obj, (float, np.floating)) and not np.isfinite(obj):
-        return "NaN" if np.isnan(obj) else ("Infinity" if obj > 0 else "-Infinity")
+        return nonfinite_name(obj)
     return obj
 
 
@@ -328,7 +329,6 @@ def inverse_series(study: InverseStudy) -> list:
     /inverse/<method>/torque (τ, ½τᵀQτ, |τ|), /inverse/<method>/grasp_wrench (F_e), and
     /inverse/<method>/internal (both definitions and the grasp-line components of each), plus
     /inverse/<method>/stress (box section peaks) when the object is a box."""
-    from .log import Series
 
     t = study.traj.t
     lo, hi = study.limits
@@ -356,7 +356,6 @@ def capacity_series(study: CapacityStudy) -> list:
     """Series for the MCAP log: /capacity/limits (θ̇, motor lines) and per method and mode
     /capacity/<method>/<mode> (τ at the capacity, the largest mass each sample allows), likewise
     /capacity/lp/<mode> and /capacity/optimised/scaled."""
-    from .log import Series
 
     t = study.traj.t
     lo, hi = study.limits

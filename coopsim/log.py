@@ -161,7 +161,8 @@ def _check_series(s: Series) -> None:
             raise LogError(f"{s.topic}: field {name!r} has shape {a.shape}, expected ({len(t)}, ...)")
 
 
-def _nonfinite_name(x: float) -> str:
+def nonfinite_name(x: float) -> str:
+    """The string a non-finite float is written as: "NaN", "Infinity" or "-Infinity"."""
     return "NaN" if np.isnan(x) else ("Infinity" if x > 0 else "-Infinity")
 
 
@@ -179,7 +180,7 @@ def _field_values(a: np.ndarray) -> list:
         bad = ~np.isfinite(a)
         if bad.any():
             obj = a.astype(object)
-            obj[bad] = [_nonfinite_name(x) for x in a[bad]]
+            obj[bad] = [nonfinite_name(x) for x in a[bad]]
             a = obj
     elif a.dtype.kind in "iu":
         a = a.astype(np.int64)

@@ -133,7 +133,7 @@ def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
         ax = fig.add_subplot(rows, cols, i + 1)
         rec = log.metadata.get(f"capacity.{k}.{mode}", {})
         j = json.loads(rec.get("stacked_joint", "null"))
-        mass = json.loads(rec.get("mass_kg", "NaN").replace("Infinity", "1e999"))
+        mass = json.loads(rec.get("mass_kg", "NaN"))  # Python's json reads Infinity and NaN
         if j is None:
             ax.text(0.5, 0.5, "no saturating motor", ha="center", va="center", transform=ax.transAxes)
             continue
