@@ -96,8 +96,9 @@ class Motors:
 
 @dataclass(frozen=True)
 class IntegratorSettings:
-    """method: 'dop853' | 'dopri5' (adaptive, rtol/atol) | 'rk4' (fixed `step`, s; also the maximum
-    step of the adaptive methods); output_dt: sample interval of the results, s;
+    """method: 'dop853' | 'dopri5' (adaptive, rtol/atol; outputs from their dense output) | 'rk4'
+    (fixed `step`, s); max_step: largest step of the adaptive methods, s (None: unbounded);
+    output_dt: sample interval of the results, s;
     stabilization: 'projection' | 'baumgarte' | 'none'; baumgarte_alpha (1/s), baumgarte_beta (1/s)
     in Λθ̈ = −Λ̇θ̇ − 2αΛθ̇ − β²Φ; projection_tol: loop-closure tolerance (m and rad);
     max_initial_correction: largest joint correction (rad) accepted when the initial state is made
@@ -109,6 +110,7 @@ class IntegratorSettings:
     rtol: float = 1e-11
     atol: float = 1e-12
     step: float = 1e-2
+    max_step: float | None = None
     output_dt: float = 1e-2
     stabilization: str = "projection"
     baumgarte_alpha: float = 10.0

@@ -50,8 +50,10 @@ class _Section:
             return default
         return self.data[key]
 
-    def number(self, key, default=_REQUIRED, positive=False, nonneg=False) -> float:
+    def number(self, key, default=_REQUIRED, positive=False, nonneg=False) -> float | None:
         v = self.raw(key, default)
+        if v is None and default is None:   # optional key, absent
+            return None
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(key, f"expected a number, got {v!r}")
         v = float(v)
@@ -292,6 +294,7 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
         rtol=sec.number("rtol", d.rtol, positive=True),
         atol=sec.number("atol", d.atol, positive=True),
         step=sec.number("step", d.step, positive=True),
+        max_step=sec.number("max_step", d.max_step, positive=True),
         output_dt=sec.number("output_dt", d.output_dt, positive=True),
         stabilization=sec.string("stabilization", ("projection", "baumgarte", "none"), d.stabilization),
         baumgarte_alpha=sec.number("baumgarte_alpha", d.baumgarte_alpha, nonneg=True),

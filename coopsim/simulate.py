@@ -5,7 +5,14 @@
                            loop-closure Jacobians (4)
       → stabilization      Baumgarte right-hand side, if selected (5)
       → forward_dynamics   θ̈ and grasp wrenches (eqs. 25–27)
-      → integrate          adaptive DOP853/DOPRI5 or fixed-step RK4, projection after each step (5)
+      → integrate          adaptive DOP853/DOPRI5 (dense output) or fixed-step RK4, projection after
+                           each step (5)
+      → sample             every reported quantity at the output times
+
+Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the whole time loop in
+compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.integrate`, which lands on
+every output time; used for torques given as a Python function, and as the readable reference the
+compiled engine is tested against).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from .closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain
 from .grasp import grasp_matrix, internal_wrench
 from .integrate import IntegrationError, IntegratorStats, integrate
 from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
-from .model import CoopsimError, IntegratorSettings, Model, torque_at
+from .model import CoopsimError, IntegratorSettings, Model, TorqueFunction, torque_at
 from .results import SampledMotion
 from .spatial import rot_to_quat
 
@@ -136,23 +143,79 @@ def output_times(duration: float, dt: float) -> np.ndarray:
     return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)
 
 
+ENGINES = ("compiled", "reference")
+
+
 def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None,
-             progress=None) -> SimResult:
+             progress=None, engine: str = "compiled") -> SimResult:
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
     scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
-    called as the run advances."""
+    called as the run advances. engine: 'compiled' or 'reference' (module docstring); torques given
+    as a TorqueFunction always run on the reference engine."""
     if settings is not None:
         model = replace(model, integrator=settings)
     if duration is not None:
         model = replace(model, duration=duration)
-    s = model.integrator
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
     init = initial_state(model)
-    t_out = output_times(model.duration, s.output_dt)
+    t_out = output_times(model.duration, model.integrator.output_dt)
+    if engine == "reference" or isinstance(model.torques, TorqueFunction):
+        return _simulate_reference(model, init, t_out, progress, start)
+    return _simulate_compiled(model, init, t_out, progress, start)
+
+
+def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
+    """The compiled engine: one compiled time loop (`coopsim.compiled.api.integrate_chain`), then the
+    compiled sampling of every reported quantity."""
+    from .compiled import api
+
+    s = model.integrator
+    y0 = np.concatenate([init.q, init.qd])
+    fixed = s.step if s.method == "rk4" else None
+    h_max = np.inf if s.max_step is None else s.max_step
+    run = api.integrate_chain(model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
+                              fixed_step=fixed, progress=progress)
+    n = model.n_total
+    if run.rank_warning is not None:
+        t, y, rank, cond = run.rank_warning
+        warnings.warn(f"at {_describe(t, y[:n])}: constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, "
+                      f"cond {cond:.3g}); using minimum-norm grasp wrenches", ConstraintRankWarning, stacklevel=3)
+    if run.status:
+        raise SimulationError(f"simulation failed at {_describe(run.fail_t, run.fail_y[:n])}: "
+                              f"{_compiled_reason(model, run)}")
+    smp = api.sample_states(model, t_out, run.Y)
+    stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
+                            n_projections=run.counts[3])
+    return SimResult(model=model, t=t_out, q=run.Y[:, :n], qd=run.Y[:, n:], qdd=smp.qdd, tau=smp.tau,
+                     object_pos=smp.object_pos, object_quat=smp.object_quat, object_twist=smp.object_twist,
+                     object_acc=smp.object_acc, grasp_wrench=smp.grasp_wrench, internal_wrench=smp.internal_wrench,
+                     residual_pos=smp.residual_pos, residual_vel=smp.residual_vel, cond=smp.cond, initial=init,
+                     stats=stats, wall_time=time.perf_counter() - start)
+
+
+def _compiled_reason(model: Model, run) -> str:
+    """The one-line reason of a compiled run's failure (as the reference engine words it)."""
+    from .compiled import api
+
+    reason = api.REASONS.get(run.status, f"failure code {run.status}")
+    n = model.n_total
+    if run.status == api.chain.NON_FINITE:
+        tau = torque_at(model.torques, run.fail_t)
+        reason += (f" (torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to "
+                   f"{np.max(np.abs(run.fail_y[n:])):.3g} rad/s)")
+    return reason
+
+
+def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
+    """The reference engine: `coopsim.integrate` over the plain-NumPy stages, landing on every output."""
+    s = model.integrator
     project = _projector(model) if s.stabilization == "projection" else None
+    step = s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
     try:
         Y, stats = integrate(_rhs(model, progress), np.concatenate([init.q, init.qd]), t_out, method=s.method,
-                             rtol=s.rtol, atol=s.atol, step=s.step, project=project)
+                             rtol=s.rtol, atol=s.atol, step=step, project=project)
     except IntegrationError as exc:
         n = model.n_total
         raise SimulationError(f"simulation failed at {_describe(exc.t, exc.y[:n])}: {exc.reason}") from None

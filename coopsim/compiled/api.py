@@ -1,0 +1,227 @@
+"""Python entry points of the compiled model: packing (cached per model), one evaluation, batches of
+states (threads, the kernels release the GIL), the time loop with progress, sampling, inverse terms.
+
+Failures come back as codes from compiled code and are turned here into one-line reasons; the
+callers (`coopsim.simulate`) add the time and configuration.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+import weakref
+from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
+
+import numpy as np
+
+from ..model import Model
+from . import chain, integrate, manifold, sample
+from .packing import PackedModel, Workspace, pack, tabulated_torques, workspace
+from .structs import Struct, to_struct
+
+_CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
+
+REASONS = {
+    chain.NOT_PD: "closed-chain mass matrix is not positive definite",
+    chain.RANK_DEFICIENT: "constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient",
+    chain.NON_FINITE: "non-finite joint accelerations",
+    integrate.NON_FINITE_STATE: "non-finite state",
+    integrate.STEP_COLLAPSED: "step size collapsed",
+    integrate.MAX_STEPS: "maximum number of steps exceeded",
+    manifold.PROJECTION_FAILED: f"projection: loop closure did not converge in {integrate.PROJECTION_MAX_ITER} "
+                                "Gauss–Newton steps",
+}
+
+
+class Compiled(NamedTuple):
+    """A model ready for the kernels: P (PackedModel) and W (Workspace) for Python to read, Ps and Ws
+    their StructRefs (the same arrays) for compiled code."""
+
+    P: PackedModel
+    W: Workspace
+    Ps: Struct
+    Ws: Struct
+
+
+def compiled(model: Model) -> Compiled:
+    """The compiled form of `model`, built once per model object."""
+    hit = _CACHE.get(model)
+    if hit is None:
+        P = pack(model)
+        W = workspace(P)
+        hit = _CACHE[model] = Compiled(P, W, to_struct(P), to_struct(W))
+    return hit
+
+
+def fresh_workspace(P: PackedModel) -> Struct:
+    """A new workspace StructRef for P (one per thread)."""
+    return to_struct(workspace(P))
+
+
+@functools.cache
+def _tableau(method: str) -> Struct:
+    return to_struct(integrate.tableau(method))
+
+
+def n_rows(P: PackedModel) -> int:
+    return P.rows.shape[0] * (len(P.dof) - 2)
+
+
+class Evaluation(NamedTuple):
+    """One closed-chain evaluation: qdd (N,) rad/s²; F (K,) loop-closure wrenches in the rows S;
+    status (0, or a code of REASONS); rank of Λ𝐈⁻¹Λᵀ."""
+
+    qdd: np.ndarray
+    F: np.ndarray
+    status: int
+    rank: int
+
+
+def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
+    """θ̈ of the closed chain at (q, qd) with torques tau (N,) (Baumgarte term included if selected);
+    afterwards `compiled(model).W` holds every term of that state."""
+    P, W, Ps, Ws = compiled(model)
+    out = sample.new_samples(1, len(q), len(P.dof) - 1)
+    out.tau[0] = tau
+    sample.evaluate(Ps, Ws, np.concatenate([_f(q), _f(qd)])[None], out, False)
+    return Evaluation(W.qdd.copy(), W.F.copy(), int(out.status[0]), int(W.rank[0]))
+
+
+def chain_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> Workspace:
+    """The workspace after one evaluation at (q, qd) (zero torque): W.Mb, W.h, W.J, W.Lam, … (see
+    `Workspace`). The arrays are reused by the next call: copy what you keep."""
+    forward(model, q, qd, np.zeros(len(q)))
+    return compiled(model).W
+
+
+def _f(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def threads() -> int:
+    return max(1, min(os.cpu_count() or 1, 8))
+
+
+def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = False,
+                    n_threads: int | None = None) -> sample.Samples:
+    """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques TAU (S, N), split over threads (one
+    workspace each): θ̈ and status, and with `full` every reported quantity (`sample.Samples`)."""
+    P, _, Ps, _ = compiled(model)
+    Y = _f(Y)
+    out = sample.new_samples(len(Y), int(P.dof[-1]), len(P.dof) - 1)
+    out.tau[:] = TAU
+
+    def run(idx):
+        if len(idx):
+            s = slice(idx[0], idx[-1] + 1)
+            sample.evaluate(Ps, fresh_workspace(P), Y[s], sample.Samples(*(a[s] for a in out)), full)
+
+    _map(run, np.array_split(np.arange(len(Y)), n_threads or threads()))
+    return out
+
+
+def forward_models(models: list[Model], Y: np.ndarray, TAU: np.ndarray,
+                   n_threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """θ̈ (M, S, N) and status (M, S) of M models (parameter sets of one scene: same arms and grasps,
+    other masses or geometry) at the same S states Y (S, 2N), torques TAU (S, N), one model per task
+    over threads."""
+    Y, TAU = _f(Y), _f(TAU)
+    N = TAU.shape[1]
+    QDD = np.empty((len(models), len(Y), N))
+    status = np.zeros((len(models), len(Y)), dtype=np.int64)
+
+    def run(i):
+        P = pack(models[i])
+        out = sample.new_samples(len(Y), N, len(P.dof) - 1)
+        out.tau[:] = TAU
+        sample.evaluate(to_struct(P), fresh_workspace(P), Y, out, False)
+        QDD[i], status[i] = out.qdd, out.status
+
+    _map(run, range(len(models)), n_threads)
+    return QDD, status
+
+
+def _map(fn, items, n_threads=None):
+    items = list(items)
+    n = min(len(items), n_threads or threads())
+    if n <= 1:
+        for it in items:
+            fn(it)
+        return
+    with ThreadPoolExecutor(n) as pool:
+        list(pool.map(fn, items))
+
+
+class Run(NamedTuple):
+    """A compiled integration: Y (len(t_out), 2N) states at t_out; counts (rhs evaluations, accepted,
+    rejected, projections); status 0 or a code of REASONS, fail_t s and fail_y (2N,) where it stopped;
+    rank_warning: None or (t s, y (2N,), rank, cond) at the first loss of rank of Λ𝐈⁻¹Λᵀ."""
+
+    Y: np.ndarray
+    counts: tuple[int, int, int, int]
+    status: int
+    fail_t: float
+    fail_y: np.ndarray
+    rank_warning: tuple | None
+
+
+def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str, rtol: float = 1e-10,
+                    atol: float = 1e-12, h_max: float = math.inf, h_min: float = 1e-12,
+                    max_steps: int = 10_000_000, fixed_step: float | None = None, progress=None,
+                    chunk_seconds: float = 0.25) -> Run:
+    """Integrate the closed chain of `model` from y0 = [θ; θ̇] (already consistent) at t_out[0], sampled
+    at t_out (strictly increasing). Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it).
+    `progress(fraction)` is called between chunks of about chunk_seconds of work; the chunking does
+    not change the result."""
+    P, W, Ps, Ws = compiled(model)
+    tab = _tableau(method)
+    t_out = _f(t_out)
+    Y = np.zeros((len(t_out), len(y0)))
+    L = integrate.new_loop(_f(y0), float(t_out[0]), n_rows(P))
+    Ls = to_struct(L)
+    n_out = len(t_out)
+    k_stop = n_out if progress is None else min(n_out, 2)
+    st = 0
+    while st == 0 and int(L.k_next[0]) < n_out:
+        start = time.perf_counter()
+        before = int(L.k_next[0])
+        integrate.run(Ps, Ws, Ls, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step or 0.0, k_stop)
+        st = int(L.status[0])
+        if progress is not None:
+            progress(float((t_out[min(int(L.k_next[0]), n_out) - 1] - t_out[0]) / max(t_out[-1] - t_out[0], 1e-300)))
+            spent = max(time.perf_counter() - start, 1e-4)
+            done = max(int(L.k_next[0]) - before, 1)
+            k_stop = min(n_out, int(L.k_next[0]) + max(1, int(done * chunk_seconds / spent)))
+    warn = None
+    if L.warn[0]:
+        warn = (float(L.warn_t[0]), L.warn_y.copy(), int(L.warn[1]), float(L.warn_cond[0]))
+    return Run(Y, tuple(int(c) for c in L.count), int(L.status[0]), float(L.fail_t[0]), L.fail_y.copy(), warn)
+
+
+def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | None = None) -> sample.Samples:
+    """Every reported quantity at the states Y (S, 2N), times t (S,), torques TAU (S, N) (default: the
+    model's tables at t)."""
+    P = compiled(model).P
+    return evaluate_states(model, Y, tabulated_torques(P, t) if TAU is None else TAU, full=True)
+
+
+def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
+                  n_threads: int | None = None) -> sample.InverseTerms:
+    """Per-sample inverse-dynamics terms (`sample.InverseTerms`) at the states (Q, QD, QDD) (S, N)."""
+    P, _, Ps, _ = compiled(model)
+    Q, QD, QDD = _f(Q), _f(QD), _f(QDD)
+    nmax = int(np.max(np.diff(P.dof)))
+    out = sample.new_inverse_terms(len(Q), int(P.dof[-1]), len(P.dof) - 1, nmax)
+    chunks = np.array_split(np.arange(len(Q)), n_threads or threads())
+
+    def run(idx):
+        if len(idx):
+            s = slice(idx[0], idx[-1] + 1)
+            sample.inverse_terms(Ps, fresh_workspace(P), Q[s], QD[s], QDD[s],
+                                 sample.InverseTerms(*(a[s] for a in out)))
+
+    _map(run, chunks)
+    return out

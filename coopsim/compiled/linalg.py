@@ -1,0 +1,173 @@
+"""Small dense linear algebra, in place, for the compiled kernels (no allocation on the hot path).
+
+`block_cholesky` factors one diagonal block of the block-diagonal closed-chain mass matrix;
+`psd_solve` solves the constraint system (Λ𝐈⁻¹Λᵀ) F = b: a Cholesky factorization with diagonal
+pivoting when the matrix is safely of full rank, else the reference's eigen-decomposition
+(minimum-norm solution, numerical rank from eigenvalues above rank_tol·λ_max). The switch is exact in
+effect: with diagonal pivoting λ_max ≤ K d_1 and λ_min ≥ d_K·9/(4^K + 6K − 1) (Higham, *Accuracy and
+Stability of Numerical Algorithms*, 2nd ed., Thm. 8.13 applied to the unit factor with |l_ij| ≤ 1), so
+a pivot ratio d_K/d_1 above rank_tol·K·(4^K + 6K − 1)/9 proves λ_min/λ_max > rank_tol.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from .jit import kernel
+
+
+@kernel
+def block_cholesky(M, L, o, n):
+    """Lower Cholesky factor of the SPD block M[o:o+n, 0:n] into L[o:o+n, 0:n]; False if not positive
+    definite (or not finite)."""
+    for j in range(n):
+        d = M[o + j, j]
+        for k in range(j):
+            d -= L[o + j, k] * L[o + j, k]
+        if not d > 0.0:
+            return False
+        d = np.sqrt(d)
+        L[o + j, j] = d
+        for i in range(j + 1, n):
+            v = M[o + i, j]
+            for k in range(j):
+                v -= L[o + i, k] * L[o + j, k]
+            L[o + i, j] = v / d
+        for i in range(j):
+            L[o + i, j] = 0.0
+    return True
+
+
+@kernel
+def block_solve(L, o, n, x, xo):
+    """x[xo:xo+n] ← (L Lᵀ)⁻¹ x[xo:xo+n] with the factor L[o:o+n, 0:n] (in place)."""
+    for i in range(n):
+        v = x[xo + i]
+        for k in range(i):
+            v -= L[o + i, k] * x[xo + k]
+        x[xo + i] = v / L[o + i, i]
+    for i in range(n - 1, -1, -1):
+        v = x[xo + i]
+        for k in range(i + 1, n):
+            v -= L[o + k, i] * x[xo + k]
+        x[xo + i] = v / L[o + i, i]
+
+
+@kernel
+def block_solve_col(L, o, n, X, c):
+    """X[o:o+n, c] ← (L Lᵀ)⁻¹ X[o:o+n, c] (column c of a matrix, rows of block o)."""
+    for i in range(n):
+        v = X[o + i, c]
+        for k in range(i):
+            v -= L[o + i, k] * X[o + k, c]
+        X[o + i, c] = v / L[o + i, i]
+    for i in range(n - 1, -1, -1):
+        v = X[o + i, c]
+        for k in range(i + 1, n):
+            v -= L[o + k, i] * X[o + k, c]
+        X[o + i, c] = v / L[o + i, i]
+
+
+@kernel
+def pivoted_cholesky(A, Lf, perm, K):
+    """Cholesky factorization with diagonal pivoting P A Pᵀ = L Lᵀ of the symmetric PSD A (K, K) into
+    Lf (lower), perm[i] the row of A in position i. Returns the pivot ratio d_K/d_1 (d = L_ii²;
+    0 if a pivot is not positive)."""
+    for i in range(K):
+        perm[i] = i
+        for j in range(K):
+            Lf[i, j] = A[i, j]
+    d1 = 0.0
+    for j in range(K):
+        best, arg = -1.0, j
+        for i in range(j, K):
+            if Lf[i, i] > best:
+                best, arg = Lf[i, i], i
+        if arg != j:
+            for c in range(K):
+                Lf[j, c], Lf[arg, c] = Lf[arg, c], Lf[j, c]
+            for c in range(K):
+                Lf[c, j], Lf[c, arg] = Lf[c, arg], Lf[c, j]
+            perm[j], perm[arg] = perm[arg], perm[j]
+        d = Lf[j, j]
+        if j == 0:
+            d1 = d
+        if not d > 0.0:
+            return 0.0
+        dj = np.sqrt(d)
+        Lf[j, j] = dj
+        for i in range(j + 1, K):
+            Lf[i, j] /= dj
+        for c in range(j + 1, K):
+            for i in range(c, K):
+                Lf[i, c] -= Lf[i, j] * Lf[c, j]
+                Lf[c, i] = Lf[i, c]
+    return Lf[K - 1, K - 1] ** 2 / d1
+
+
+@kernel
+def pivoted_solve(Lf, perm, K, b, y, x):
+    """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b); y (K,) is
+    scratch; b is left unchanged and may alias neither y nor x."""
+    for i in range(K):
+        v = b[perm[i]]
+        for k in range(i):
+            v -= Lf[i, k] * y[k]
+        y[i] = v / Lf[i, i]
+    for i in range(K - 1, -1, -1):
+        v = y[i]
+        for k in range(i + 1, K):
+            v -= Lf[k, i] * y[k]
+        y[i] = v / Lf[i, i]
+    for i in range(K):
+        x[perm[i]] = y[i]
+
+
+@kernel
+def safe_pivot_ratio(K, rank_tol):
+    """The pivot ratio above which λ_min/λ_max > rank_tol is guaranteed (module docstring)."""
+    return rank_tol * K * (4.0 ** K + 6.0 * K - 1.0) / 9.0
+
+
+@kernel
+def eig_solve(A, b, x, K, rank_tol):
+    """Minimum-norm solution x of A x = b (A symmetric PSD) from its eigen-decomposition, keeping
+    eigenvalues above rank_tol·λ_max; returns (condition number λ_max/λ_min, rank). Allocates:
+    used only off the hot path (near-singular systems, and condition numbers of output samples)."""
+    ev, V = np.linalg.eigh(A[:K, :K].copy())
+    top = ev[K - 1] if K > 0 else 0.0
+    rank = 0
+    for i in range(K):
+        x[i] = 0.0
+    for j in range(K):
+        if ev[j] > rank_tol * top:
+            rank += 1
+            c = 0.0
+            for i in range(K):
+                c += V[i, j] * b[i]
+            c /= ev[j]
+            for i in range(K):
+                x[i] += c * V[i, j]
+    cond = top / ev[0] if K > 0 and ev[0] > 0 else np.inf
+    return cond, rank
+
+
+@kernel
+def copy1(src, dst):
+    """dst[:] ← src (1-D; explicit loop: slice assignment drags numba's shape-error formatting into
+    every caller's compile)."""
+    for i in range(len(src)):
+        dst[i] = src[i]
+
+
+@kernel
+def copy2(src, dst):
+    """dst[:, :] ← src (2-D)."""
+    for i in range(src.shape[0]):
+        copy1(src[i], dst[i])
+
+
+@kernel
+def copy3(src, dst):
+    """dst[:, :, :] ← src (3-D)."""
+    for i in range(src.shape[0]):
+        copy2(src[i], dst[i])

@@ -1,0 +1,93 @@
+"""Compiled stage 5: the loop-closure manifold (as `coopsim.manifold`).
+
+Positions are projected by Gauss–Newton steps of minimum norm, Δθ = −Λ⁺Φ(θ) with
+Λ⁺ = Λᵀ(ΛΛᵀ)⁺ (pivoted Cholesky of ΛΛᵀ, or its eigen-decomposition when rank is lost), until
+max |Φ| ≤ tol; rates by θ̇ ← θ̇ − Λ⁺Λθ̇, applied twice (the second pass removes what rounding in the
+normal equations left).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
+from .jit import kernel
+from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+
+PROJECTION_FAILED = 7
+
+
+@kernel
+def closure_kinematics(P, W, q):
+    """Kinematics, EE Jacobians, object pose, Λ and Φ at q (no dynamics)."""
+    for m in range(len(P.dof) - 1):
+        arm_kinematics(P, W, m, q)
+        arm_jacobian(P, W, m)
+    object_pose(P, W)
+    constraint_jacobian(P, W)
+    loop_residual(P, W)
+
+
+@kernel
+def min_norm_step(P, W, rhs, out):
+    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam."""
+    K, N = W.Lam.shape
+    for i in range(K):
+        for l in range(i, K):
+            v = 0.0
+            for j in range(N):
+                v += W.Lam[i, j] * W.Lam[l, j]
+            W.A[i, l] = v
+            W.A[l, i] = v
+        W.b[i] = rhs[i]
+    if pivoted_cholesky(W.A, W.A_f, W.perm, K) > safe_pivot_ratio(K, P.rank_tol):
+        pivoted_solve(W.A_f, W.perm, K, W.b, W.yK, W.dF)
+    else:
+        eig_solve(W.A, W.b, W.dF, K, P.rank_tol)
+    for j in range(N):
+        v = 0.0
+        for i in range(K):
+            v += W.Lam[i, j] * W.dF[i]
+        out[j] = v
+
+
+@kernel
+def max_abs(x):
+    """max |x_i| (NaN if any x_i is NaN)."""
+    v = 0.0
+    for i in range(len(x)):
+        a = abs(x[i])
+        if a != a:
+            return a
+        if a > v:
+            v = a
+    return v
+
+
+@kernel
+def project_state(P, W, y, tol, max_iter, step):
+    """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 (to max |Φ| ≤ tol, at most max_iter Gauss–Newton steps)
+    and Λ(θ)θ̇ = 0, in place; step (N,) scratch. Returns 0 or PROJECTION_FAILED (W.phi holds the
+    last residual)."""
+    N = P.dof[-1]
+    q, qd = y[:N], y[N:]
+    K = W.Lam.shape[0]
+    for it in range(max_iter + 1):
+        closure_kinematics(P, W, q)
+        if max_abs(W.phi) <= tol:
+            break
+        if it == max_iter:
+            return PROJECTION_FAILED
+        min_norm_step(P, W, W.phi, step)
+        for j in range(N):
+            q[j] -= step[j]
+    for _ in range(2):
+        for i in range(K):
+            v = 0.0
+            for j in range(N):
+                v += W.Lam[i, j] * qd[j]
+            W.res[i] = v
+        min_norm_step(P, W, W.res, step)
+        for j in range(N):
+            qd[j] -= step[j]
+    return 0

@@ -1,0 +1,181 @@
+"""Model → PackedModel: every array the compiled kernels read, built once from a frozen `Model`.
+
+A `PackedModel` is a NamedTuple of NumPy arrays and scalars (numba passes it to compiled code as one
+typed tuple). Joints of all arms are stacked arm after arm: arm m owns rows dof[m]:dof[m+1] of every
+per-joint array. Units SI, frames as in `coopsim.model`. A `Workspace` holds the buffers the kernels
+write into, so that no evaluation allocates.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..model import Model, TorqueFunction, TorqueTable
+
+STAB_NONE, STAB_PROJECTION, STAB_BAUMGARTE = 0, 1, 2
+_STAB = {"none": STAB_NONE, "projection": STAB_PROJECTION, "baumgarte": STAB_BAUMGARTE}
+
+
+class PackedModel(NamedTuple):
+    """Frozen model arrays (N joints in all, r arms, k rows per grasp).
+
+    dof (r+1,) int: arm m's joints are dof[m]:dof[m+1]; base_pos (r, 3), base_rot (r, 3, 3) world←base;
+    joint_pos (N, 3) in the parent frame; joint_rot (N, 3, 3) parent←joint frame at θ = 0;
+    joint_axis (N, 3) unit, joint frame; link_mass (N,) kg; link_com (N, 3) link frame;
+    link_inertia (N, 3, 3) about the centre of mass, link axes; ee_pos (r, 3), ee_rot (r, 3, 3)
+    end-effector frame in the last link frame; obj_mass kg; obj_inertia (3, 3) about C, object axes;
+    grasp_pos (r, 3), grasp_rot (r, 3, 3) EE frame m in the object frame; carrier: arm index;
+    gravity (3,) m/s²; rows (k, 6) constraint rows S; rank_tol; rank_error: 1 to stop when Λ𝐈⁻¹Λᵀ
+    loses rank, 0 to warn; stabilization code (STAB_*);
+    alpha, beta 1/s (Baumgarte); projection_tol m, rad;
+    tq_off (N+1,) int, tq_t, tq_v: joint j's torque table is (tq_t, tq_v)[tq_off[j]:tq_off[j+1]]
+    (s, N·m), linear between knots, held outside."""
+
+    dof: np.ndarray
+    base_pos: np.ndarray
+    base_rot: np.ndarray
+    joint_pos: np.ndarray
+    joint_rot: np.ndarray
+    joint_axis: np.ndarray
+    link_mass: np.ndarray
+    link_com: np.ndarray
+    link_inertia: np.ndarray
+    ee_pos: np.ndarray
+    ee_rot: np.ndarray
+    obj_mass: float
+    obj_inertia: np.ndarray
+    grasp_pos: np.ndarray
+    grasp_rot: np.ndarray
+    carrier: int
+    gravity: np.ndarray
+    rows: np.ndarray
+    rank_tol: float
+    rank_error: int
+    stabilization: int
+    alpha: float
+    beta: float
+    projection_tol: float
+    tq_off: np.ndarray
+    tq_t: np.ndarray
+    tq_v: np.ndarray
+
+
+class Workspace(NamedTuple):
+    """Buffers of one evaluation (N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows).
+    Link geometry, world axes: p, R, z, c, I (N, …) joint origins, frames, axes, centres of mass,
+    inertias; p_ee (r, 3), R_ee (r, 3, 3); link motion at θ̈ = 0 with base acceleration −g:
+    w, dw, a (N, 3). Arm terms: Mb (N, nmax) mass-matrix blocks (arm m's
+    block in rows dof[m]:dof[m+1], columns 0:n_m), Lb (N, nmax) their Cholesky factors, h (N,) bias
+    forces h = −Re (object included in the carrier's rows), h_arm (N,) without the object, J (r, 6, nmax)
+    end-effector Jacobians, Jd_qd (r, 6). Object: p_C (3,), R_o (3, 3), K_o (3, 3), s (r, 3),
+    J_o (6, nmax), Jd_o_qd (6,), v_o (6,), Y_bias (6,) M_o J̇_oθ̇ + b_o. Closed chain: Lam (K, N),
+    Lam_dot_qd (K,), X (N, K) 𝐈⁻¹Λᵀ, x0 (N,), A (K, K), A_f (K, K) its factor, b (K,), F (K,), res (K,),
+    perm (K,) int, yK (K,) scratch, phi (K,) loop residual Φ; out: qdd (N,), tau (N,), cond (1,) and rank (1,) int.
+    dF (K,) refinement step; vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch."""
+
+    p: np.ndarray
+    R: np.ndarray
+    z: np.ndarray
+    c: np.ndarray
+    I: np.ndarray
+    p_ee: np.ndarray
+    R_ee: np.ndarray
+    w: np.ndarray
+    dw: np.ndarray
+    a: np.ndarray
+    Mb: np.ndarray
+    Lb: np.ndarray
+    h: np.ndarray
+    h_arm: np.ndarray
+    J: np.ndarray
+    Jd_qd: np.ndarray
+    p_C: np.ndarray
+    R_o: np.ndarray
+    K_o: np.ndarray
+    s: np.ndarray
+    J_o: np.ndarray
+    Jd_o_qd: np.ndarray
+    v_o: np.ndarray
+    Y_bias: np.ndarray
+    Lam: np.ndarray
+    Lam_dot_qd: np.ndarray
+    X: np.ndarray
+    x0: np.ndarray
+    A: np.ndarray
+    A_f: np.ndarray
+    b: np.ndarray
+    F: np.ndarray
+    res: np.ndarray
+    perm: np.ndarray
+    yK: np.ndarray
+    phi: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    cond: np.ndarray
+    rank: np.ndarray
+    dF: np.ndarray
+    vec6: np.ndarray
+    v3: np.ndarray
+    m3: np.ndarray
+
+
+def _f(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def torque_arrays(torques, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-joint torque tables (tq_off, tq_t, tq_v) of the model's per-arm tables (a TorqueFunction
+    packs as zero torque: its values are supplied per stage by the caller)."""
+    if isinstance(torques, TorqueFunction):
+        tables = [TorqueTable(np.zeros(1), np.zeros((1, n)))]
+    else:
+        tables = list(torques)
+    off, ts, vs = [0], [], []
+    for tab in tables:
+        for col in np.asarray(tab.values, dtype=float).T:
+            ts.append(np.asarray(tab.times, dtype=float))
+            vs.append(col)
+            off.append(off[-1] + len(col))
+    return np.array(off, dtype=np.int64), _f(np.concatenate(ts)), _f(np.concatenate(vs))
+
+
+def tabulated_torques(P: PackedModel, t: np.ndarray) -> np.ndarray:
+    """τ (S, N) N·m at times t (S,) from P's per-joint tables (as `integrate.torque_at`)."""
+    t = np.asarray(t, dtype=float)
+    out = np.empty((len(t), int(P.dof[-1])))
+    for j in range(out.shape[1]):
+        sl = slice(P.tq_off[j], P.tq_off[j + 1])
+        out[:, j] = np.interp(t, P.tq_t[sl], P.tq_v[sl])
+    return out
+
+
+def pack(model: Model) -> PackedModel:
+    """The frozen arrays of `model` for the compiled kernels."""
+    arms, obj, s = model.arms, model.object, model.integrator
+    dof = np.cumsum([0] + [a.n for a in arms]).astype(np.int64)
+    cat = lambda name: _f(np.concatenate([getattr(a, name) for a in arms]))  # noqa: E731
+    stack = lambda name: _f(np.array([getattr(a, name) for a in arms]))      # noqa: E731
+    tq_off, tq_t, tq_v = torque_arrays(model.torques, model.n_total)
+    return PackedModel(
+        dof, stack("base_pos"), stack("base_rot"), cat("joint_pos"), cat("joint_rot"), cat("joint_axis"),
+        cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
+        float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
+        _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],
+        float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol), tq_off, tq_t, tq_v)
+
+
+def workspace(P: PackedModel) -> Workspace:
+    """Fresh buffers for the kernels of model P."""
+    r, N = len(P.dof) - 1, int(P.dof[-1])
+    nmax = int(np.max(np.diff(P.dof)))
+    K = P.rows.shape[0] * (r - 1)
+    z = np.zeros
+    return Workspace(
+        z((N, 3)), z((N, 3, 3)), z((N, 3)), z((N, 3)), z((N, 3, 3)), z((r, 3)), z((r, 3, 3)),
+        z((N, 3)), z((N, 3)), z((N, 3)),
+        z((N, nmax)), z((N, nmax)), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
+        z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),
+        z((K, N)), z(K), z((N, K)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
+        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3), z((4, 3, 3)))

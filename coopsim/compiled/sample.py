@@ -1,0 +1,217 @@
+"""Compiled evaluation of many states: θ̈ (batches, run on threads from `api`, one workspace each: the
+entries release the GIL), every reported quantity of a trajectory at its output samples (as the
+reference `coopsim.simulate._sample`), and the per-sample terms of the inverse dynamics (as
+`coopsim.inverse.inverse_problem`'s loop). Two entries only: each entry compiles the chain again.
+
+Grasp wrenches (eqs. 4–6, 11): F_e^m = Sᵀ F_m for the arms m ≠ c, and the carrier's from the object's
+Newton–Euler equation W_c F_e^c = M_o v̇_o + b_o − Σ_{m≠c} W_m F_e^m restricted to the rows S, with
+W_m [f; n] = [f; n − s_m × f] and W_m⁻¹ = W(−s_m). Internal wrench (eq. 7, paper's W⁺): F_I^m = W_m F_e^m
+− (1/r) Σ_j W_j F_e^j at C.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .chain import arm_terms, chain_forward, loop_residual, object_dynamics, object_pose
+from .jit import entry, kernel
+from .linalg import copy1, copy2, copy3
+from .manifold import max_abs
+from .spatial import rot_to_quat
+
+
+class Samples(NamedTuple):
+    """Output arrays for S samples (N joints, r arms), world axes, SI: qdd, tau (S, N);
+    object_pos (S, 3); object_quat (S, 4) [w, x, y, z]; object_twist, object_acc (S, 6) [v_C; ω],
+    [v̇_C; ω̇]; grasp_wrench, internal_wrench (S, r, 6); residual_pos (S,) max |Φ|; residual_vel (S,)
+    max |Λθ̇|; cond (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ; status (S,) int (chain_forward's code)."""
+
+    qdd: np.ndarray
+    tau: np.ndarray
+    object_pos: np.ndarray
+    object_quat: np.ndarray
+    object_twist: np.ndarray
+    object_acc: np.ndarray
+    grasp_wrench: np.ndarray
+    internal_wrench: np.ndarray
+    residual_pos: np.ndarray
+    residual_vel: np.ndarray
+    cond: np.ndarray
+    status: np.ndarray
+
+
+def new_samples(S: int, N: int, r: int) -> Samples:
+    z = np.zeros
+    return Samples(z((S, N)), z((S, N)), z((S, 3)), z((S, 4)), z((S, 6)), z((S, 6)), z((S, r, 6)),
+                   z((S, r, 6)), z(S), z(S), z(S), np.zeros(S, dtype=np.int64))
+
+
+@kernel
+def object_acceleration(P, W, qdd, out):
+    """v̇_o (6,) = J_o θ̈_c + J̇_oθ̇_c."""
+    o = P.dof[P.carrier]
+    for a in range(6):
+        v = W.Jd_o_qd[a]
+        for j in range(P.dof[P.carrier + 1] - o):
+            v += W.J_o[a, j] * qdd[o + j]
+        out[a] = v
+
+
+@kernel
+def object_wrench(P, W, vd, out):
+    """Y (6,) = M_o v̇_o + b_o = [m_o (v̇_C − g); K_o ω̇ + ω × K_o ω]."""
+    K, w = W.K_o, W.v_o[3:]
+    for a in range(3):
+        out[a] = P.obj_mass * (vd[a] - P.gravity[a])
+        out[3 + a] = K[a, 0] * vd[3] + K[a, 1] * vd[4] + K[a, 2] * vd[5]
+    Kw0 = K[0, 0] * w[0] + K[0, 1] * w[1] + K[0, 2] * w[2]
+    Kw1 = K[1, 0] * w[0] + K[1, 1] * w[1] + K[1, 2] * w[2]
+    Kw2 = K[2, 0] * w[0] + K[2, 1] * w[1] + K[2, 2] * w[2]
+    out[3] += w[1] * Kw2 - w[2] * Kw1
+    out[4] += w[2] * Kw0 - w[0] * Kw2
+    out[5] += w[0] * Kw1 - w[1] * Kw0
+
+
+@kernel
+def move_to_centre(s, F, out):
+    """out (6,) ← W(s) F = [f; n − s × f]."""
+    out[0], out[1], out[2] = F[0], F[1], F[2]
+    out[3] = F[3] - (s[1] * F[2] - s[2] * F[1])
+    out[4] = F[4] - (s[2] * F[0] - s[0] * F[2])
+    out[5] = F[5] - (s[0] * F[1] - s[1] * F[0])
+
+
+@kernel
+def grasp_wrenches(P, W, Y, F_e, F_I):
+    """F_e (r, 6) from the loop-closure wrenches W.F and the object wrench Y (6,) (overwritten), and the
+    internal wrenches F_I (r, 6) (module docstring)."""
+    S = P.rows
+    k = S.shape[0]
+    c = P.carrier
+    r = len(P.dof) - 1
+    u = W.vec6
+    g = 0
+    for m in range(r):
+        if m == c:
+            continue
+        for a in range(6):
+            v = 0.0
+            for i in range(k):
+                v += S[i, a] * W.F[g * k + i]
+            F_e[m, a] = v
+        move_to_centre(W.s[m], F_e[m], u)
+        for a in range(6):
+            Y[a] -= u[a]
+        g += 1
+    for a in range(3):   # W(−s_c) Y
+        u[a] = Y[a]
+    sc = W.s[c]
+    u[3] = Y[3] + (sc[1] * Y[2] - sc[2] * Y[1])
+    u[4] = Y[4] + (sc[2] * Y[0] - sc[0] * Y[2])
+    u[5] = Y[5] + (sc[0] * Y[1] - sc[1] * Y[0])
+    for a in range(6):
+        v = 0.0
+        for i in range(k):
+            sv = 0.0
+            for b in range(6):
+                sv += S[i, b] * u[b]
+            v += S[i, a] * sv
+        F_e[c, a] = v
+    for m in range(r):
+        move_to_centre(W.s[m], F_e[m], F_I[m])
+    for a in range(6):
+        mean = 0.0
+        for m in range(r):
+            mean += F_I[m, a]
+        mean /= r
+        for m in range(r):
+            F_I[m, a] -= mean
+
+
+@kernel
+def reported(P, W, i, qd, out, Yw):
+    """Row i of `out` after an evaluation at rates qd: object pose, twist and acceleration, grasp and
+    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,) scratch."""
+    N = P.dof[-1]
+    K = W.Lam.shape[0]
+    copy1(W.p_C, out.object_pos[i])
+    rot_to_quat(W.R_o, out.object_quat[i])
+    copy1(W.v_o, out.object_twist[i])
+    object_acceleration(P, W, W.qdd, out.object_acc[i])
+    object_wrench(P, W, out.object_acc[i], Yw)
+    grasp_wrenches(P, W, Yw, out.grasp_wrench[i], out.internal_wrench[i])
+    loop_residual(P, W)
+    out.residual_pos[i] = max_abs(W.phi)
+    rv = 0.0
+    for a in range(K):
+        v = 0.0
+        for j in range(N):
+            v += W.Lam[a, j] * qd[j]
+        rv = max(rv, abs(v))
+    out.residual_vel[i] = rv
+    if K:
+        ev = np.linalg.eigvalsh(W.A)
+        out.cond[i] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
+    else:
+        out.cond[i] = 1.0
+
+
+@entry
+def evaluate(P, W, Y, out, full):
+    """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques out.tau (S, N): θ̈ into out.qdd and
+    status codes into out.status; with `full`, every other field of `out` (Samples) too."""
+    N = P.dof[-1]
+    stab = np.zeros(W.Lam.shape[0])
+    Yw = np.empty(6)
+    for i in range(Y.shape[0]):
+        out.status[i] = chain_forward(P, W, Y[i, :N], Y[i, N:], out.tau[i], stab)
+        copy1(W.qdd, out.qdd[i])
+        if full:
+            reported(P, W, i, Y[i, N:], out, Yw)
+
+
+class InverseTerms(NamedTuple):
+    """Per-sample terms of the inverse dynamics (S samples, N joints, r arms, nmax joints per arm at
+    most): tau_arms (S, N) = I_m θ̈_m + h_m per open arm (eq. 29, no object); J (S, r, 6, nmax) EE
+    Jacobians; s (S, r, 3) p_C − grasp points; p_C (S, 3); R_o (S, 3, 3); twist (S, 6) [v_C; ω];
+    acc (S, 6) [v̇_C; ω̇]; Y (S, 6) = M_o v̇_o + b_o at C."""
+
+    tau_arms: np.ndarray
+    J: np.ndarray
+    s: np.ndarray
+    p_C: np.ndarray
+    R_o: np.ndarray
+    twist: np.ndarray
+    acc: np.ndarray
+    Y: np.ndarray
+
+
+def new_inverse_terms(S: int, N: int, r: int, nmax: int) -> InverseTerms:
+    z = np.zeros
+    return InverseTerms(z((S, N)), z((S, r, 6, nmax)), z((S, r, 3)), z((S, 3)), z((S, 3, 3)), z((S, 6)),
+                        z((S, 6)), z((S, 6)))
+
+
+@entry
+def inverse_terms(P, W, Q, QD, QDD, out):
+    """Fill `out` (InverseTerms) at the states (Q, QD, QDD) (S, N)."""
+    for i in range(Q.shape[0]):
+        arm_terms(P, W, Q[i], QD[i])
+        for m in range(len(P.dof) - 1):
+            o, e = P.dof[m], P.dof[m + 1]
+            for j in range(o, e):
+                v = W.h_arm[j]
+                for l in range(o, e):
+                    v += W.Mb[j, l - o] * QDD[i, l]
+                out.tau_arms[i, j] = v
+        object_pose(P, W)
+        object_dynamics(P, W, QD[i])
+        copy3(W.J, out.J[i])
+        copy2(W.s, out.s[i])
+        copy1(W.p_C, out.p_C[i])
+        copy2(W.R_o, out.R_o[i])
+        copy1(W.v_o, out.twist[i])
+        object_acceleration(P, W, QDD[i], out.acc[i])
+        object_wrench(P, W, out.acc[i], out.Y[i])

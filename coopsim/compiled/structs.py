@@ -1,0 +1,283 @@
+"""numba StructRef types of the four records the kernels share: PackedModel, Workspace, Loop, Tableau.
+
+A StructRef is passed to compiled functions by reference (one pointer), where a NamedTuple of ~50
+arrays is passed by value field by field: with them the package compiles about ten times faster.
+Python builds and reads the NamedTuples (`packing`, `integrate`); `to_struct` gives compiled code a
+StructRef holding the *same* arrays (no copy), through cached constructors. Field types are fixed:
+float64 / int64 C-contiguous arrays and scalars. (This file lists the fields of the NamedTuples in
+order; a test checks that the two stay in step.)
+"""
+
+from __future__ import annotations
+
+from numba import njit, types
+from numba.experimental import structref
+
+_F, _I = types.float64, types.int64
+_f1, _f2, _f3 = (types.Array(types.float64, d, "C") for d in (1, 2, 3))
+_i1 = types.Array(types.int64, 1, "C")
+
+
+@structref.register
+class StructType(types.StructRef):
+    """The numba type of a coopsim record (fields as declared below)."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class Struct(structref.StructRefProxy):
+    """Python handle of a record; compiled code reads its fields."""
+
+
+structref.define_boxing(StructType, Struct)
+
+PACKED_FIELDS = (
+    ("dof", _i1),
+    ("base_pos", _f2),
+    ("base_rot", _f3),
+    ("joint_pos", _f2),
+    ("joint_rot", _f3),
+    ("joint_axis", _f2),
+    ("link_mass", _f1),
+    ("link_com", _f2),
+    ("link_inertia", _f3),
+    ("ee_pos", _f2),
+    ("ee_rot", _f3),
+    ("obj_mass", _F),
+    ("obj_inertia", _f2),
+    ("grasp_pos", _f2),
+    ("grasp_rot", _f3),
+    ("carrier", _I),
+    ("gravity", _f1),
+    ("rows", _f2),
+    ("rank_tol", _F),
+    ("rank_error", _I),
+    ("stabilization", _I),
+    ("alpha", _F),
+    ("beta", _F),
+    ("projection_tol", _F),
+    ("tq_off", _i1),
+    ("tq_t", _f1),
+    ("tq_v", _f1),
+)
+PACKED_T = StructType(list(PACKED_FIELDS))
+
+WORKSPACE_FIELDS = (
+    ("p", _f2),
+    ("R", _f3),
+    ("z", _f2),
+    ("c", _f2),
+    ("I", _f3),
+    ("p_ee", _f2),
+    ("R_ee", _f3),
+    ("w", _f2),
+    ("dw", _f2),
+    ("a", _f2),
+    ("Mb", _f2),
+    ("Lb", _f2),
+    ("h", _f1),
+    ("h_arm", _f1),
+    ("J", _f3),
+    ("Jd_qd", _f2),
+    ("p_C", _f1),
+    ("R_o", _f2),
+    ("K_o", _f2),
+    ("s", _f2),
+    ("J_o", _f2),
+    ("Jd_o_qd", _f1),
+    ("v_o", _f1),
+    ("Y_bias", _f1),
+    ("Lam", _f2),
+    ("Lam_dot_qd", _f1),
+    ("X", _f2),
+    ("x0", _f1),
+    ("A", _f2),
+    ("A_f", _f2),
+    ("b", _f1),
+    ("F", _f1),
+    ("res", _f1),
+    ("perm", _i1),
+    ("yK", _f1),
+    ("phi", _f1),
+    ("qdd", _f1),
+    ("tau", _f1),
+    ("cond", _f1),
+    ("rank", _i1),
+    ("dF", _f1),
+    ("vec6", _f1),
+    ("v3", _f1),
+    ("m3", _f3),
+)
+WORKSPACE_T = StructType(list(WORKSPACE_FIELDS))
+
+LOOP_FIELDS = (
+    ("t", _f1),
+    ("h", _f1),
+    ("y", _f1),
+    ("fy", _f1),
+    ("has_fy", _i1),
+    ("k_next", _i1),
+    ("count", _i1),
+    ("status", _i1),
+    ("fail_t", _f1),
+    ("fail_y", _f1),
+    ("warn", _i1),
+    ("warn_t", _f1),
+    ("warn_cond", _f1),
+    ("warn_y", _f1),
+    ("K", _f2),
+    ("y_new", _f1),
+    ("ytmp", _f1),
+    ("Fd", _f2),
+    ("stab", _f1),
+    ("step", _f1),
+)
+LOOP_T = StructType(list(LOOP_FIELDS))
+
+TABLEAU_FIELDS = (
+    ("code", _I),
+    ("stages", _I),
+    ("A", _f2),
+    ("C", _f1),
+    ("B", _f1),
+    ("E5", _f1),
+    ("E3", _f1),
+    ("D", _f2),
+    ("Pd", _f2),
+    ("err_order", _I),
+)
+TABLEAU_T = StructType(list(TABLEAU_FIELDS))
+
+
+@njit(cache=True)
+def _new_packed(r):
+    s = structref.new(PACKED_T)
+    s.dof = r.dof
+    s.base_pos = r.base_pos
+    s.base_rot = r.base_rot
+    s.joint_pos = r.joint_pos
+    s.joint_rot = r.joint_rot
+    s.joint_axis = r.joint_axis
+    s.link_mass = r.link_mass
+    s.link_com = r.link_com
+    s.link_inertia = r.link_inertia
+    s.ee_pos = r.ee_pos
+    s.ee_rot = r.ee_rot
+    s.obj_mass = r.obj_mass
+    s.obj_inertia = r.obj_inertia
+    s.grasp_pos = r.grasp_pos
+    s.grasp_rot = r.grasp_rot
+    s.carrier = r.carrier
+    s.gravity = r.gravity
+    s.rows = r.rows
+    s.rank_tol = r.rank_tol
+    s.rank_error = r.rank_error
+    s.stabilization = r.stabilization
+    s.alpha = r.alpha
+    s.beta = r.beta
+    s.projection_tol = r.projection_tol
+    s.tq_off = r.tq_off
+    s.tq_t = r.tq_t
+    s.tq_v = r.tq_v
+    return s
+
+
+@njit(cache=True)
+def _new_workspace(r):
+    s = structref.new(WORKSPACE_T)
+    s.p = r.p
+    s.R = r.R
+    s.z = r.z
+    s.c = r.c
+    s.I = r.I
+    s.p_ee = r.p_ee
+    s.R_ee = r.R_ee
+    s.w = r.w
+    s.dw = r.dw
+    s.a = r.a
+    s.Mb = r.Mb
+    s.Lb = r.Lb
+    s.h = r.h
+    s.h_arm = r.h_arm
+    s.J = r.J
+    s.Jd_qd = r.Jd_qd
+    s.p_C = r.p_C
+    s.R_o = r.R_o
+    s.K_o = r.K_o
+    s.s = r.s
+    s.J_o = r.J_o
+    s.Jd_o_qd = r.Jd_o_qd
+    s.v_o = r.v_o
+    s.Y_bias = r.Y_bias
+    s.Lam = r.Lam
+    s.Lam_dot_qd = r.Lam_dot_qd
+    s.X = r.X
+    s.x0 = r.x0
+    s.A = r.A
+    s.A_f = r.A_f
+    s.b = r.b
+    s.F = r.F
+    s.res = r.res
+    s.perm = r.perm
+    s.yK = r.yK
+    s.phi = r.phi
+    s.qdd = r.qdd
+    s.tau = r.tau
+    s.cond = r.cond
+    s.rank = r.rank
+    s.dF = r.dF
+    s.vec6 = r.vec6
+    s.v3 = r.v3
+    s.m3 = r.m3
+    return s
+
+
+@njit(cache=True)
+def _new_loop(r):
+    s = structref.new(LOOP_T)
+    s.t = r.t
+    s.h = r.h
+    s.y = r.y
+    s.fy = r.fy
+    s.has_fy = r.has_fy
+    s.k_next = r.k_next
+    s.count = r.count
+    s.status = r.status
+    s.fail_t = r.fail_t
+    s.fail_y = r.fail_y
+    s.warn = r.warn
+    s.warn_t = r.warn_t
+    s.warn_cond = r.warn_cond
+    s.warn_y = r.warn_y
+    s.K = r.K
+    s.y_new = r.y_new
+    s.ytmp = r.ytmp
+    s.Fd = r.Fd
+    s.stab = r.stab
+    s.step = r.step
+    return s
+
+
+@njit(cache=True)
+def _new_tableau(r):
+    s = structref.new(TABLEAU_T)
+    s.code = r.code
+    s.stages = r.stages
+    s.A = r.A
+    s.C = r.C
+    s.B = r.B
+    s.E5 = r.E5
+    s.E3 = r.E3
+    s.D = r.D
+    s.Pd = r.Pd
+    s.err_order = r.err_order
+    return s
+
+
+_NEW = {"PackedModel": _new_packed, "Workspace": _new_workspace, "Loop": _new_loop, "Tableau": _new_tableau}
+
+
+def to_struct(record) -> Struct:
+    """The StructRef of a PackedModel, Workspace, Loop or Tableau NamedTuple (sharing its arrays)."""
+    return _NEW[type(record).__name__](record)
