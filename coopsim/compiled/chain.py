@@ -403,66 +403,69 @@ def chain_solve(P, W, tau, stab):
     with `stab` (K,) added to the right-hand side of Λθ̈ = −Λ̇θ̇ − stab (zeros: none). Needs
     `chain_terms` first. One step of iterative refinement on the acceleration constraint. Returns a
     status code (module docstring)."""
-    N = P.dof[-1]
-    K = W.Lam.shape[0]
-    for m in range(len(P.dof) - 1):
-        o, n = P.dof[m], P.dof[m + 1] - P.dof[m]
-        if not block_cholesky(W.Mb, W.Lb, o, n):
+    Lam_, X_, x0_, h_, Mb_, Lb_, b_, A_ = W.Lam, W.X, W.x0, W.h, W.Mb, W.Lb, W.b, W.A
+    F_, qdd_, res_, A_f_, perm_, yK_, dF_, Lam_dot_qd_ = W.F, W.qdd, W.res, W.A_f, W.perm, W.yK, W.dF, W.Lam_dot_qd
+    dof = P.dof
+    N = dof[-1]
+    K = Lam_.shape[0]
+    for m in range(len(dof) - 1):
+        o, n = dof[m], dof[m + 1] - dof[m]
+        if not block_cholesky(Mb_, Lb_, o, n):
             return NOT_PD
     for i in range(N):
-        W.x0[i] = tau[i] - W.h[i]
-    for m in range(len(P.dof) - 1):
-        block_solve(W.Lb, P.dof[m], P.dof[m + 1] - P.dof[m], W.x0, P.dof[m])
+        x0_[i] = tau[i] - h_[i]
+    for m in range(len(dof) - 1):
+        block_solve(Lb_, dof[m], dof[m + 1] - dof[m], x0_, dof[m])
     # X = 𝐈⁻¹Λᵀ: row group g touches arm m and the carrier only
     c = P.carrier
     k = P.rows.shape[0]
     g = 0
-    for m in range(len(P.dof) - 1):
+    for m in range(len(dof) - 1):
         if m == c:
             continue
         for i in range(g * k, (g + 1) * k):
             for blk in (m, c):
-                o, e = P.dof[blk], P.dof[blk + 1]
+                o, e = dof[blk], dof[blk + 1]
                 for j in range(o, e):
-                    W.X[j, i] = W.Lam[i, j]
-                block_solve_col(W.Lb, o, e - o, W.X, i)
+                    X_[j, i] = Lam_[i, j]
+                block_solve_col(Lb_, o, e - o, X_, i)
         g += 1
     for i in range(K):
-        v = W.Lam_dot_qd[i] + stab[i]
+        v = Lam_dot_qd_[i] + stab[i]
         for j in range(N):
-            v += W.Lam[i, j] * W.x0[j]
-        W.b[i] = v
+            v += Lam_[i, j] * x0_[j]
+        b_[i] = v
         for l in range(i, K):
             a = 0.0
             for j in range(N):
-                a += W.Lam[i, j] * W.X[j, l]
-            W.A[i, l] = a
-            W.A[l, i] = a
+                a += Lam_[i, j] * X_[j, l]
+            A_[i, l] = a
+            A_[l, i] = a
     fast = solve_constraints(P, W, K)
     for j in range(N):
-        v = W.x0[j]
+        v = x0_[j]
         for i in range(K):
-            v -= W.X[j, i] * W.F[i]
-        W.qdd[j] = v
+            v -= X_[j, i] * F_[i]
+        qdd_[j] = v
     # refinement: residual of Λθ̈ + Λ̇θ̇ + stab = 0
     for i in range(K):
-        v = W.Lam_dot_qd[i] + stab[i]
+        v = Lam_dot_qd_[i] + stab[i]
         for j in range(N):
-            v += W.Lam[i, j] * W.qdd[j]
-        W.res[i] = v
+            v += Lam_[i, j] * qdd_[j]
+        res_[i] = v
     if fast:
-        pivoted_solve(W.A_f, W.perm, K, W.res, W.yK, W.dF)
+        pivoted_solve(A_f_, perm_, K, res_, yK_, dF_)
     else:
-        eig_solve(W.A, W.res, W.dF, K, P.rank_tol)
+        eig_solve(A_, res_, dF_, K, P.rank_tol)
     for i in range(K):
-        W.F[i] += W.dF[i]
+        F_[i] += dF_[i]
     for j in range(N):
         v = 0.0
         for i in range(K):
-            v += W.X[j, i] * W.dF[i]
-        W.qdd[j] -= v
+            v += X_[j, i] * dF_[i]
+        qdd_[j] -= v
     for j in range(N):
-        if not np.isfinite(W.qdd[j]):
+        if not np.isfinite(qdd_[j]):
             return NON_FINITE
     return OK if W.rank[0] == K else RANK_DEFICIENT
 
