@@ -165,6 +165,17 @@ def _cmd_capacity(args) -> int:
     return 0 if ok else 1
 
 
+def _cmd_bench(args) -> int:
+    from .bench import FULL, QUICK, run_bench
+    from .bench_report import json_text, markdown_report, write_outputs
+
+    log = (lambda msg: None) if args.json else (lambda msg: print(f"bench: {msg}", file=sys.stderr, flush=True))
+    report = run_bench(_scenario_paths(args.scenarios), QUICK if args.quick else FULL, log=log)
+    paths = write_outputs(report, args.out)
+    print(json_text(report) if args.json else markdown_report(report) + f"\nwrote {len(paths)} files in {args.out}")
+    return 0
+
+
 def _scenario_paths(given: list[str]) -> list[str]:
     """The given scenario files, or every bundled `scenarios/*.yaml` when none is given."""
     from pathlib import Path
@@ -197,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario YAML file")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")
-    p.set_defaults(func=_cmd_simulate)
+    p.set_defaults(func=_cmd_simulate, native=True)
 
     p = sub.add_parser("run", help="run the native model and the MuJoCo twin: MCAP log, plots, summary.json",
                        description=("Run SCENARIO through the native model and its MuJoCo twin with the same "
@@ -207,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print summary.json to stdout")
-    p.set_defaults(func=_cmd_run)
+    p.set_defaults(func=_cmd_run, native=True)
 
     p = sub.add_parser("plot", help="comparison plots from an existing MCAP log",
                        description="Draw the comparison plots of LOG (an MCAP file written by `coopsim run`).")
@@ -221,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")
-    p.set_defaults(func=_cmd_validate)
+    p.set_defaults(func=_cmd_validate, native=True)
 
     p = sub.add_parser("mjcf", help="write the MuJoCo twin of scenarios as MJCF (models/NAME.xml)",
                        description="Write the MuJoCo twin (MJCF) of each SCENARIO (default: scenarios/*.yaml).")
@@ -248,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
-    p.set_defaults(func=_cmd_inverse)
+    p.set_defaults(func=_cmd_inverse, native=True)
 
     p = sub.add_parser("capacity", help="dynamic load carrying capacity (DLCC) of each resolution, LP bound",
                        description=("Largest object mass (scaled at constant geometry; with --payload or the "
@@ -266,12 +277,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
-    p.set_defaults(func=_cmd_capacity)
+    p.set_defaults(func=_cmd_capacity, native=True)
+
+    p = sub.add_parser("bench", help="work-precision benchmark: native model against MuJoCo and Pinocchio",
+                       description=("Time the native model (DOP853/DOPRI5 tolerance and RK4 step ladders), the MuJoCo "
+                                    "twin (RK4/Euler/implicitfast step ladders) and, with the optional 'pin' package, "
+                                    "Pinocchio's constraintDynamics against a tight native reference; µs per dynamics "
+                                    "evaluation, scaling in arms and joints, start-up times. Writes bench.json, "
+                                    "bench.md, runs.csv, scaling.csv and plots into DIR."))
+    p.add_argument("scenarios", nargs="*", help="scenario YAML files (default: scenarios/*.yaml)")
+    p.add_argument("--out", default="out/bench", help="output folder (default: out/bench)")
+    p.add_argument("--quick", action="store_true", help="short runs and ladders, no start-up timing (tests, CI)")
+    p.add_argument("--json", action="store_true", help="print bench.json to stdout")
+    p.set_defaults(func=_cmd_bench, native=True)
     return parser
+
+
+def _announce_compile() -> None:
+    """Say so before the first run on this machine compiles the native model (tens of seconds)."""
+    from .compiled.api import compile_pending
+
+    if compile_pending():
+        print("coopsim: compiling the native model for this machine (first run only; about half a minute)...",
+              file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "native", False):
+        _announce_compile()
     with warnings.catch_warnings():
         warnings.simplefilter("default")
         try:

@@ -24,10 +24,15 @@ class ObjectPose(NamedTuple):
 
 
 def grasp_matrix(s: np.ndarray) -> np.ndarray:
-    """W_m (6, 6) of eq. 2: F_o^m = W_m F_e^m moves a wrench from the EE point to C,
-    W_m = [[I₃, O₃], [−[s_m×], I₃]]."""
-    W = np.eye(6)
-    W[3:, :3] = -skew(s)
+    """W_m (…, 6, 6) of eq. 2 for offsets s (…, 3): F_o^m = W_m F_e^m moves a wrench from the EE point
+    to C, W_m = [[I₃, O₃], [−[s_m×], I₃]] (batched over leading axes)."""
+    s = np.asarray(s, dtype=float)
+    W = np.zeros(s.shape[:-1] + (6, 6))
+    W[..., range(6), range(6)] = 1.0
+    x, y, z = s[..., 0], s[..., 1], s[..., 2]
+    W[..., 3, 1], W[..., 3, 2] = z, -y
+    W[..., 4, 0], W[..., 4, 2] = -z, x
+    W[..., 5, 0], W[..., 5, 1] = y, -x
     return W
 
 

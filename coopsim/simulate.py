@@ -147,11 +147,13 @@ ENGINES = ("compiled", "reference")
 
 
 def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None,
-             progress=None, engine: str = "compiled") -> SimResult:
+             progress=None, engine: str = "compiled", fixed_step: float | None = None) -> SimResult:
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
     scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
     called as the run advances. engine: 'compiled' or 'reference' (module docstring); torques given
-    as a TorqueFunction always run on the reference engine."""
+    as a TorqueFunction always run on the reference engine. fixed_step (s, compiled engine): run the
+    method (DOP853 or DOPRI5 too) at fixed steps of at most this size, landing on every output time —
+    for torques tabulated at exactly those steps' stage times (`coopsim.compiled.integrate.stage_times`)."""
     if settings is not None:
         model = replace(model, integrator=settings)
     if duration is not None:
@@ -162,18 +164,21 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     init = initial_state(model)
     t_out = output_times(model.duration, model.integrator.output_dt)
     if engine == "reference" or isinstance(model.torques, TorqueFunction):
+        if fixed_step is not None:
+            raise ValueError("fixed_step needs the compiled engine and tabulated torques")
         return _simulate_reference(model, init, t_out, progress, start)
-    return _simulate_compiled(model, init, t_out, progress, start)
+    return _simulate_compiled(model, init, t_out, progress, start, fixed_step)
 
 
-def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
+def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
+                       fixed_step: float | None = None) -> SimResult:
     """The compiled engine: one compiled time loop (`coopsim.compiled.api.integrate_chain`), then the
     compiled sampling of every reported quantity."""
     from .compiled import api
 
     s = model.integrator
     y0 = np.concatenate([init.q, init.qd])
-    fixed = s.step if s.method == "rk4" else None
+    fixed = fixed_step if fixed_step is not None else (s.step if s.method == "rk4" else None)
     h_max = np.inf if s.max_step is None else s.max_step
     run = api.integrate_chain(model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
                               fixed_step=fixed, progress=progress)
@@ -201,6 +206,9 @@ def _compiled_reason(model: Model, run) -> str:
 
     reason = api.REASONS.get(run.status, f"failure code {run.status}")
     n = model.n_total
+    if run.status == api.chain.RANK_DEFICIENT:
+        W = api.compiled(model).W
+        reason += f" (rank {int(W.rank[0])}, cond {float(W.cond[0]):.3g})"
     if run.status == api.chain.NON_FINITE:
         tau = torque_at(model.torques, run.fail_t)
         reason += (f" (torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to "

@@ -52,19 +52,25 @@ def from_simulation(res) -> JointTrajectory:
 
 
 def trajectory_at(traj: JointTrajectory, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(θ, θ̇, θ̈) (n,) at time t (clamped to the sampled span): the quintic Hermite polynomial through
-    (θ, θ̇, θ̈) at the ends of the sample interval holding t, evaluated from the nearer end (so the
-    sample values come back to rounding)."""
+    """(θ, θ̇, θ̈) (n,) at time t (clamped to the sampled span); see `trajectory_at_times`."""
+    q, qd, qdd = trajectory_at_times(traj, np.array([float(t)]))
+    return q[0], qd[0], qdd[0]
+
+
+def trajectory_at_times(traj: JointTrajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(θ, θ̇, θ̈) (M, n) at times t (M,) (clamped to the sampled span): the quintic Hermite polynomial
+    through (θ, θ̇, θ̈) at the ends of the sample interval holding each t, evaluated from the nearer end
+    (so the sample values come back to rounding)."""
     ts = traj.t
-    t = min(max(float(t), ts[0]), ts[-1])
-    i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
-    h = ts[i + 1] - ts[i]
-    u = (t - ts[i]) / h
+    t = np.clip(np.asarray(t, dtype=float), ts[0], ts[-1])
+    i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
+    h = (ts[i + 1] - ts[i])[:, None]
+    u = (t - ts[i])[:, None] / h
     a, b = (traj.q[i], traj.qd[i], traj.qdd[i]), (traj.q[i + 1], traj.qd[i + 1], traj.qdd[i + 1])
-    if u <= 0.5:
-        return hermite_quintic(a, b, u, h)
+    fwd = hermite_quintic(a, b, u, h)
     q, qd, qdd = hermite_quintic((b[0], -b[1], b[2]), (a[0], -a[1], a[2]), 1.0 - u, h)
-    return q, -qd, qdd
+    near_start = u <= 0.5
+    return tuple(np.where(near_start, f, g) for f, g in zip(fwd, (q, -qd, qdd)))
 
 
 def hermite_quintic(start, end, u: float, h: float):
@@ -188,12 +194,11 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             guess = q[i - 1] + h * qd[i - 1] + 0.5 * h * h * qdd[i - 1]
         for m, (arm, sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.arms, model.dof_slices,
                                                              grasp_targets(model, p_C, R_o, tw, ac))):
-            q[i, sl] = _solve_arm(arm, S, p, R, guess[sl], t, p_C)
-            full = np.max(np.abs(pose_error(arm, q[i, sl], p, R)))
-            if full > plane_tol:
+            sol = _solve_arm(model, m, p, R, tw_m, ac_m, guess, t, p_C)
+            if sol.full_error > plane_tol:
                 raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
-                                      f"leaves the plane of motion by {full:.3g} (m or rad)")
-            qd[i, sl], qdd[i, sl], dets[i, m] = arm_rates(arm, S, q[i, sl], tw_m, ac_m)
+                                      f"leaves the plane of motion by {sol.full_error:.3g} (m or rad)")
+            q[i, sl], qd[i, sl], qdd[i, sl], dets[i, m] = sol.q[sl], sol.qd[sl], sol.qdd[sl], sol.det
             if i and np.sign(dets[i, m]) != np.sign(dets[i - 1, m]):
                 raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} crosses a singularity between "
                                       f"t={t_out[i - 1]:.6g} s and t={t:.6g} s (det S J changes sign)")
@@ -208,20 +213,27 @@ def _check_square(model: Model, S: np.ndarray):
                 f"rows; closed-chain inverse kinematics needs as many joints as rows (no redundant arms)")
 
 
-def _solve_arm(arm: ArmModel, S: np.ndarray, p, R, guess, t, p_C) -> np.ndarray:
+def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
+    """Arm m at the targets (compiled Newton and differential kinematics, `coopsim.compiled.api.solve_arm`,
+    the same steps as `arm_ik` and `arm_rates`), with one-line errors naming the arm and the time."""
+    from .compiled import api, ik
+
+    arm = model.arms[m]
     reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
     dist = float(np.linalg.norm(p - (arm.base_pos + arm.base_rot @ arm.joint_pos[0])))
     where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
     if dist > reach * (1 + 1e-12):
         raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
                               f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
-    try:
-        return arm_ik(arm, S, p, R, guess)
-    except SingularJacobian as exc:
-        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} meets a singularity {where}: {exc}") from None
-    except ConstraintError as exc:
+    sol = api.solve_arm(model, m, p, R, twist, acc, guess)
+    if sol.status == ik.SINGULAR:
+        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} meets a singularity {where}: singular "
+                              f"Jacobian (σ_min/σ_max = {sol.ratio:.2g})")
+    if sol.status != ik.SOLVED:
         raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
-                              f"no joint angles reach its grasp ({exc})") from None
+                              f"no joint angles reach its grasp (Newton did not converge (max |error| "
+                              f"{sol.ratio:.3g} after 50 steps))")
+    return sol
 
 
 def object_pose_of(model: Model, q: np.ndarray):

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..model import Model
-from . import chain, integrate, manifold, sample
+from . import chain, ik, integrate, manifold, sample
 from .packing import PackedModel, Workspace, pack, tabulated_torques, workspace
 from .structs import Struct, to_struct
 
@@ -44,6 +44,17 @@ class Compiled(NamedTuple):
     W: Workspace
     Ps: Struct
     Ws: Struct
+
+
+def compile_pending() -> bool:
+    """True when some entry has no compiled code cached on this machine yet (the first run after
+    installing or editing the package compiles it). Reads numba's cache index files; False when they
+    cannot be located."""
+    try:
+        return any(not os.path.exists(e._cache._cache_file._index_path)
+                   for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve))
+    except AttributeError:
+        return False
 
 
 def compiled(model: Model) -> Compiled:
@@ -225,3 +236,29 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
 
     _map(run, chunks)
     return out
+
+
+class ArmSolution(NamedTuple):
+    """Inverse kinematics of one arm: status (ik.SOLVED | SINGULAR | NOT_CONVERGED); q, qd, qdd (N,)
+    stacked, the arm's rows filled; ratio σ_min/σ_max of S J (SINGULAR) or the residual left
+    (NOT_CONVERGED); det S J; full_error: max |pose error| over all six rows (m or rad)."""
+
+    status: int
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    ratio: float
+    det: float
+    full_error: float
+
+
+def solve_arm(model: Model, m: int, p, R, twist, acc, guess: np.ndarray, tol: float = 1e-13,
+              max_iter: int = 50, sing_tol: float = 1e-7) -> ArmSolution:
+    """Arm m's joint angles putting its end-effector frame at (p (3,), R (3, 3)) in the model's rows S
+    (Newton from the stacked `guess` (N,)), and its rates for the EE twist and acceleration (6,)."""
+    P, W, Ps, Ws = compiled(model)
+    q = _f(guess).copy()
+    qd, qdd, info = np.zeros_like(q), np.zeros_like(q), np.zeros(3)
+    st = ik.arm_solve(Ps, Ws, m, _f(P.rows), _f(p), _f(R), _f(twist), _f(acc), q, tol, max_iter, sing_tol,
+                      qd, qdd, info)
+    return ArmSolution(int(st), q, qd, qdd, float(info[0]), float(info[1]), float(info[2]))

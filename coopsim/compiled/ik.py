@@ -1,0 +1,84 @@
+"""Compiled inverse kinematics of one arm (as `coopsim.trajectory.arm_ik` and `arm_rates`): Newton
+steps Δθ = −(S J)⁻¹ S e(θ) on the end-effector pose error e = [p_EE(θ) − p; log(R_EE(θ) Rᵀ)] in the rows
+S (k × 6, k = n_m), then the differential kinematics S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .chain import arm_bias, arm_jacobian, arm_kinematics
+from .jit import entry, kernel
+from .spatial import matmul3_T, rot_log
+
+SOLVED, SINGULAR, NOT_CONVERGED = 0, 1, 2
+
+
+@kernel
+def pose_error(P, W, m, p, R, e):
+    """e (6,) ← [p_EE − p; log(R_EE Rᵀ)] of arm m from the current kinematics."""
+    E = W.m3[3]
+    for a in range(3):
+        e[a] = W.p_ee[m, a] - p[a]
+    matmul3_T(W.R_ee[m], R, E)
+    rot_log(E, W.v3)
+    e[3], e[4], e[5] = W.v3[0], W.v3[1], W.v3[2]
+
+
+@kernel
+def rows_jacobian(P, W, m, S):
+    """S J_m (k, n_m) of the current kinematics."""
+    n = P.dof[m + 1] - P.dof[m]
+    SJ = np.zeros((S.shape[0], n))
+    for i in range(S.shape[0]):
+        for j in range(n):
+            v = 0.0
+            for a in range(6):
+                v += S[i, a] * W.J[m, a, j]
+            SJ[i, j] = v
+    return SJ
+
+
+@entry
+def arm_solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info):
+    """Joint angles of arm m (written into its rows of the stacked q (N,), which hold the guess) putting
+    the end-effector frame at (p, R) in the rows S, then θ̇ and θ̈ (its rows of qd, qdd) for the EE twist
+    and acceleration [v; ω], [a; ω̇] (6,). info (3,) ← [σ_min/σ_max of S J at the failure, det S J,
+    max |full pose error| (all six rows)]. Returns SOLVED, SINGULAR or NOT_CONVERGED."""
+    o, n = P.dof[m], P.dof[m + 1] - P.dof[m]
+    e = np.empty(6)
+    status = NOT_CONVERGED
+    for _ in range(max_iter):
+        arm_kinematics(P, W, m, q)
+        pose_error(P, W, m, p, R, e)
+        Se = S @ e
+        if np.max(np.abs(Se)) <= tol:
+            status = SOLVED
+            break
+        arm_jacobian(P, W, m)
+        SJ = rows_jacobian(P, W, m, S)
+        sv = np.linalg.svd(SJ)[1]
+        if sv[-1] < sing_tol * sv[0]:
+            info[0] = sv[-1] / sv[0]
+            return SINGULAR
+        dq = np.linalg.solve(SJ, Se)
+        for j in range(n):
+            q[o + j] -= dq[j]
+    if status != SOLVED:
+        info[0] = np.max(np.abs(Se))
+        return status
+    info[2] = np.max(np.abs(e))
+    arm_jacobian(P, W, m)
+    SJ = rows_jacobian(P, W, m, S)
+    info[1] = np.linalg.det(SJ)
+    v = np.linalg.solve(SJ, S @ twist)
+    for j in range(n):
+        qd[o + j] = v[j]
+    arm_bias(P, W, m, qd)
+    rhs = np.empty(6)
+    for a in range(6):
+        rhs[a] = acc[a] - W.Jd_qd[m, a]
+    v = np.linalg.solve(SJ, S @ rhs)
+    for j in range(n):
+        qdd[o + j] = v[j]
+    return SOLVED
