@@ -12,8 +12,9 @@ closed form (no bisection); the constraint that sets it names the motor that sat
 
 Beyond the paper:
   * `lp_capacity`: the largest μ for which *some* distribution f with A f = y(μ) keeps every torque
-    within its lines — a linear program per sample (HiGHS); the capacity is the smallest over the
-    samples. It bounds every resolution's capacity from above (each resolution is one such f).
+    within its lines — a linear program per sample (HiGHS, all samples in one block-diagonal LP); the
+    capacity is the smallest over the samples. It bounds every resolution's capacity from above (each
+    resolution is one such f).
   * `optimise_weights`: the energy weights Q that maximise the minimum-energy capacity (the paper's
     closing suggestion), by Nelder–Mead on log Q from equal weights and from the paper's heuristic.
   * `energy_stress_curve`: energy of the bounded-internal-wrench minimum-energy QP against its bound.
@@ -25,9 +26,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .inverse import (InverseProblem, Resolution, internal_bound_rows, distribute, energy, internal_operator,
-                      min_energy_distribution, resolve, torques_of)
+from .inverse import (InverseProblem, Resolution, distribute, energy, grasp_line_frames, internal_bound_components,
+                      internal_operator, min_energy_setup, min_energy_solve, resolve, torques_of)
 from .model import Model, Motors
+from .qp import LPBatch, solve_lps
 
 MODES = ("scaled", "payload")
 
@@ -79,28 +81,39 @@ def affine_torques(prob: InverseProblem, res: Resolution, mode: str) -> tuple[np
     return a, torques_of(prob, distribute(prob, y0 + y1, res)) - a
 
 
+def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi (all (N, n)) the largest and smallest μ.
+    b > 0 gives (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs
+    lo <= a <= hi (up = −inf where it does not hold); nan (0/0, ∞/∞) counts as no limit."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_hi, to_lo = (hi - a) / b, (lo - a) / b
+    pos, neg = b > 0, b < 0
+    up = np.where(pos, to_hi, np.where(neg, to_lo, np.inf))
+    dn = np.where(pos, to_lo, np.where(neg, to_hi, -np.inf))
+    up = np.where((b == 0) & ((a < lo) | (a > hi)), -np.inf, up)
+    return np.where(np.isnan(up), np.inf, up), dn
+
+
+def mass_interval(up: np.ndarray, dn: np.ndarray) -> tuple[float, float, bool]:
+    """(mass, lower, feasible) of the per-constraint limits (N, n): the largest mass min(up), the
+    smallest max(0, max(dn)), feasible: lower <= mass (an infinite mass: feasible when +inf)."""
+    mass, lower = float(np.min(up)), max(0.0, float(np.max(dn)))
+    return mass, lower, (lower <= mass) if np.isfinite(mass) else mass > 0
+
+
 def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, t: np.ndarray,
                     joints: np.ndarray | None = None) -> Capacity:
     """Closed-form capacity of τ(μ) = a + μ b (N, n) within lo <= τ <= hi (N, n), μ >= 0, over the
-    joints selected by the boolean mask `joints` (default all). Per constraint: b > 0 gives
-    (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs lo <= a <= hi."""
+    joints selected by the boolean mask `joints` (default all), from `mass_limits`."""
     sel = np.ones(a.shape[1], bool) if joints is None else joints
-    a, b, lo, hi = a[:, sel], b[:, sel], lo[:, sel], hi[:, sel]
     idx = np.flatnonzero(sel)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        up = np.where(b > 0, (hi - a) / b, np.where(b < 0, (lo - a) / b, np.inf))
-        dn = np.where(b > 0, (lo - a) / b, np.where(b < 0, (hi - a) / b, -np.inf))
-    flat = (b == 0) & ((a < lo) | (a > hi))
-    up = np.where(flat, -np.inf, up)
-    up = np.where(np.isnan(up), np.inf, up)
+    up, dn = mass_limits(a[:, sel], b[:, sel], lo[:, sel], hi[:, sel])
+    mass, lower, feasible = mass_interval(up, dn)
     i, j = np.unravel_index(int(np.argmin(up)), up.shape)
-    mass = float(up[i, j])
-    lower = max(0.0, float(np.max(dn)))
-    feasible = lower <= mass
-    side = "upper" if b[i, j] > 0 else "lower"
+    side = "upper" if b[i, idx[j]] > 0 else "lower"
     per_sample = np.min(up, axis=1)
     if not np.isfinite(mass):
-        return Capacity(mass, lower, mass > 0, None, None, None, None,
+        return Capacity(mass, lower, feasible, None, None, None, None,
                         "" if mass > 0 else "a torque is outside its limits at every mass", per_sample)
     return Capacity(mass, lower, feasible, int(idx[j]), int(i), float(t[i]), side,
                     "" if feasible else "no mass keeps every torque within its limits", per_sample)
@@ -132,66 +145,69 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
     `internal_bound` = (N, N·m) every internal-wrench component (grasp-line frames, `definition`)
     within ±bound; the capacity is the smallest per-sample maximum. The per-sample feasible sets are
     intervals, so their intersection is [max lower, min upper]: the lower ends are 0 when
-    `zero_feasible` (a resolution is known to be feasible at μ = 0), else found by a second LP. The
-    motor reported is the one whose line has the largest dual value at the binding sample."""
-    from scipy.optimize import linprog
-
-    y0, y1 = mass_line(prob, mode)
-    lo, hi = torque_limits(motors, prob.qd)
-    act = ~passive
-    L = None if internal_bound is None else internal_operator(prob, definition, Mstar)
+    `zero_feasible` (a resolution is known to be feasible at μ = 0), else found by a second LP. All
+    samples' LPs are solved together (`coopsim.qp.solve_lps`). The motor reported is the one whose
+    line has the largest dual value at the binding sample (its LP solved alone)."""
+    A_ub, b_ub, A_eq, b_eq = _lp_rows(prob, motors, passive, mode, internal_bound, Mstar, definition)
     N, m = len(prob.t), prob.r * prob.k
-    upper, lower, joints, sides = np.zeros(N), np.zeros(N), np.full(N, -1), np.zeros(N, bool)
-    for i in range(N):
-        JT = prob.JT[i]
-        A_ub = np.vstack([np.hstack([JT[act], np.zeros((act.sum(), 1))]),
-                          np.hstack([-JT[act], np.zeros((act.sum(), 1))])])
-        b_ub = np.concatenate([hi[i, act] - prob.tau_arms[i, act], prob.tau_arms[i, act] - lo[i, act]])
-        if L is not None:
-            res_b = Resolution("bounded", np.ones(len(act)), passive, np.ones(prob.r), np.zeros((prob.r, 3, 3)),
-                               internal_bound[0], internal_bound[1], definition)
-            C, bound = internal_bound_rows(prob, i, L[i], res_b)
-            A_ub = np.vstack([A_ub, np.hstack([C, np.zeros((len(C), 1))]), np.hstack([-C, np.zeros((len(C), 1))])])
-            b_ub = np.concatenate([b_ub, bound, bound])
-        finite = np.isfinite(b_ub)
-        A_ub, b_ub = A_ub[finite], b_ub[finite]
-        A_eq = np.vstack([np.hstack([prob.A[i], -y1[i][:, None]]),
-                          np.hstack([JT[passive], np.zeros((passive.sum(), 1))])])
-        b_eq = np.concatenate([y0[i], -prob.tau_arms[i, passive]])
-        bounds = [(None, None)] * m + [(0, None)]
-        c = np.zeros(m + 1)
-        c[-1] = -1.0
-        lp = {"A_ub": A_ub if len(b_ub) else None, "b_ub": b_ub if len(b_ub) else None, "A_eq": A_eq,
-              "b_eq": b_eq, "bounds": bounds, "method": "highs"}
-        sol = linprog(c, **lp)
-        if sol.status == 3:
-            upper[i] = np.inf
-        elif sol.status == 2:
-            upper[i] = -np.inf
-        elif sol.status == 0:
-            upper[i] = sol.x[-1]
-            marg = np.zeros(len(finite))
-            marg[finite] = np.abs(sol.ineqlin.marginals) if len(b_ub) else 0.0
-            marg = marg[:2 * act.sum()]                     # τ_max rows, then τ_min rows
-            if np.any(marg > 0):
-                k = int(np.argmax(marg))
-                joints[i], sides[i] = int(np.flatnonzero(act)[k % act.sum()]), k >= act.sum()
-        else:
-            raise RuntimeError(f"LP failed at t={prob.t[i]:.6g} s: {sol.message}")
-        if not zero_feasible and sol.status == 0:
-            c[-1] = 1.0
-            low = linprog(c, **lp)
-            lower[i] = low.x[-1] if low.status == 0 else np.inf
-            c[-1] = -1.0
+    bounds = [(None, None)] * m + [(0, None)]
+    c = np.zeros(m + 1)
+    c[-1] = -1.0
+    top = solve_lps(c, A_ub, b_ub, A_eq, b_eq, bounds)
+    failed = np.flatnonzero(~np.isin(top.status, (0, 2, 3)))
+    if len(failed):
+        raise RuntimeError(f"LP failed at t={prob.t[failed[0]]:.6g} s: {top.messages[failed[0]]}")
+    upper = np.select([top.status == 0, top.status == 3], [top.x[:, -1], np.inf], -np.inf)
+    lower = np.zeros(N)
+    solved = np.flatnonzero(top.status == 0)
+    if not zero_feasible and len(solved):
+        low = solve_lps(-c, A_ub[solved], b_ub[solved], A_eq[solved], b_eq[solved], bounds)
+        lower[solved] = np.where(low.status == 0, low.x[:, -1], np.inf)
     i = int(np.argmin(upper))
     mass, low = float(upper[i]), float(np.max(lower))
     feasible = low <= mass
     if not np.isfinite(mass):
         return Capacity(mass, low, mass > 0, None, None, None, None, "" if mass > 0 else "infeasible LP", upper)
-    j = int(joints[i])
-    side = None if j < 0 else ("lower" if sides[i] else "upper")
-    return Capacity(mass, low, feasible, j if j >= 0 else None, i, float(prob.t[i]), side,
+    alone = solve_lps(c, A_ub[i:i + 1], b_ub[i:i + 1], A_eq[i:i + 1], b_eq[i:i + 1], bounds, cap=np.inf)
+    j, side = _binding_motor(alone, ~passive)
+    return Capacity(mass, low, feasible, j, i, float(prob.t[i]), side,
                     "" if feasible else "no mass is feasible at every sample", upper)
+
+
+def _lp_rows(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: str,
+             internal_bound: tuple[float, float] | None, Mstar: np.ndarray | None, definition: str):
+    """Per-sample LP rows in the unknowns [f; μ] (m + 1): A_ub (N, rows, m + 1), b_ub (N, rows) — the
+    τ_max rows of the active joints, then their τ_min rows, then with `internal_bound` the internal
+    components' upper and lower rows (rows with an infinite bound, or left out by
+    `internal_bound_components`, carry b_ub = inf) — and A_eq (N, k + #passive, m + 1), b_eq."""
+    y0, y1 = mass_line(prob, mode)
+    lo, hi = torque_limits(motors, prob.qd)
+    act = ~passive
+    JT, ta = prob.JT, prob.tau_arms
+    rows, rhs = [JT[:, act], -JT[:, act]], [hi[:, act] - ta[:, act], ta[:, act] - lo[:, act]]
+    if internal_bound is not None:
+        res_b = Resolution("bounded", np.ones(len(act)), passive, np.ones(prob.r), np.zeros((prob.r, 3, 3)),
+                           internal_bound[0], internal_bound[1], definition)
+        L = internal_operator(prob, definition, Mstar)
+        C, bound, keep = internal_bound_components(grasp_line_frames(prob), L, res_b)
+        bound = np.where(keep, bound, np.inf)
+        rows, rhs = rows + [C, -C], rhs + [bound, bound]
+    A = np.concatenate(rows, axis=1)
+    A_ub = np.concatenate([A, np.zeros(A.shape[:2] + (1,))], axis=2)
+    zero = np.zeros((len(JT), int(passive.sum()), 1))
+    A_eq = np.concatenate([np.concatenate([prob.A, -y1[:, :, None]], axis=2),
+                           np.concatenate([JT[:, passive], zero], axis=2)], axis=1)
+    return A_ub, np.concatenate(rhs, axis=1), A_eq, np.concatenate([y0, -ta[:, passive]], axis=1)
+
+
+def _binding_motor(lp: LPBatch, act: np.ndarray) -> tuple[int | None, str | None]:
+    """(stacked joint, 'upper' | 'lower') of the motor line with the largest dual value in a one-sample
+    LP solution (τ_max rows of the active joints first, then τ_min rows); (None, None) if all are 0."""
+    marg = np.abs(lp.marginals[0, :2 * act.sum()])
+    if not np.any(marg > 0):
+        return None, None
+    k = int(np.argmax(marg))
+    return int(np.flatnonzero(act)[k % act.sum()]), ("lower" if k >= act.sum() else "upper")
 
 
 def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
@@ -199,25 +215,29 @@ def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode
     """Energy weights (n,) maximising the minimum-energy capacity (weights are scale-free: normalised
     to a geometric mean of 1 over the active joints), with that capacity. Nelder–Mead on log-weights
     (clipped to ±ln 10⁴) from equal weights and from the paper's suggestion (weight ×10 on the motor
-    that saturates first); the better of the two is kept."""
+    that saturates first); the better of the two is kept. The weight-independent part of the
+    minimum-energy problem (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once."""
     from scipy.optimize import minimize
 
     act = ~res.passive
     lo, hi = torque_limits(motors, prob.qd)
     y0, y1 = mass_line(prob, mode)
+    setup = min_energy_setup(prob, np.stack([y0, y0 + y1]), res.passive)
+    lo_act, hi_act = lo[:, act], hi[:, act]
 
     def capacity_of(logw):
         w = np.ones(len(act))
         w[act] = np.exp(np.clip(logw, -np.log(1e4), np.log(1e4)))
-        a = torques_of(prob, min_energy_distribution(prob, y0, w, res.passive))
-        b = torques_of(prob, min_energy_distribution(prob, y0 + y1, w, res.passive)) - a
-        return w, affine_capacity(a, b, lo, hi, prob.t, act)
+        f0, f1 = min_energy_solve(prob, setup, w)
+        a = torques_of(prob, f0)
+        return w, a, torques_of(prob, f1) - a
 
     def objective(logw):
-        cap = capacity_of(logw)[1]
-        return -cap.mass if cap.feasible else 1e6
+        _, a, b = capacity_of(logw)
+        mass, _, feasible = mass_interval(*mass_limits(a[:, act], b[:, act], lo_act, hi_act))
+        return -mass if feasible else 1e6
 
-    base = capacity_of(np.zeros(act.sum()))[1]
+    base = affine_capacity(*capacity_of(np.zeros(act.sum()))[1:], lo, hi, prob.t, act)
     starts = [np.zeros(act.sum())]
     if base.joint is not None and act[base.joint]:
         s = np.zeros(act.sum())
@@ -231,8 +251,8 @@ def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode
             best = opt
     logw = np.clip(best.x, -np.log(1e4), np.log(1e4))
     logw -= logw.mean()
-    w, cap = capacity_of(logw)
-    return w, cap
+    w, a, b = capacity_of(logw)
+    return w, affine_capacity(a, b, lo, hi, prob.t, act)
 
 
 def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float, float],

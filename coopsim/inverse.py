@@ -37,16 +37,15 @@ pair). Planar scenes report out-of-plane components as zero (carried by the bear
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
-from .closed_chain import chain_terms
 from .grasp import grasp_matrix
-from .model import CoopsimError, Model, TorqueFunction
-from .qp import solve_qp
+from .model import CoopsimError, Model, TorqueFunction, TorqueTable
+from .qp import solve_qps
 from .spatial import cross
-from .stress import grasp_line_axes, line_frame
-from .trajectory import JointTrajectory, trajectory_at
+from .trajectory import JointTrajectory, trajectory_at_times
 
 METHODS = ("paper", "nonsqueezing", "min_energy", "bounded")
 
@@ -133,40 +132,37 @@ class InverseResult:
 
 
 def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.ndarray | None = None) -> InverseProblem:
-    """Evaluate the terms of eqs. 28–32 at every sample of `traj` (chain_terms per sample)."""
-    S, c, g = model.rows, model.object.carrier, model.gravity
-    N, n, r, k = len(traj.t), model.n_total, model.r, model.rows.shape[0]
-    out = {name: np.zeros(shape) for name, shape in [
-        ("tau_arms", (N, n)), ("JT", (N, n, r * k)), ("A", (N, k, r * k)), ("y", (N, k)),
-        ("y_payload", (N, k)), ("W", (N, r, 6, 6)), ("p_C", (N, 3)), ("R_o", (N, 3, 3)),
-        ("twist", (N, 6)), ("acc", (N, 6)), ("p_grasp", (N, r, 3))]}
-    for i, (q, qd, qdd) in enumerate(zip(traj.q, traj.qd, traj.qdd)):
-        T = chain_terms(model, q, qd)
-        vd_o = T.J_o @ qdd[model.dof_slices[c]] + T.Jd_o_qd
-        for m, sl in enumerate(model.dof_slices):
-            out["tau_arms"][i, sl] = T.M_arms[m] @ qdd[sl] + T.h_arms[m]
-            out["JT"][i, sl, m * k:(m + 1) * k] = (S @ T.J[m]).T
-            out["W"][i, m] = grasp_matrix(T.s[m])
-            out["A"][i, :, m * k:(m + 1) * k] = S @ out["W"][i, m] @ S.T
-            out["p_grasp"][i, m] = T.obj.p_C - T.s[m]
-        out["y"][i] = S @ (T.M_o @ vd_o + T.b_o)
-        out["p_C"][i], out["R_o"][i], out["twist"][i], out["acc"][i] = T.obj.p_C, T.obj.R_o, T.v_o, vd_o
-        if payload_position is not None:
-            out["y_payload"][i] = S @ payload_wrench(T.obj.R_o @ payload_position, T.v_o, vd_o, g)
+    """Evaluate the terms of eqs. 28–32 at every sample of `traj`: the per-sample kinematics and arm
+    dynamics from the compiled kernel (`coopsim.compiled.api.inverse_terms`, batched over threads),
+    assembled here with array operations."""
+    from .compiled import api
+
+    S, g = model.rows, model.gravity
+    N, r, k = len(traj.t), model.r, model.rows.shape[0]
+    T = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
+    JT = np.zeros((N, model.n_total, r * k))
+    for m, sl in enumerate(model.dof_slices):
+        JT[:, sl, m * k:(m + 1) * k] = np.swapaxes(S @ T.J[:, m, :, :sl.stop - sl.start], 1, 2)
+    W = grasp_matrix(T.s)
+    A = np.concatenate([S @ W[:, m] @ S.T for m in range(r)], axis=2)
+    y_payload = None
+    if payload_position is not None:
+        rho = T.R_o @ np.asarray(payload_position, dtype=float)
+        y_payload = payload_wrench(rho, T.twist, T.acc, g) @ S.T
     obj = model.object
-    return InverseProblem(traj.t, traj.q, traj.qd, traj.qdd, out["tau_arms"], out["JT"], out["A"], out["y"],
-                          out["y"] / obj.mass, None if payload_position is None else out["y_payload"],
-                          out["W"], out["p_C"], out["R_o"], out["twist"], out["acc"], out["p_grasp"], S,
+    y = T.Y @ S.T
+    return InverseProblem(traj.t, traj.q, traj.qd, traj.qdd, T.tau_arms, JT, A, y, y / obj.mass, y_payload,
+                          W, T.p_C, T.R_o, T.twist, T.acc, T.p_C[:, None, :] - T.s, S,
                           None if model.plane is None else model.plane[2], g, obj.mass, obj.inertia, obj.box,
                           obj.grasp_pos)
 
 
 def payload_wrench(rho: np.ndarray, twist: np.ndarray, acc: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Net wrench at C (6,) needed per kg of a point mass at ρ = p_P − p_C (world axes):
-    a_P = a_C + ω̇ × ρ + ω × (ω × ρ), Y_P = [a_P − g; ρ × (a_P − g)]."""
-    w, dw = twist[3:], acc[3:]
-    a = acc[:3] + cross(dw, rho) + cross(w, cross(w, rho)) - g
-    return np.concatenate([a, cross(rho, a)])
+    """Net wrench at C (…, 6) needed per kg of a point mass at ρ = p_P − p_C (…, 3) (world axes; twist,
+    acc (…, 6)): a_P = a_C + ω̇ × ρ + ω × (ω × ρ), Y_P = [a_P − g; ρ × (a_P − g)]."""
+    w, dw = twist[..., 3:], acc[..., 3:]
+    a = acc[..., :3] + cross(dw, rho) + cross(w, cross(w, rho)) - g
+    return np.concatenate([a, cross(rho, a)], axis=-1)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -186,8 +182,8 @@ def grasp_wrenches(prob: InverseProblem, f: np.ndarray) -> np.ndarray:
 def paper_distribution(prob: InverseProblem, y: np.ndarray) -> np.ndarray:
     """Zero internal force with the paper's W⁺ (eqs. 8, 30): f_m = S W_m⁻¹ Sᵀ y / r, W_m⁻¹ = W(−s_m)."""
     S, r = prob.rows, prob.r
-    Winv = np.linalg.inv(prob.W)                                   # (N, r, 6, 6)
-    f = np.einsum("ki,nmij,lj,nl->nmk", S, Winv, S, y) / r
+    Winv = 2 * np.eye(6) - prob.W                                  # W(−s) (N, r, 6, 6), exactly
+    f = (S @ Winv @ (y @ S)[:, None, :, None])[..., 0] / r
     return f.reshape(len(y), -1)
 
 
@@ -240,35 +236,124 @@ def nonsqueezing_distribution(prob: InverseProblem, y: np.ndarray, Mstar: np.nda
     return np.einsum("nij,nj->ni", nonsqueezing_inverse(prob, Mstar), y)
 
 
+class MinEnergySetup(NamedTuple):
+    """The weight-independent part of the minimum-energy distributions of s net wrenches along a
+    trajectory (N samples, n joints, m = rk unknowns, c = k + #passive constraints C f = b with
+    C = [A; P Jᵀ], b = [y; −P τ_arms], d = m − c free directions): every solution of C f = b is
+    f = f_p + Z z. Sample axis last (vectorized over samples): ys (s, N, k) the net wrenches;
+    fp (m, s, N) = C⁺b (minimum norm); Z (m, d, N) an orthonormal basis of null(C); with D = Jᵀ Z and
+    u = τ_arms + Jᵀf_p (the torques of f_p), per joint j DD (n, d, d, N) = d_j d_jᵀ and
+    Du (n, d, s, N) = d_j u_j (d_j: row j of D); regular (N,) bool: C has full row rank (condition
+    number below 1e12); passive (n,) bool."""
+
+    ys: np.ndarray
+    fp: np.ndarray
+    Z: np.ndarray
+    DD: np.ndarray
+    Du: np.ndarray
+    regular: np.ndarray
+    passive: np.ndarray
+
+
+def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) -> MinEnergySetup:
+    """The parts of the minimum-energy problem that do not depend on the weights, for the net wrenches
+    ys (s, N, k): the particular solutions and null spaces of C f = b (an SVD of C per sample)."""
+    JT, ta = prob.JT, prob.tau_arms
+    C = np.concatenate([prob.A, JT[:, passive, :]], axis=1)
+    N, c, m = C.shape
+    b = np.concatenate([np.moveaxis(ys, 0, 2),
+                        np.broadcast_to(-ta[:, passive, None], (N, int(np.sum(passive)), len(ys)))], axis=1)
+    U, sv, Vt = np.linalg.svd(C)
+    rank = min(c, m)
+    regular = (c <= m) & (sv[:, -1] > 1e-12 * sv[:, 0])
+    inv_s = np.divide(1.0, sv, out=np.zeros_like(sv), where=sv > 0)
+    fp = np.swapaxes(Vt[:, :rank], 1, 2) @ (inv_s[..., None] * (np.swapaxes(U[:, :, :rank], 1, 2) @ b))
+    Z = np.swapaxes(Vt[:, rank:], 1, 2)
+    last = lambda x: np.ascontiguousarray(np.moveaxis(x, 0, -1))    # noqa: E731
+    D = last(JT @ Z)                                                # (n, d, N)
+    u = last(ta[..., None] + JT @ fp)                               # (n, s, N)
+    return MinEnergySetup(ys, last(fp), last(Z), D[:, :, None] * D[:, None, :], D[:, :, None] * u[:, None, :],
+                          regular, np.asarray(passive, bool))
+
+
+def min_energy_solve(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray) -> np.ndarray:
+    """Minimum-energy distributions f (s, N, m) of setup.ys for the weights (n,): f = f_p + Z z with
+    (DᵀQD) z = −DᵀQu (the KKT system of eqs. 33–35 reduced to null(C)). Samples where C is rank
+    deficient or DᵀQD singular (condition number 1e12 or more) — where the KKT matrix
+    [JQJᵀ, Cᵀ; C, 0] is singular — get the least-squares (minimum-norm) solution of that KKT system."""
+    Q = np.where(setup.passive, 0.0, weights)
+    z, ok = _spd_solve(_weighted_sum(Q, setup.DD), -_weighted_sum(Q, setup.Du))
+    f = setup.fp + sum(setup.Z[:, a, None] * z[a] for a in range(len(z)))
+    f = np.ascontiguousarray(np.moveaxis(f, 0, -1))
+    for i in np.flatnonzero(~(setup.regular & ok)):
+        f[:, i] = _min_energy_kkt_lstsq(prob, i, setup.ys[:, i], Q, setup.passive)
+    return f
+
+
+def _weighted_sum(Q: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Σ_j Q_j X_j (X[0].shape) of X (n, ...)."""
+    return (Q @ X.reshape(len(Q), -1)).reshape(X.shape[1:])
+
+
 def min_energy_distribution(prob: InverseProblem, y: np.ndarray, weights: np.ndarray,
                             passive: np.ndarray) -> np.ndarray:
     """argmin_f ½ τᵀQτ, τ = τ_arms + Jᵀf, s.t. A f = y and τ_j = 0 (passive j) — eqs. 33–35 in the grasp
-    wrenches: [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms].
-    Least squares (minimum norm) where the KKT matrix is singular."""
-    JT, ta = prob.JT, prob.tau_arms
-    Q = np.where(passive, 0.0, weights)
-    H = np.einsum("nji,j,njk->nik", JT, Q, JT)
-    g = np.einsum("nji,j,nj->ni", JT, Q, ta)
-    Cp, bp = JT[:, passive, :], -ta[:, passive]
-    C = np.concatenate([prob.A, Cp], axis=1)
-    b = np.concatenate([y, bp], axis=1)
-    N, m, c = H.shape[0], H.shape[1], C.shape[1]
-    K = np.zeros((N, m + c, m + c))
-    K[:, :m, :m], K[:, :m, m:], K[:, m:, :m] = H, np.swapaxes(C, 1, 2), C
-    rhs = np.concatenate([-g, b], axis=1)
-    return _kkt_solve(K, rhs)[:, :m]
+    wrenches: [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms], solved in
+    the null space of C (`min_energy_solve`). Least squares (minimum norm) where the KKT matrix is
+    singular."""
+    return min_energy_solve(prob, min_energy_setup(prob, y[None], passive), weights)[0]
 
 
-def _kkt_solve(K: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve the batched systems K x = rhs; minimum-norm least squares for singular ones."""
-    cond = np.linalg.cond(K)
-    x = np.empty_like(rhs)
-    ok = cond < 1e12
-    if np.any(ok):
-        x[ok] = np.linalg.solve(K[ok], rhs[ok][..., None])[..., 0]
-    for i in np.flatnonzero(~ok):
-        x[i] = np.linalg.lstsq(K[i], rhs[i], rcond=None)[0]
-    return x
+def _min_energy_kkt_lstsq(prob: InverseProblem, i: int, ys: np.ndarray, Q: np.ndarray,
+                          passive: np.ndarray) -> np.ndarray:
+    """f (s, m) at sample i for the net wrenches ys (s, k): minimum-norm least squares of the KKT
+    system [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b]."""
+    JT, ta = prob.JT[i], prob.tau_arms[i]
+    C = np.vstack([prob.A[i], JT[passive]])
+    m, c = JT.shape[1], len(C)
+    K = np.block([[JT.T @ (Q[:, None] * JT), C.T], [C, np.zeros((c, c))]])
+    rhs = np.concatenate([np.broadcast_to(-JT.T @ (Q * ta), (len(ys), m)),
+                          ys, np.broadcast_to(-ta[passive], (len(ys), int(np.sum(passive))))], axis=1)
+    return np.linalg.lstsq(K, rhs.T, rcond=None)[0][:m].T
+
+
+def _spd_solve(H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """z (d, s, N) with H z = r for symmetric H (d, d, N) and right-hand sides r (d, s, N), samples on
+    the last axis: Cholesky, vectorized over the samples (entry by entry: d is small). ok (N,) bool: H
+    is positive definite with condition number below 1e12 (bounded above by trace(H)ᵈ/det(H);
+    eigenvalues decide where that bound is not enough)."""
+    d, N = H.shape[0], H.shape[-1]
+    L = [[None] * d for _ in range(d)]
+    pivots = []
+    for j in range(d):
+        for i in range(j, d):
+            acc = H[i, j].copy()
+            for k in range(j):
+                acc -= L[i][k] * L[j][k]
+            if i == j:
+                pivots.append(acc)
+                L[j][j] = np.sqrt(np.where(acc > 0, acc, 1.0))
+            else:
+                L[i][j] = acc / L[j][j]
+    z = [None] * d
+    for j in range(d):
+        z[j] = r[j].copy()
+        for k in range(j):
+            z[j] -= L[j][k] * z[k]
+        z[j] /= L[j][j]
+    for j in reversed(range(d)):
+        for k in range(j + 1, d):
+            z[j] -= L[k][j] * z[k]
+        z[j] /= L[j][j]
+    if d == 0:
+        return np.zeros(r.shape), np.ones(N, bool)
+    pd = np.all(np.array(pivots) > 0, axis=0)
+    ok = pd & (sum(H[j, j] for j in range(d)) ** d < 1e12 * np.prod(pivots, axis=0))
+    unsure = np.flatnonzero(pd & ~ok)
+    if len(unsure):
+        lam = np.linalg.eigvalsh(np.moveaxis(H[..., unsure], -1, 0))
+        ok[unsure] = lam[:, 0] > lam[:, -1] / 1e12
+    return np.array(z), ok
 
 
 def min_energy_torques_jacobian_form(prob: InverseProblem, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -287,7 +372,9 @@ def distribution_of_torques(prob: InverseProblem, tau: np.ndarray) -> tuple[np.n
     and the residual (N,) of that system (zero when τ moves the chain along the trajectory)."""
     M = np.concatenate([prob.JT, prob.A], axis=1)
     rhs = np.concatenate([tau - prob.tau_arms, prob.y], axis=1)
-    f = np.array([np.linalg.lstsq(Mi, ri, rcond=None)[0] for Mi, ri in zip(M, rhs)])
+    U, s, Vt = np.linalg.svd(M, full_matrices=False)             # lstsq's cut-off: eps·max(M.shape)·s_max
+    inv_s = np.divide(1.0, s, out=np.zeros_like(s), where=s > np.finfo(float).eps * max(M.shape[1:]) * s[:, :1])
+    f = np.einsum("nij,ni,nki,nk->nj", Vt, inv_s, U, rhs)
     res = np.max(np.abs(np.einsum("nij,nj->ni", M, f) - rhs), axis=1)
     return f, res
 
@@ -322,46 +409,74 @@ def internal_wrench(prob: InverseProblem, f: np.ndarray, definition: str, Mstar:
 
 
 def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Resolution, Mstar: np.ndarray) -> np.ndarray:
-    """Minimum energy with a bounded internal wrench (a QP per sample): min ½τᵀQτ s.t. A f = y,
-    τ_j = 0 (passive), and for every arm m every component of its internal wrench at C (definition
-    res.bound_definition) in its grasp-line frame (axial, 2 shear | torsion, 2 bending) within
-    ± res.force_bound (N) | ± res.moment_bound (N·m). Starts from the definition's zero-internal
-    distribution (feasible) unless joints are passive (then a feasibility LP)."""
-    L = internal_operator(prob, res.bound_definition, Mstar)
-    start = (nonsqueezing_distribution(prob, y, Mstar) if res.bound_definition == "nonsqueezing"
-             else paper_distribution(prob, y))
+    """Minimum energy with a bounded internal wrench (a QP per sample, all solved together by
+    `coopsim.qp.solve_qps`): min ½τᵀQτ s.t. A f = y, τ_j = 0 (passive), and for every arm m every
+    component of its internal wrench at C (definition res.bound_definition) in its grasp-line frame
+    (axial, 2 shear | torsion, 2 bending) within ± res.force_bound (N) | ± res.moment_bound (N·m).
+    Starts from the definition's zero-internal distribution (feasible) unless joints are passive (then
+    a feasibility LP)."""
+    C, bound, keep = internal_bound_components(grasp_line_frames(prob),
+                                               internal_operator(prob, res.bound_definition, Mstar), res)
+    hi = np.where(keep, bound, np.inf)
     sq = np.sqrt(np.where(res.passive, 0.0, res.weights))
-    f = np.zeros((len(y), prob.r * prob.k))
-    for i in range(len(y)):
-        C, bound = internal_bound_rows(prob, i, L[i], res)
-        E = np.vstack([prob.A[i], prob.JT[i][res.passive]])
-        e = np.concatenate([y[i], -prob.tau_arms[i][res.passive]])
-        x0 = None if np.any(res.passive) else start[i]
-        f[i] = solve_qp(sq[:, None] * prob.JT[i], -sq * prob.tau_arms[i], E, e, C, -bound, bound, x0=x0).x
-    return f
+    E = np.concatenate([prob.A, prob.JT[:, res.passive]], axis=1)
+    e = np.concatenate([y, -prob.tau_arms[:, res.passive]], axis=1)
+    x0 = None
+    if not np.any(res.passive):
+        x0 = (nonsqueezing_distribution(prob, y, Mstar) if res.bound_definition == "nonsqueezing"
+              else paper_distribution(prob, y))
+    qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, C, -hi, hi, x0=x0)
+    return np.array([r.x for r in qps]).reshape(len(y), prob.r * prob.k)
+
+
+def internal_bound_components(frames: np.ndarray, L: np.ndarray, res: Resolution):
+    """Every internal-wrench component in the grasp-line frames (N, r, 3, 3) (`grasp_line_frames`) as
+    rows of f: C (N, 6r, rk) — arm m's axial, two shear, torsion and two bending components at rows
+    6m…6m+5, from L (N, 6r, rk) of `internal_operator` — their bounds (6r,) (res.force_bound N,
+    res.moment_bound N·m), and keep (N, 6r) bool: the rows that neither vanish (out-of-plane) nor
+    repeat an earlier kept row with the same bound (for r = 2 the two arms' are opposite)."""
+    N, r = frames.shape[:2]
+    C = (frames[:, :, None] @ L.reshape(N, r, 2, 3, -1)).reshape(N, 6 * r, -1)
+    bound = np.tile(np.repeat([res.force_bound, res.moment_bound], 3), r)
+    norms = np.linalg.norm(C, axis=2)
+    live = norms > 1e-12 * np.maximum(norms.max(axis=1, keepdims=True), 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = C / norms[..., None]
+    parallel = np.abs(np.abs(u @ np.swapaxes(u, 1, 2)) - 1) < 1e-12
+    repeats = parallel & (bound[:, None] == bound[None, :])
+    keep = np.zeros((N, 6 * r), bool)
+    for j in range(6 * r):
+        keep[:, j] = live[:, j] & ~np.any(keep[:, :j] & repeats[:, j, :j], axis=1)
+    return C, bound, keep
 
 
 def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
-    """Rows C (m, rk) of the internal-wrench components in the grasp-line frames and their bounds (m,),
-    without rows that vanish (out-of-plane) or repeat another (for r = 2 the two arms' are opposite)."""
-    axes = grasp_line_axes(prob.p_grasp[i], prob.p_C[i])
-    rows, bounds = [], []
-    for m in range(prob.r):
-        B = line_frame(axes[m], prob.normal)
-        block = np.zeros((6, 6))
-        block[:3, :3], block[3:, 3:] = B, B
-        comp = block @ L[6 * m:6 * m + 6]
-        for j in range(6):
-            rows.append(comp[j])
-            bounds.append(res.force_bound if j < 3 else res.moment_bound)
-    rows, bounds = np.array(rows), np.array(bounds)
-    norms = np.linalg.norm(rows, axis=1)
-    keep = []
-    for j in np.flatnonzero(norms > 1e-12 * max(norms.max(), 1e-300)):
-        u = rows[j] / norms[j]
-        if not any(abs(abs(u @ rows[i2] / norms[i2]) - 1) < 1e-12 and bounds[i2] == bounds[j] for i2 in keep):
-            keep.append(j)
-    return rows[keep], bounds[keep]
+    """Rows C (m, rk) of the internal-wrench components at sample i in the grasp-line frames and their
+    bounds (m,) — those `internal_bound_components` keeps. L (6r, rk): sample i's internal operator."""
+    frames = line_frames(prob.p_grasp[i:i + 1], prob.p_C[i:i + 1], prob.normal)
+    C, bound, keep = internal_bound_components(frames, L[None], res)
+    return C[0, keep[0]], bound[keep[0]]
+
+
+def line_frames(p_grasp: np.ndarray, p_C: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
+    """Rows (N, r, 3, 3) of every arm's grasp-line frame per sample, for grasp points p_grasp (N, r, 3)
+    and centres p_C (N, 3): `coopsim.stress.line_frame` of the axes of `coopsim.stress.grasp_line_axes`,
+    the same formulas evaluated for all samples at once."""
+    if p_grasp.shape[1] == 2:
+        d = p_grasp[:, 1] - p_grasp[:, 0]
+        e = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        e = np.stack([-e, e], axis=1)
+    else:
+        d = p_grasp - p_C[:, None]
+        e = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    e2 = np.cross(normal if normal is not None else np.eye(3)[np.argmin(np.abs(e), axis=-1)], e)
+    e2 /= np.linalg.norm(e2, axis=-1, keepdims=True)
+    return np.stack([e, e2, np.cross(e, e2)], axis=-2)
+
+
+def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
+    """`line_frames` (N, r, 3, 3) along the problem's trajectory."""
+    return line_frames(prob.p_grasp, prob.p_C, prob.normal)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -419,12 +534,11 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
     f = min_energy_distribution(prob, prob.y, res.weights, res.passive)
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
     L = internal_operator(prob, res.bound_definition, Mstar)
-    peak_f, peak_m = 0.0, 0.0
-    for i in range(len(f)):
-        C, bound = internal_bound_rows(prob, i, L[i], replace(res, force_bound=1.0, moment_bound=2.0))
-        v = np.abs(C @ f[i])
-        peak_f = max(peak_f, float(np.max(v[bound == 1.0], initial=0.0)))
-        peak_m = max(peak_m, float(np.max(v[bound == 2.0], initial=0.0)))
+    unit = replace(res, force_bound=1.0, moment_bound=2.0)                 # tells force rows from moment rows
+    C, bound, keep = internal_bound_components(grasp_line_frames(prob), L, unit)
+    v = np.abs(np.einsum("nij,nj->ni", C, f))
+    peak_f = float(np.max(v[keep & (bound == 1.0)], initial=0.0))
+    peak_m = float(np.max(v[keep & (bound == 2.0)], initial=0.0))
     return fraction * peak_f, fraction * peak_m
 
 
@@ -447,30 +561,42 @@ class Replay:
     max_rate_error: float
 
 
+def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.ndarray) -> np.ndarray:
+    """τ (M, n) N·m of resolution `res` along `traj` at times t (M,) (relative to traj.t[0]): the
+    trajectory's quintic Hermite interpolant at each t, then the inverse dynamics of those states."""
+    q, qd, qdd = trajectory_at_times(traj, traj.t[0] + np.asarray(t, dtype=float))
+    prob = inverse_problem(model, JointTrajectory(np.asarray(t, dtype=float), q, qd, qdd, traj.source))
+    return torques_of(prob, distribute(prob, prob.y, res))
+
+
 def torque_function(model: Model, traj: JointTrajectory, res: Resolution) -> TorqueFunction:
-    """τ(t) of resolution `res` along `traj` at any time t (relative to traj.t[0]): the trajectory's
-    quintic Hermite interpolant at t, then the inverse dynamics of that single state."""
-    t0 = traj.t[0]
+    """τ(t) of resolution `res` along `traj` at any time t (relative to traj.t[0]), as a Python
+    function (for the reference engine; `replay` tabulates it at the integrator's stage times)."""
+    return TorqueFunction(lambda t: stage_torques(model, traj, res, np.array([t]))[0])
 
-    def fn(t: float) -> np.ndarray:
-        q, qd, qdd = trajectory_at(traj, t0 + t)
-        one = JointTrajectory(np.array([t0 + t]), q[None], qd[None], qdd[None], traj.source)
-        prob = inverse_problem(model, one)
-        return torques_of(prob, distribute(prob, prob.y, res))[0]
 
-    return TorqueFunction(fn)
+REPLAY_METHOD = "dop853"
 
 
 def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
-    """Simulate the closed chain from the trajectory's first state with the torques of `res` evaluated
-    at the integrator's stage times, sampled at the trajectory's (uniform) sample times."""
-    from .simulate import simulate
+    """Simulate the closed chain from the trajectory's first state with the torques of `res`, sampled at
+    the trajectory's (uniform) sample times: DOP853 at fixed steps of one sample interval, the torques
+    evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
+    time loop meets every stage on a knot of the table."""
+    from .compiled.integrate import stage_times, tableau
+    from .simulate import output_times, simulate
 
-    dt = float(traj.t[1] - traj.t[0])
-    replay_model = replace(model, torques=torque_function(model, traj, res), q0=traj.q[0], qd0=traj.qd[0],
-                           duration=float(traj.t[-1] - traj.t[0]),
-                           integrator=replace(model.integrator, output_dt=dt))
-    sim = simulate(replay_model)
-    if len(sim.t) != len(traj.t):
+    tr = traj.t - traj.t[0]
+    dt = float(tr[1])
+    t_out = output_times(float(tr[-1]), dt)
+    if len(t_out) != len(tr) or not np.allclose(t_out, tr, rtol=0, atol=1e-9 * dt):
         raise InverseError("replay: the trajectory's samples are not evenly spaced")
+    tab = tableau(REPLAY_METHOD)
+    t_stage = np.unique(np.concatenate([stage_times(a, b, dt, tab.C, tab.stages)
+                                        for a, b in zip(t_out[:-1], t_out[1:])]))
+    tau = stage_torques(model, traj, res, t_stage)
+    tables = tuple(TorqueTable(t_stage, tau[:, sl]) for sl in model.dof_slices)
+    replay_model = replace(model, torques=tables, q0=traj.q[0], qd0=traj.qd[0], duration=float(tr[-1]),
+                           integrator=replace(model.integrator, method=REPLAY_METHOD, output_dt=dt))
+    sim = simulate(replay_model, fixed_step=dt)
     return Replay(sim, float(np.max(np.abs(sim.q - traj.q))), float(np.max(np.abs(sim.qd - traj.qd))))

@@ -14,11 +14,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import capacity as cap
-from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy,
+from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy, grasp_line_frames,
                       inverse_problem, replay, resolution_for, resolve, result_of, virtual_masses)
 from .log import Series, nonfinite_name
 from .model import Model
-from .stress import SectionLoads, decompose_internal, grasp_line_axes, section_loads
+from .stress import SectionLoads, decompose_internal, section_loads
 from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
 DEFINITIONS = ("paper", "nonsqueezing")
@@ -80,7 +80,7 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
     for k, res in resolutions.items():
         results[k] = resolve(prob, res)
     components, stress = {}, {}
-    axes = np.array([grasp_line_axes(pg, pc) for pg, pc in zip(prob.p_grasp, prob.p_C)])
+    axes = grasp_line_frames(prob)[:, :, 0]
     box = np.any(model.object.box > 0)
     for k, r in results.items():
         components[k] = {d: decompose_internal(getattr(r, f"internal_{d}"), axes) for d in DEFINITIONS}

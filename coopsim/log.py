@@ -287,10 +287,13 @@ def _schema_shape(schema: dict) -> tuple[tuple[int, ...], str]:
 
 
 def _decode_field(values: list, shape: tuple[int, ...], leaf: str) -> np.ndarray:
-    rows = [_unwrap_rows(v, len(shape)) for v in values]
-    if leaf == "number":
-        rows = _replace_nonfinite(rows)
-    return np.asarray(rows, dtype=_DTYPE[leaf]).reshape((len(values),) + shape)
+    """Values of one field (N messages) → array (N, *shape). Numbers only convert at once; a field
+    holding strings (the non-finite spellings) goes through `_replace_nonfinite`."""
+    rows = [_unwrap_rows(v, len(shape)) for v in values] if len(shape) > 1 else values
+    out = np.asarray(rows)
+    if out.dtype.kind not in "biuf" or (leaf == "boolean") != (out.dtype.kind == "b"):
+        out = np.asarray(_replace_nonfinite(rows) if leaf == "number" else rows, dtype=_DTYPE[leaf])
+    return out.astype(_DTYPE[leaf], copy=False).reshape((len(values),) + shape)
 
 
 def _replace_nonfinite(x: Any) -> Any:
@@ -322,10 +325,11 @@ def read_mcap(path: str | Path) -> LogData:
         summary = reader.get_summary()
         schemas = {s.id: (s.name, json.loads(s.data)) for s in summary.schemas.values()} if summary else {}
         topic_schema = {c.topic: schemas[c.schema_id] for c in summary.channels.values()} if summary else {}
-        raw: dict[str, list[dict]] = {t: [] for t in topic_schema}
+        data: dict[str, list[bytes]] = {t: [] for t in topic_schema}
         for _, channel, message in reader.iter_messages(log_time_order=False):
-            raw[channel.topic].append(json.loads(message.data))
+            data[channel.topic].append(message.data)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    raw = {t: json.loads(b"[" + b",".join(msgs) + b"]") for t, msgs in data.items()}   # one parse per topic
     topics, messages = {}, {}
     for topic, (_, schema) in topic_schema.items():
         if schema.get("$comment") == SERIES_COMMENT:
