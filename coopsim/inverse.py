@@ -45,6 +45,7 @@ from .grasp import grasp_matrix
 from .model import CoopsimError, Model, TorqueFunction, TorqueTable
 from .qp import solve_qps
 from .spatial import cross
+from .stress import grasp_line_axes, line_frame
 from .trajectory import JointTrajectory, trajectory_at_times
 
 METHODS = ("paper", "nonsqueezing", "min_energy", "bounded")
@@ -453,30 +454,15 @@ def internal_bound_components(frames: np.ndarray, L: np.ndarray, res: Resolution
 def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
     """Rows C (m, rk) of the internal-wrench components at sample i in the grasp-line frames and their
     bounds (m,) — those `internal_bound_components` keeps. L (6r, rk): sample i's internal operator."""
-    frames = line_frames(prob.p_grasp[i:i + 1], prob.p_C[i:i + 1], prob.normal)
+    frames = line_frame(grasp_line_axes(prob.p_grasp[i:i + 1], prob.p_C[i:i + 1]), prob.normal)
     C, bound, keep = internal_bound_components(frames, L[None], res)
     return C[0, keep[0]], bound[keep[0]]
 
 
-def line_frames(p_grasp: np.ndarray, p_C: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
-    """Rows (N, r, 3, 3) of every arm's grasp-line frame per sample, for grasp points p_grasp (N, r, 3)
-    and centres p_C (N, 3): `coopsim.stress.line_frame` of the axes of `coopsim.stress.grasp_line_axes`,
-    the same formulas evaluated for all samples at once."""
-    if p_grasp.shape[1] == 2:
-        d = p_grasp[:, 1] - p_grasp[:, 0]
-        e = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        e = np.stack([-e, e], axis=1)
-    else:
-        d = p_grasp - p_C[:, None]
-        e = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    e2 = np.cross(normal if normal is not None else np.eye(3)[np.argmin(np.abs(e), axis=-1)], e)
-    e2 /= np.linalg.norm(e2, axis=-1, keepdims=True)
-    return np.stack([e, e2, np.cross(e, e2)], axis=-2)
-
-
 def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
-    """`line_frames` (N, r, 3, 3) along the problem's trajectory."""
-    return line_frames(prob.p_grasp, prob.p_C, prob.normal)
+    """Rows (N, r, 3, 3) of every arm's grasp-line frame along the problem's trajectory
+    (`coopsim.stress.line_frame` of `coopsim.stress.grasp_line_axes`)."""
+    return line_frame(grasp_line_axes(prob.p_grasp, prob.p_C), prob.normal)
 
 
 # ------------------------------------------------------------------------------------------------

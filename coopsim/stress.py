@@ -41,29 +41,28 @@ class SectionLoads(NamedTuple):
 
 
 def grasp_line_axes(p_grasp: np.ndarray, p_C: np.ndarray) -> np.ndarray:
-    """Unit axis e_m (r, 3) of each arm's grasp line, pointing from the object's inside towards grasp m:
-    for r = 2 the line through both grasp points (e₂ = −e₁ = (p₂ − p₁)/|p₂ − p₁|); for r > 2 the line
-    from C to the grasp point. A force of the arm along +e_m stretches the object."""
-    if len(p_grasp) == 2:
-        d = p_grasp[1] - p_grasp[0]
-        e = d / np.linalg.norm(d)
-        return np.array([-e, e])
-    d = p_grasp - p_C
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
+    """Unit axis e_m (…, r, 3) of each arm's grasp line, pointing from the object's inside towards grasp
+    m, for grasp points p_grasp (…, r, 3) and centres p_C (…, 3): for r = 2 the line through both grasp
+    points (e₂ = −e₁ = (p₂ − p₁)/|p₂ − p₁|); for r > 2 the line from C to the grasp point. A force of the
+    arm along +e_m stretches the object."""
+    p_grasp, p_C = np.asarray(p_grasp, dtype=float), np.asarray(p_C, dtype=float)
+    if p_grasp.shape[-2] == 2:
+        d = p_grasp[..., 1, :] - p_grasp[..., 0, :]
+        e = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.stack([-e, e], axis=-2)
+    d = p_grasp - p_C[..., None, :]
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
 def line_frame(e: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
-    """Rows (3, 3) of a right-handed frame whose first axis is e: in a planar scene (normal given) the
-    second axis is normal × e (in-plane shear direction) and the third the normal; otherwise the
-    second is perpendicular to e and to the world axis least aligned with it."""
-    if normal is not None:
-        e2 = np.cross(normal, e)
-        e2 /= np.linalg.norm(e2)
-        return np.array([e, e2, np.cross(e, e2)])
-    ref = np.eye(3)[int(np.argmin(np.abs(e)))]
+    """Rows (…, 3, 3) of a right-handed frame whose first axis is e (…, 3): in a planar scene (normal
+    given) the second axis is normal × e (in-plane shear direction) and the third the normal; otherwise
+    the second is perpendicular to e and to the world axis least aligned with it."""
+    e = np.asarray(e, dtype=float)
+    ref = normal if normal is not None else np.eye(3)[np.argmin(np.abs(e), axis=-1)]
     e2 = np.cross(ref, e)
-    e2 /= np.linalg.norm(e2)
-    return np.array([e, e2, np.cross(e, e2)])
+    e2 = e2 / np.linalg.norm(e2, axis=-1, keepdims=True)
+    return np.stack([e, e2, np.cross(e, e2)], axis=-2)
 
 
 def decompose_internal(F_I: np.ndarray, axes: np.ndarray) -> dict[str, np.ndarray]:
