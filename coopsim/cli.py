@@ -169,7 +169,11 @@ def _cmd_bench(args) -> int:
     from .bench import FULL, QUICK, run_bench
     from .bench_report import json_text, markdown_report, write_outputs
 
-    log = (lambda msg: None) if args.json else (lambda msg: print(f"bench: {msg}", file=sys.stderr, flush=True))
+    import time
+
+    start = time.perf_counter()
+    log = (lambda msg: None) if args.json else (
+        lambda msg: print(f"bench [{time.perf_counter() - start:4.0f} s]: {msg}", file=sys.stderr, flush=True))
     report = run_bench(_scenario_paths(args.scenarios), QUICK if args.quick else FULL, log=log)
     paths = write_outputs(report, args.out)
     print(json_text(report) if args.json else markdown_report(report) + f"\nwrote {len(paths)} files in {args.out}")

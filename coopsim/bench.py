@@ -1,0 +1,716 @@
+"""Work-precision benchmark (`coopsim bench`): the native model against its peers, each run timed and
+measured against one tight native reference on the same output grid, in the same process.
+
+    reference   native DOP853 at rtol 1e-13 (atol 1e-14), checked against a 10x looser run
+    native      DOP853 and DOPRI5 over an rtol ladder (atol = rtol / 10), RK4 over a step ladder
+    MuJoCo      the twin (`validation/peers.py`) through `mujoco.rollout`, RK4 / Euler / implicitfast
+                over a timestep ladder; per (integrator, step) the weld time constant k·step with the
+                lowest error over k in WELD_FACTORS
+    Pinocchio   `constraintDynamics` + scipy DOP853 over an rtol ladder (only with `pin` installed)
+
+Per run: wall time s (minimum over repeats; native: `simulate()` end to end, and `loop_s` the compiled
+time loop alone from the same consistent state, which is what MuJoCo's timed `Rollout.rollout` call
+does; Pinocchio: `solve_ivp`), max joint error rad over the output grid, final constraint violation
+(native loop-closure residual, MuJoCo weld efc_pos, Pinocchio closure log6; m or rad). Per model: µs
+per dynamics evaluation, from Python and amortised in a compiled loop. Scaling: µs per evaluation of
+synthetic scenes, r arms × n joints, with power-law fits. Start-up: first-run compile time and cached
+start-up, each a fresh Python process.
+
+Everything here returns plain data (dicts, lists of `RunRow`); `coopsim.bench_report` turns a report
+into tables and files, `coopsim.plots_bench` draws the figures. Wall times depend on the machine and
+its load: compare within one report only.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .model import CoopsimError, IntegratorSettings, Model
+
+OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
+REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14
+CHECK_FACTOR = 10.0                  # the self-convergence run is this much looser
+ATOL_RATIO = 0.1                     # atol = rtol · ATOL_RATIO on every adaptive ladder
+WELD_FACTORS = (1, 2, 4)             # MuJoCo weld time constant = k · timestep
+TARGETS = (1e-3, 1e-6, 1e-8)         # rad: headline error targets
+MJ_STAGES = {"RK4": 4, "Euler": 1, "implicit": 1, "implicitfast": 1}  # mj_forward-like stages per step
+
+# The issue's targets (reported, never asserted): scenario -> {error target rad: MuJoCo ÷ native at least}
+ISSUE_TARGETS = {"paper_planar_2x3": {1e-8: 50.0, 1e-6: 10.0, 1e-3: 1.0}, "spatial_6r_pair": {1e-6: 10.0}}
+EVAL_RATIO_TARGET = 0.5              # native amortised µs ÷ one constraintDynamics call, at most
+CHOLESKY_RANK_TOL = 1e-300          # scaling diagnostic: rank_tol that keeps the Cholesky fast path
+EVAL_BUDGET_S = 0.5                  # s: keep repeating a cheap µs/eval timing until this much is spent
+
+
+@dataclass(frozen=True)
+class Ladders:
+    """What to run. rtols: native DOP853/DOPRI5; rk4_steps s: native RK4; mujoco: (integrator, steps
+    s) pairs, each step a whole fraction of OUTPUT_DT (the first-order integrators stop at 0.25 ms:
+    below it they only add points far from every target, at the cost of the slowest rollouts);
+    pin_rtols: Pinocchio + scipy DOP853; max_duration s (None: the scenario's duration); repeats:
+    timing repeats at least (min of them reported), repeat_budget_s: keep repeating a cheap run
+    until this much time is spent (at most max_repeats);
+    eval_states: states of the amortised evaluation; scaling_r, scaling_n: the scaling grid;
+    startup: measure the compile and cached start-up times (two fresh processes, ~1 min)."""
+
+    rtols: tuple[float, ...] = tuple(10.0 ** -k for k in range(3, 13))
+    rk4_steps: tuple[float, ...] = (0.05, 0.025, 0.01, 0.005, 0.0025, 0.001)
+    mujoco: tuple[tuple[str, tuple[float, ...]], ...] = (("RK4", (5e-3, 2.5e-3, 1e-3, 5e-4, 2.5e-4, 1e-4)),
+                                                         ("Euler", (5e-3, 2.5e-3, 1e-3, 5e-4, 2.5e-4)),
+                                                         ("implicitfast", (5e-3, 2.5e-3, 1e-3, 5e-4, 2.5e-4)))
+    pin_rtols: tuple[float, ...] = (1e-3, 1e-6, 1e-9, 1e-12)
+    max_duration: float | None = None
+    repeats: int = 3
+    repeat_budget_s: float = 0.3
+    max_repeats: int = 15
+    eval_states: int = 20000
+    scaling_r: tuple[int, ...] = (2, 3, 4)
+    scaling_n: tuple[int, ...] = (3, 6, 7)
+    startup: bool = True
+
+
+FULL = Ladders()
+QUICK = Ladders(rtols=(1e-3, 1e-6, 1e-9), rk4_steps=(0.05, 0.01),
+                mujoco=(("RK4", (5e-3, 1e-3)), ("Euler", (5e-3, 1e-3))), pin_rtols=(1e-4, 1e-8),
+                max_duration=0.5, repeats=1, repeat_budget_s=0.0, max_repeats=1, eval_states=2000,
+                scaling_r=(2, 3), scaling_n=(3, 6), startup=False)
+
+
+@dataclass
+class RunRow:
+    """One timed run. family: 'native' | 'mujoco' | 'pinocchio'; method (dop853, RK4, ...); setting:
+    text of its tolerance or step; param: rtol or step s; label: short plot label; wall_s: minimum
+    over repeats; loop_s: native time loop alone (None otherwise); max_error rad (NaN: failed or
+    diverged); final_violation (m or rad); evals: dynamics evaluations (native rhs, MuJoCo steps ×
+    stages, scipy nfev); extra: per-family details (weld factor and the errors of every factor);
+    note; pareto: on the scenario's Pareto front of (max_error, wall_s)."""
+
+    family: str
+    method: str
+    setting: str
+    param: float
+    label: str
+    wall_s: float
+    max_error: float
+    final_violation: float
+    evals: int
+    loop_s: float | None = None
+    extra: dict = field(default_factory=dict)
+    note: str = ""
+    pareto: bool = False
+
+
+# ------------------------------------------------------------------------------------------------
+# pieces
+
+
+def load_peers():
+    """`validation/peers.py` of the source checkout as a module (the peers are validation material,
+    not installed with the package); raises CoopsimError when it is not there."""
+    name = "coopsim_validation_peers"
+    if name in sys.modules:
+        return sys.modules[name]
+    path = Path(__file__).resolve().parents[1] / "validation" / "peers.py"
+    if not path.is_file():
+        raise CoopsimError(f"coopsim bench needs {path} (validation/peers.py of the source checkout)")
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def have_pinocchio() -> bool:
+    """Whether the optional `pin` package (module pinocchio) can be imported."""
+    try:
+        import pinocchio  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def best_time(fn: Callable[[], object], repeats: int = 3, budget_s: float = 0.0,
+              max_repeats: int = 15) -> tuple[object, float]:
+    """(last result, minimum wall time s) of fn over at least `repeats` calls, more while the total is
+    under budget_s (at most max_repeats)."""
+    best, spent, k, out = math.inf, 0.0, 0, None
+    while k < max(1, repeats) or (spent < budget_s and k < max_repeats):
+        start = time.perf_counter()
+        out = fn()
+        wall = time.perf_counter() - start
+        best, spent, k = min(best, wall), spent + wall, k + 1
+    return out, best
+
+
+def max_joint_error(q: np.ndarray, q_ref: np.ndarray) -> float:
+    """max |q − q_ref| rad over samples and joints (N, n); NaN if q has any non-finite value."""
+    d = np.abs(np.asarray(q, float) - np.asarray(q_ref, float))
+    return float(np.max(d)) if np.all(np.isfinite(d)) else math.nan
+
+
+def pareto_front(errors, times) -> np.ndarray:
+    """Boolean mask (M,) of the points not dominated in (error, time), both minimised: no other
+    point is at most as large in both and smaller in one. Non-finite points are never on it."""
+    e, t = np.asarray(errors, float), np.asarray(times, float)
+    ok = np.isfinite(e) & np.isfinite(t)
+    mask = np.zeros(len(e), bool)
+    for i in np.nonzero(ok)[0]:
+        dom = ok & (e <= e[i]) & (t <= t[i]) & ((e < e[i]) | (t < t[i]))
+        mask[i] = not np.any(dom)
+    return mask
+
+
+def power_fit(x, y) -> dict:
+    """Least-squares fit of log y = log c + p log x: {'exponent': p, 'coefficient': c, 'rms_log10':
+    rms residual in decades}; needs two distinct x."""
+    lx, ly = np.log(np.asarray(x, float)), np.log(np.asarray(y, float))
+    A = np.column_stack([np.ones_like(lx), lx])
+    (a, p), *_ = np.linalg.lstsq(A, ly, rcond=None)
+    res = ly - A @ np.array([a, p])
+    rms = float(np.sqrt(np.mean(res ** 2)) / np.log(10))
+    return {"exponent": float(p), "coefficient": float(np.exp(a)), "rms_log10": rms}
+
+
+def fastest_reaching(rows: list[RunRow], family: str, target: float, key: str = "wall_s") -> RunRow | None:
+    """The row of `family` with the smallest `key` time ('wall_s' or 'loop_s') among those with
+    max_error ≤ target and that time finite (None: no such row)."""
+    ok = [r for r in rows if r.family == family and np.isfinite(r.max_error) and r.max_error <= target
+          and getattr(r, key) is not None and np.isfinite(getattr(r, key))]
+    return min(ok, key=lambda r: getattr(r, key)) if ok else None
+
+
+def bench_duration(model: Model, ladders: Ladders) -> float:
+    """Run length s: the scenario's (capped by ladders.max_duration), down to a whole number of
+    OUTPUT_DT intervals (MuJoCo samples on whole steps)."""
+    d = model.duration if ladders.max_duration is None else min(model.duration, ladders.max_duration)
+    return OUTPUT_DT * max(1, math.floor(d / OUTPUT_DT + 1e-9))
+
+
+def adaptive_settings(model: Model, method: str, rtol: float, atol: float | None = None) -> IntegratorSettings:
+    """The model's integrator settings with `method` (dop853 | dopri5), rtol, atol (default rtol ·
+    ATOL_RATIO), unbounded step, output every OUTPUT_DT."""
+    return replace(model.integrator, method=method, rtol=rtol, atol=rtol * ATOL_RATIO if atol is None else atol,
+                   max_step=None, output_dt=OUTPUT_DT)
+
+
+def rk4_settings(model: Model, step: float) -> IntegratorSettings:
+    """The model's integrator settings with RK4 at `step` s, output every OUTPUT_DT."""
+    return replace(model.integrator, method="rk4", step=step, output_dt=OUTPUT_DT)
+
+
+# ------------------------------------------------------------------------------------------------
+# reference and native runs
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """The tight native run (`SimResult`) on the output grid, the 10x looser check run, and their
+    max joint difference rad (`self_convergence`): an estimate of the check run's error, an upper
+    bound on the reference's."""
+
+    result: object
+    check: object
+    self_convergence: float
+
+
+def reference(model: Model) -> Reference:
+    """Native DOP853 at REFERENCE_RTOL / REFERENCE_ATOL, and again CHECK_FACTOR looser, over
+    model.duration on the OUTPUT_DT grid."""
+    from .simulate import simulate
+
+    tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL))
+    check = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL * CHECK_FACTOR,
+                                                       REFERENCE_ATOL * CHECK_FACTOR))
+    return Reference(tight, check, max_joint_error(check.q, tight.q))
+
+
+def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], object]:
+    """The compiled time loop alone (as `simulate` runs it) from the reference's consistent state."""
+    from .compiled import api
+
+    m = replace(model, integrator=s)
+    y0 = np.concatenate([ref.initial.q, ref.initial.qd])
+    fixed = s.step if s.method == "rk4" else None
+    return lambda: api.integrate_chain(m, y0, ref.t, s.method, rtol=s.rtol, atol=s.atol, h_max=math.inf,
+                                       fixed_step=fixed)
+
+
+def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> RunRow:
+    """Time `simulate(model, settings=s)` and its time loop alone; error against ref (SimResult)."""
+    from .simulate import simulate
+
+    adaptive = s.method != "rk4"
+    setting = f"rtol {s.rtol:.0e}, atol {s.atol:.0e}" if adaptive else f"step {s.step:g} s"
+    label = f"{s.rtol:.0e}" if adaptive else f"{1e3 * s.step:g}ms"
+    kw = dict(repeats=ladders.repeats, budget_s=ladders.repeat_budget_s, max_repeats=ladders.max_repeats)
+    try:
+        res, wall = best_time(lambda: simulate(model, settings=s), **kw)
+        _, loop = best_time(_native_loop(model, s, ref), **kw)
+    except CoopsimError as exc:
+        return RunRow("native", s.method, setting, s.rtol if adaptive else s.step, label, math.nan, math.nan,
+                      math.nan, 0, note=f"failed: {exc}")
+    return RunRow("native", s.method, setting, s.rtol if adaptive else s.step, label, wall,
+                  max_joint_error(res.q, ref.q), float(res.residual_pos[-1]), int(res.stats.n_rhs), loop_s=loop,
+                  extra={"accepted": int(res.stats.n_accepted), "rejected": int(res.stats.n_rejected)})
+
+
+def native_runs(model: Model, ref, ladders: Ladders) -> list[RunRow]:
+    """DOP853 and DOPRI5 over ladders.rtols, RK4 over ladders.rk4_steps."""
+    cases = [adaptive_settings(model, m, r) for m in ("dop853", "dopri5") for r in ladders.rtols]
+    cases += [rk4_settings(model, h) for h in ladders.rk4_steps]
+    return [native_run(model, s, ref, ladders) for s in cases]
+
+
+# ------------------------------------------------------------------------------------------------
+# MuJoCo
+
+
+class _MujocoWarnings:
+    """Collect MuJoCo's warnings (instability resets) instead of letting it write MUJOCO_LOG.TXT."""
+
+    def __enter__(self):
+        import mujoco
+
+        self.messages: list[str] = []
+        self._prev = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(self.messages.append)
+        return self
+
+    def __exit__(self, *exc):
+        import mujoco
+
+        mujoco.set_mju_user_warning(self._prev)
+        return False
+
+
+def mujoco_run(model: Model, ref, integrator: str, dt: float, peers, ladders: Ladders) -> RunRow:
+    """The twin with `integrator` at step dt s: one rollout per weld time constant k·dt (k in
+    WELD_FACTORS), the lowest-error one kept and its rollout repeated for the time."""
+    q0, qd0, t = ref.initial.q, ref.initial.qd, ref.t
+    tried = {}
+    with _MujocoWarnings():
+        for k in WELD_FACTORS:
+            twin = peers.mujoco_twin(model, integrator, dt, k * dt)
+            roll = peers.twin_rollout(twin, q0, qd0, t)
+            tried[k] = (max_joint_error(roll.q, ref.q), twin, roll)
+        finite = [k for k in WELD_FACTORS if np.isfinite(tried[k][0])]
+        k = min(finite, key=lambda j: tried[j][0]) if finite else WELD_FACTORS[0]
+        err, twin, roll = tried[k]
+        wall = repeat_walls(lambda: peers.twin_rollout(twin, q0, qd0, t), roll.wall_time, ladders)
+    note = "" if finite else f"diverged at t = {roll.diverged_at:g} s for every weld time constant"
+    extra = {"weld_factor": k, "weld_timeconst_s": k * dt, "nstep": roll.nstep,
+             "errors_by_weld_factor": {str(j): tried[j][0] for j in WELD_FACTORS}}
+    return RunRow("mujoco", integrator, f"step {dt:g} s, weld timeconst {k}·step", dt, f"{1e3 * dt:g}ms",
+                  wall, err, float(roll.weld_violation[-1]), roll.nstep * MJ_STAGES[integrator],
+                  extra=extra, note=note)
+
+
+def mujoco_runs(model: Model, ref, peers, ladders: Ladders) -> list[RunRow]:
+    """Every (integrator, steps) ladder of ladders.mujoco."""
+    return [mujoco_run(model, ref, integ, dt, peers, ladders) for integ, steps in ladders.mujoco for dt in steps]
+
+
+# ------------------------------------------------------------------------------------------------
+# Pinocchio
+
+
+def pinocchio_runs(model: Model, ref, peers, ladders: Ladders) -> list[RunRow]:
+    """constraintDynamics + scipy DOP853 over ladders.pin_rtols (atol = rtol · ATOL_RATIO); [] without
+    pinocchio."""
+    if not have_pinocchio():
+        return []
+    system = peers.pinocchio_system(model)
+    return [pinocchio_run(system, ref, rtol, peers, ladders) for rtol in ladders.pin_rtols]
+
+
+def pinocchio_run(system, ref, rtol: float, peers, ladders: Ladders) -> RunRow:
+    """One Pinocchio trajectory (scipy DOP853 at rtol, atol = rtol · ATOL_RATIO) from the reference's
+    consistent state, repeated for the time (solve_ivp alone)."""
+    run = lambda: peers.pinocchio_trajectory(system, ref.initial.q, ref.initial.qd, ref.t, None, rtol,
+                                             rtol * ATOL_RATIO)
+    traj = run()
+    wall = repeat_walls(run, traj.wall_time, ladders)
+    return RunRow("pinocchio", "constraintDynamics+DOP853", f"rtol {rtol:.0e}, atol {rtol * ATOL_RATIO:.0e}", rtol,
+                  f"{rtol:.0e}", wall, max_joint_error(traj.q, ref.q), float(traj.residual[-1]), traj.nfev)
+
+
+def repeat_walls(run: Callable[[], object], first: float, ladders: Ladders) -> float:
+    """Minimum wall time s over `first` and further calls of run() (each returning an object with
+    .wall_time s, its own timing of the part that counts), repeated as `best_time` repeats."""
+    walls = [first]
+    while len(walls) < ladders.repeats or (sum(walls) < ladders.repeat_budget_s and len(walls) < ladders.max_repeats):
+        walls.append(run().wall_time)
+    return min(walls)
+
+
+# ------------------------------------------------------------------------------------------------
+# cost per evaluation
+
+
+def trajectory_states(ref, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Y (count, 2n) = [θ; θ̇] and TAU (count, n): the reference's samples repeated cyclically."""
+    idx = np.arange(count) % len(ref.t)
+    return np.hstack([ref.q, ref.qd])[idx], ref.tau[idx]
+
+
+def native_eval_us(model: Model, Y: np.ndarray, TAU: np.ndarray, repeats: int = 3, calls: int = 2000) -> dict:
+    """µs per native closed-chain evaluation: 'amortised' (api.evaluate_states over the S states Y
+    (S, 2n), TAU (S, n), one thread) and 'python' (api.forward, one call from Python at Y[0], loops
+    of `calls`), each the minimum over at least `repeats` timings, more (up to 10) while under
+    EVAL_BUDGET_S; 'bad_states': evaluations with a non-zero status."""
+    from .compiled import api
+
+    n = model.n_total
+    kw = dict(repeats=repeats, budget_s=EVAL_BUDGET_S, max_repeats=10)
+    out, wall = best_time(lambda: api.evaluate_states(model, Y, TAU, n_threads=1), **kw)
+    q, qd, tau = Y[0, :n].copy(), Y[0, n:].copy(), TAU[0].copy()
+    api.forward(model, q, qd, tau)
+    _, loop = best_time(lambda: [api.forward(model, q, qd, tau) for _ in range(calls)], **kw)
+    return {"native_amortised_us": 1e6 * wall / len(Y), "native_python_us": 1e6 * loop / calls,
+            "bad_states": int(np.count_nonzero(out.status))}
+
+
+def peer_eval_us(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, peers, calls: int = 2000,
+                 repeats: int = 3) -> dict:
+    """µs per call from Python of MuJoCo's mj_forward (twin at the scenario's step, RK4) and, with
+    pin, of pinocchio.constraintDynamics (None without), at (q, qd, tau) (n,)."""
+    twin = peers.mujoco_twin(model, "RK4")
+    out = {"mujoco_forward_us": peers.mujoco_forward_us(twin, q, qd, tau, calls, repeats), "pinocchio_us": None}
+    if have_pinocchio():
+        system = peers.pinocchio_system(model)
+        out["pinocchio_us"] = peers.pinocchio_eval_us(system, q, qd, tau, calls, repeats)
+    return out
+
+
+def eval_costs(model: Model, ref, rows: list[RunRow], peers, ladders: Ladders) -> dict:
+    """Per-model µs per evaluation: native (amortised, from Python, in the time loop of the
+    tightest DOP853 run: loop_s / rhs evaluations), MuJoCo (mj_forward from Python; amortised:
+    rollout wall / (steps · 4) of the RK4 run with the most steps), Pinocchio (from Python; in its
+    scipy integrator: wall / nfev of its tightest run)."""
+    Y, TAU = trajectory_states(ref, ladders.eval_states)
+    n = model.n_total
+    k = len(ref.t) // 2
+    out = native_eval_us(model, Y, TAU, repeats=max(ladders.repeats, 2))
+    out |= peer_eval_us(model, ref.q[k], ref.qd[k], ref.tau[k], peers, repeats=max(ladders.repeats, 2))
+    dop = [r for r in rows if r.family == "native" and r.method == "dop853" and r.loop_s]
+    if dop:
+        tight = min(dop, key=lambda r: r.param)
+        out["native_loop_us_per_rhs"] = 1e6 * tight.loop_s / tight.evals
+    rk4 = [r for r in rows if r.family == "mujoco" and r.method == "RK4" and np.isfinite(r.wall_s)]
+    if rk4:
+        longest = max(rk4, key=lambda r: r.evals)
+        out["mujoco_amortised_us"] = 1e6 * longest.wall_s / longest.evals
+    pin = [r for r in rows if r.family == "pinocchio"]
+    if pin:
+        tight = min(pin, key=lambda r: r.param)
+        out["pinocchio_in_integrator_us"] = 1e6 * tight.wall_s / tight.evals
+    if out["pinocchio_us"]:
+        out["native_amortised_over_pinocchio"] = out["native_amortised_us"] / out["pinocchio_us"]
+    out["n_joints"], out["eval_states"] = n, len(Y)
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# headline
+
+
+def headline(name: str, rows: list[RunRow], targets=TARGETS) -> list[dict]:
+    """Per error target rad: the fastest native run reaching it by simulate() wall time and by time-loop
+    time, the fastest MuJoCo run reaching it, and MuJoCo's wall time ÷ native's ('ratio_wall':
+    native simulate() end to end; 'ratio_loop': native time loop alone, the like-for-like of the
+    timed rollout call), with the issue's required ratio for this scenario where it sets one (None
+    otherwise) and whether each ratio meets it ('met_wall', 'met_loop'; None: no requirement, or no
+    ratio). A ratio is None when either side has no run within the target ('note' says which)."""
+    out = []
+    for target in targets:
+        nat, mj = fastest_reaching(rows, "native", target), fastest_reaching(rows, "mujoco", target)
+        nat_loop = fastest_reaching(rows, "native", target, key="loop_s")
+        req = ISSUE_TARGETS.get(name, {}).get(target)
+        entry = {"target_rad": target, "native": _brief(nat), "native_by_loop": _brief(nat_loop), "mujoco": _brief(mj),
+                 "ratio_wall": mj.wall_s / nat.wall_s if nat and mj else None,
+                 "ratio_loop": mj.wall_s / nat_loop.loop_s if nat_loop and mj else None, "required_ratio": req}
+        entry["note"] = "no MuJoCo run reaches this error" if mj is None else (
+            "no native run reaches this error" if nat is None else "")
+        for k in ("wall", "loop"):
+            ratio = entry[f"ratio_{k}"]
+            entry[f"met_{k}"] = None if req is None or ratio is None else bool(ratio >= req)
+        out.append(entry)
+    return out
+
+
+def _brief(row: RunRow | None) -> dict | None:
+    """method, setting, wall_s, loop_s, max_error of a row (None: none)."""
+    if row is None:
+        return None
+    return {"method": row.method, "setting": row.setting, "wall_s": row.wall_s, "loop_s": row.loop_s,
+            "max_error": row.max_error}
+
+
+# ------------------------------------------------------------------------------------------------
+# one scenario
+
+
+def bench_scenario(model: Model, ladders: Ladders, peers, log: Callable[[str], None] = lambda s: None) -> dict:
+    """The whole benchmark of one scenario: reference (self-convergence), every run (Pareto flags),
+    µs per evaluation, headline. Returns a dict (see `run_bench`)."""
+    model = replace(model, duration=bench_duration(model, ladders))
+    log(f"{model.name}: reference ({model.duration:g} s)")
+    ref = reference(model)
+    log(f"{model.name}: native ladders")
+    rows = native_runs(model, ref.result, ladders)
+    log(f"{model.name}: MuJoCo ladders")
+    rows += mujoco_runs(model, ref.result, peers, ladders)
+    notes = []
+    if have_pinocchio():
+        log(f"{model.name}: Pinocchio ladder")
+        rows += pinocchio_runs(model, ref.result, peers, ladders)
+    else:
+        notes.append("Pinocchio rows skipped: the optional 'pin' package is not installed (pip install -e '.[bench]')")
+    for row, on in zip(rows, pareto_front([r.max_error for r in rows], [r.wall_s for r in rows])):
+        row.pareto = bool(on)
+    log(f"{model.name}: cost per evaluation")
+    costs = eval_costs(model, ref.result, rows, peers, ladders)
+    return {"name": model.name, "duration_s": model.duration, "output_dt_s": OUTPUT_DT,
+            "n_joints": model.n_total, "arms": model.r, "reference": _reference_summary(ref, rows),
+            "runs": [asdict(r) for r in rows], "eval_us": costs, "headline": headline(model.name, rows),
+            "notes": notes}
+
+
+def _reference_summary(ref: Reference, rows: list[RunRow]) -> dict:
+    """Reference settings, its self-convergence difference rad, and whether it is far below every
+    error target (≤ 1 % of the smallest) and below the smallest measured error."""
+    errs = [r.max_error for r in rows if np.isfinite(r.max_error) and r.max_error > 0]
+    sc = ref.self_convergence
+    return {"method": "dop853", "rtol": REFERENCE_RTOL, "atol": REFERENCE_ATOL,
+            "check_rtol": REFERENCE_RTOL * CHECK_FACTOR, "check_atol": REFERENCE_ATOL * CHECK_FACTOR,
+            "self_convergence_rad": sc, "far_below_targets": bool(sc <= 0.01 * min(TARGETS)),
+            "smallest_measured_error_rad": min(errs) if errs else None,
+            "rhs_evaluations": int(ref.result.stats.n_rhs)}
+
+
+# ------------------------------------------------------------------------------------------------
+# scaling: synthetic scenes
+
+
+_SPATIAL_AXES = ([0, 0, 1], [0, 1, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 0, 1])
+_SPATIAL_LENGTHS = (0.12, 0.45, 0.40, 0.10, 0.08, 0.06, 0.05)
+_SPATIAL_ANGLES = (0.3, -0.9, 1.2, 0.4, -0.7, 0.5, 0.2)
+_PLANAR_LENGTHS = (0.5, 0.4, 0.1)
+_PLANAR_ANGLES = (1.0, -1.1, -0.7)
+
+
+def synthetic_scene(r: int, n: int) -> dict:
+    """Scenario data (the YAML dict) of r arms of n revolute joints, bases on a 0.8 m circle facing
+    its centre, box links, grasping a box whose grasps are derived from the initial configuration.
+    n = 3: planar arms (parallel vertical axes, planar constraint rows: a 3-joint arm cannot hold a
+    6-D grasp, Λ𝐈⁻¹Λᵀ would be singular for r ≥ 3); n ≥ 4: spatial arms with non-parallel axes
+    (yaw, pitch, pitch, roll, pitch, roll, yaw), spatial rows; n ≤ 7."""
+    if not (n == 3 or 4 <= n <= len(_SPATIAL_AXES)):
+        raise ValueError(f"n must be 3 (planar) or 4..{len(_SPATIAL_AXES)} (spatial), got {n}")
+    arms = [_synthetic_arm(m, r, n) for m in range(r)]
+    return {"name": f"synthetic_{r}x{n}", "gravity": [0.0, 0.0, -9.81], "duration": 1.0, "arms": arms,
+            "object": {"box": {"size": [0.3, 0.3, 0.08], "density": 1000}, "grasps": "derive"}}
+
+
+def _synthetic_arm(m: int, r: int, n: int) -> dict:
+    """Arm m of `synthetic_scene`: base at angle 2πm/r on the circle, yawed to face the centre."""
+    phi = 2.0 * math.pi * m / r
+    yaw = math.remainder(phi + math.pi, 2.0 * math.pi)
+    base = {"position": [0.8 * math.cos(phi), 0.8 * math.sin(phi), 0.0], "rpy": [0.0, 0.0, yaw]}
+    box = lambda L, w: {"length": L, "cross_section": [w, w], "density": 2700}
+    if n == 3:
+        links = [{"joint": {"axis": [0, 0, 1]}, "box": box(L, 0.04)} for L in _PLANAR_LENGTHS]
+        angles = list(_PLANAR_ANGLES)
+    else:
+        links = [{"joint": {"axis": _SPATIAL_AXES[i]}, "box": box(_SPATIAL_LENGTHS[i], 0.05)} for i in range(n)]
+        links[0]["joint"]["position"] = [0.0, 0.0, 0.3]
+        angles = list(_SPATIAL_ANGLES[:n])
+    angles = [a + 0.05 * m for a in angles]
+    return {"name": f"arm{m}", "base": base, "links": links, "initial": {"angles": angles},
+            "torque": {"constant": [0.0] * n}}
+
+
+def synthetic_model(r: int, n: int) -> Model:
+    """The frozen Model of `synthetic_scene(r, n)`."""
+    from .scenario import model_from_dict
+
+    return model_from_dict(synthetic_scene(r, n), where=f"synthetic_{r}x{n}")
+
+
+def scaling_point(r: int, n: int, count: int, peers=None, repeats: int = 3, seed: int = 0) -> dict:
+    """µs per evaluation of synthetic_model(r, n) at `count` states q0 + N(0, 0.1²) rad, rates N(0,
+    1) rad/s, torques N(0, 1) N·m (not on the manifold: the cost does not depend on it): native
+    amortised and from Python (`native_eval_us`), and 'native_cholesky_us', amortised with rank_tol
+    CHOLESKY_RANK_TOL (a diagnostic: the pivoted-Cholesky fast path taken whenever its pivots are
+    positive, where the default rank_tol's guaranteed-bound test sends K ≳ 12 constraint rows to the
+    eigen-decomposition); with peers also mj_forward and constraintDynamics from Python."""
+    model = synthetic_model(r, n)
+    rng = np.random.default_rng(seed)
+    N = model.n_total
+    Y = np.hstack([model.q0 + rng.normal(scale=0.1, size=(count, N)), rng.normal(size=(count, N))])
+    TAU = rng.normal(size=(count, N))
+    out = {"r": r, "n": n, "n_total": N, "rows": int(model.rows.shape[0] * (r - 1)),
+           "planar": model.plane is not None} | native_eval_us(model, Y, TAU, repeats, calls=1000)
+    forced = replace(model, integrator=replace(model.integrator, rank_tol=CHOLESKY_RANK_TOL))
+    out["native_cholesky_us"] = native_eval_us(forced, Y, TAU, repeats, calls=1)["native_amortised_us"]
+    if peers is not None:
+        out |= peer_eval_us(model, Y[0, :N], Y[0, N:], TAU[0], peers, calls=1000, repeats=repeats)
+    return out
+
+
+def scaling_study(ladders: Ladders, peers=None, log: Callable[[str], None] = lambda s: None) -> dict:
+    """Every (r, n) of the ladders' grid (`scaling_point`) and power-law fits (`scaling_fits`) of the
+    amortised µs ('fits') and of the forced-Cholesky diagnostic ('fits_cholesky')."""
+    points = []
+    for r in ladders.scaling_r:
+        for n in ladders.scaling_n:
+            log(f"scaling: {r} arms x {n} joints")
+            points.append(scaling_point(r, n, ladders.eval_states, peers, max(ladders.repeats, 2)))
+    return {"points": points, "fits": scaling_fits(points),
+            "fits_cholesky": scaling_fits(points, "native_cholesky_us")}
+
+
+def scaling_fits(points: list[dict], key: str = "native_amortised_us") -> dict:
+    """Power-law fits (`power_fit`) of points[key]: 'in_total_joints' per fixed r (over n), 'in_arms'
+    per fixed n (over r), and 'all' of every point in total joints; only groups of two or more."""
+    def group(by: str, x: str) -> dict:
+        out = {}
+        for v in sorted({p[by] for p in points}):
+            sel = [p for p in points if p[by] == v]
+            if len({p[x] for p in sel}) >= 2:
+                out[str(v)] = power_fit([p[x] for p in sel], [p[key] for p in sel])
+        return out
+
+    fits = {"in_total_joints": group("r", "n_total"), "in_arms": group("n", "r")}
+    if len({p["n_total"] for p in points}) >= 2:
+        fits["all"] = power_fit([p["n_total"] for p in points], [p[key] for p in points])
+    return fits
+
+
+# ------------------------------------------------------------------------------------------------
+# start-up
+
+
+_STARTUP_SCRIPT = ("import time; t0 = time.perf_counter(); from coopsim.scenario import load_scenario; "
+                   "from coopsim.simulate import simulate; "
+                   "simulate(load_scenario({path!r}), duration=0.05); print(time.perf_counter() - t0)")
+
+
+def _source_stamps() -> dict[str, int]:
+    """Modification times (ns) of the compiled kernels' sources (coopsim/compiled/*.py): numba's
+    cache is keyed on them."""
+    root = Path(__file__).resolve().parent / "compiled"
+    return {str(p): p.stat().st_mtime_ns for p in sorted(root.glob("*.py"))}
+
+
+def _startup_once(code: str) -> dict:
+    """One compile / cached pair of fresh processes (see `startup_times`)."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="coopsim-numba-") as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        for key in ("compile", "cached"):
+            start = time.perf_counter()
+            done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
+            out[f"{key}_s"] = time.perf_counter() - start
+            if done.returncode:
+                raise CoopsimError(f"start-up measurement failed: {done.stderr.strip().splitlines()[-1:]}")
+            out[f"{key}_inside_s"] = float(done.stdout.split()[-1])
+    return out
+
+
+def startup_times(scenario: str | Path, attempts: int = 2) -> dict:
+    """Wall time s of a fresh `python -c` process that imports coopsim and simulates 0.05 s of
+    `scenario`: 'compile_s' with NUMBA_CACHE_DIR an empty temporary folder (every kernel compiled),
+    'cached_s' the same again with that cache filled; '..._inside_s': the part after start-up of
+    the interpreter (imports and the run), as the process measures it. A source file changed
+    between the two processes invalidates the cache: the pair is then run again (up to `attempts`
+    times) and 'sources_changed' says whether the last pair still saw a change."""
+    code = _STARTUP_SCRIPT.format(path=str(Path(scenario).resolve()))
+    for _ in range(max(1, attempts)):
+        before = _source_stamps()
+        out = _startup_once(code)
+        out["sources_changed"] = _source_stamps() != before
+        if not out["sources_changed"]:
+            break
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# the whole benchmark
+
+
+def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
+              log: Callable[[str], None] = lambda s: None) -> dict:
+    """Benchmark each scenario file, the scaling grid and (ladders.startup) the start-up times.
+    Returns {'scenarios': [bench_scenario dicts], 'scaling': scaling_study, 'startup': dict or None,
+    'settings': what was run, 'environment': versions and machine}."""
+    from .scenario import load_scenario
+    from .simulate import simulate
+
+    peers = peers or load_peers()
+    models = [load_scenario(p) for p in scenarios]
+    simulate(models[0], duration=OUTPUT_DT)  # warm-up: load (or compile) the kernels before timing
+    report = {"settings": _settings(ladders), "environment": environment(), "scenarios": []}
+    for model in models:
+        report["scenarios"].append(bench_scenario(model, ladders, peers, log))
+    report["scaling"] = scaling_study(ladders, peers, log)
+    report["startup"] = None
+    if ladders.startup:
+        log("start-up: fresh processes (compile, then cached)")
+        report["startup"] = startup_times(scenarios[0])
+    report["environment"]["load_average_end"] = environment()["load_average"]
+    return report
+
+
+def _settings(ladders: Ladders) -> dict:
+    """The ladders and fixed choices, for the report."""
+    return asdict(ladders) | {"output_dt_s": OUTPUT_DT, "reference": [REFERENCE_RTOL, REFERENCE_ATOL],
+                              "atol_over_rtol": ATOL_RATIO, "weld_factors": list(WELD_FACTORS),
+                              "targets_rad": list(TARGETS)}
+
+
+def environment() -> dict:
+    """Python, numpy, numba, mujoco, pinocchio versions (None: absent), CPU count, platform, the
+    1/5/15-minute load averages now (other work on the machine inflates wall times), and the
+    code's `source_state`."""
+    import platform
+    from importlib import metadata
+
+    def version(dist: str):
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            return None
+
+    return {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count(),
+            "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+            **{d: version(d) for d in ("numpy", "scipy", "numba", "mujoco", "pin")}, **source_state()}
+
+
+def source_state() -> dict:
+    """'git_head' (None outside a git checkout) and 'sources_sha256': the first 12 hex digits of the
+    SHA-256 of the package's Python sources (coopsim/**/*.py), so a report names the code it timed,
+    uncommitted edits included."""
+    import hashlib
+
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")):
+        digest.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes())
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
+        git = head.stdout.strip() if head.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        git = None
+    return {"git_head": git, "sources_sha256": digest.hexdigest()[:12]}
