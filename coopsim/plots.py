@@ -11,6 +11,9 @@ them); when the twin is sampled at other times it is interpolated linearly onto 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -84,6 +87,30 @@ def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
         ax.legend(fontsize="small", ncol=2)
     else:
         ax.text(0.5, 0.5, "difference exactly zero", ha="center", va="center", transform=ax.transAxes)
+
+
+_JOBS: list = []   # the figure jobs of the running `render_figures` call, read by its forked workers
+
+
+def render_figures(jobs: list) -> list[Path]:
+    """Build and write figures, each job (builder, args, path) as save_figure(builder(*args), path); on
+    two forked worker processes where the platform forks and has two cores (matplotlib draws on one
+    thread, about a second a figure on the development machine), else one after the other. Returns
+    the paths in job order; an error in a builder is raised here."""
+    global _JOBS
+    if len(jobs) < 2 or (os.cpu_count() or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return [save_figure(fn(*args), Path(path)) for fn, args, path in jobs]
+    _JOBS = list(jobs)
+    try:
+        with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork")) as pool:
+            return [Path(p) for p in pool.map(_render_job, range(len(jobs)))]
+    finally:
+        _JOBS = []
+
+
+def _render_job(i: int) -> str:
+    fn, args, path = _JOBS[i]
+    return str(save_figure(fn(*args), Path(path)))
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
@@ -165,7 +192,6 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     out.mkdir(parents=True, exist_ok=True)
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
-    figures = [_joint_figure(log, "angle", "angle", "rad", labels),
-               _joint_figure(log, "rate", "rate", "rad/s", labels),
-               _object_figure(log), _constraint_figure(log)]
-    return [save_figure(fig, out / name) for fig, name in zip(figures, FILES)]
+    jobs = [(_joint_figure, (log, "angle", "angle", "rad", labels)), (_joint_figure, (log, "rate", "rate", "rad/s", labels)),
+            (_object_figure, (log,)), (_constraint_figure, (log,))]
+    return render_figures([(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)])

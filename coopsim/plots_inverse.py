@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .log import LogData
-from .plots import save_figure
+from .plots import render_figures
 
 STYLE = {"forward": dict(color="black", ls="--", lw=1.2), "paper": dict(color="tab:blue"),
          "nonsqueezing": dict(color="tab:green"), "min_energy": dict(color="tab:red"),
@@ -113,9 +113,9 @@ def inverse_internal_figure(log: LogData) -> Figure:
 def inverse_plots(log: LogData, out_dir: str | Path) -> list[Path]:
     """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir."""
     out = Path(out_dir)
-    return [save_figure(inverse_torques_figure(log), out / "inverse_torques.png"),
-            save_figure(inverse_norms_figure(log), out / "inverse_norms.png"),
-            save_figure(inverse_internal_figure(log), out / "inverse_internal.png")]
+    return render_figures([(inverse_torques_figure, (log,), out / "inverse_torques.png"),
+                           (inverse_norms_figure, (log,), out / "inverse_norms.png"),
+                           (inverse_internal_figure, (log,), out / "inverse_internal.png")])
 
 
 def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
@@ -172,11 +172,11 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
 def capacity_plots(log: LogData, out_dir: str | Path) -> list[Path]:
     """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir."""
     out = Path(out_dir)
-    paths = []
+    jobs = []
     for mode in ("scaled", "payload"):
         if not any(k.endswith(f"/{mode}") and k.startswith("/capacity/") for k in log.topics):
             continue
         tag = "" if mode == "scaled" else "_payload"
-        paths.append(save_figure(capacity_motor_figure(log, mode), out / f"capacity_motors{tag}.png"))
-        paths.append(save_figure(capacity_along_path_figure(log, mode), out / f"capacity_along_path{tag}.png"))
-    return paths
+        jobs += [(capacity_motor_figure, (log, mode), out / f"capacity_motors{tag}.png"),
+                 (capacity_along_path_figure, (log, mode), out / f"capacity_along_path{tag}.png")]
+    return render_figures(jobs)

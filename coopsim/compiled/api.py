@@ -58,13 +58,35 @@ def compile_pending() -> bool:
 
 
 def compiled(model: Model) -> Compiled:
-    """The compiled form of `model`, built once per model object."""
+    """The compiled form of `model`, built once per model object, and shared by models that differ
+    only in what packing does not read (duration, output grid, tolerances, initial state, MuJoCo and
+    inverse settings: e.g. `dataclasses.replace(model, duration=…)`)."""
     hit = _CACHE.get(model)
     if hit is None:
-        P = pack(model)
-        W = workspace(P)
-        hit = _CACHE[model] = Compiled(P, W, to_struct(P), to_struct(W))
+        key = _content_key(model)
+        entry = _BY_CONTENT.pop(key, None)
+        if entry is None:
+            P = pack(model)
+            W = workspace(P)
+            entry = (Compiled(P, W, to_struct(P), to_struct(W)), (model.arms, model.object, model.torques))
+        _BY_CONTENT[key] = entry               # most recently used last
+        while len(_BY_CONTENT) > _BY_CONTENT_SIZE:
+            _BY_CONTENT.pop(next(iter(_BY_CONTENT)))
+        hit = _CACHE[model] = entry[0]
     return hit
+
+
+_BY_CONTENT: dict = {}
+_BY_CONTENT_SIZE = 32
+
+
+def _content_key(model: Model) -> tuple:
+    """What `pack` reads: the arm, object and torque objects (by identity: frozen, and kept alive by the
+    cache entry), gravity, constraint rows and the integrator settings the kernels use."""
+    s = model.integrator
+    return (id(model.arms), id(model.object), id(model.torques), model.gravity.tobytes(), model.rows.tobytes(),
+            s.rank_tol, s.on_rank_deficiency, s.stabilization, s.baumgarte_alpha, s.baumgarte_beta,
+            s.projection_tol)
 
 
 def fresh_workspace(P: PackedModel) -> Struct:

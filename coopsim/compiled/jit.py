@@ -9,5 +9,5 @@ releases the GIL, so batches run on threads.
 
 from numba import njit
 
-kernel = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True, error_model="numpy")
+kernel = njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True, error_model="numpy", fastmath={"contract"})
 entry = njit(cache=True, nogil=True, error_model="numpy")

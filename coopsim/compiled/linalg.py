@@ -71,53 +71,62 @@ def block_solve_col(L, o, n, X, c):
 def pivoted_cholesky(A, Lf, perm, K):
     """Cholesky factorization with diagonal pivoting P A Pᵀ = L Lᵀ of the symmetric PSD A (K, K) into
     Lf (lower), perm[i] the row of A in position i. Returns the pivot ratio d_K/d_1 (d = L_ii²;
-    0 if a pivot is not positive)."""
+    0 if a pivot is not positive). Works on the lower triangle only (A's is read, Lf's upper triangle
+    is left as it was): a pivot swaps rows and columns j, p of the symmetric trailing matrix as
+    LAPACK's dsyswapr does, and rows j, p of the columns already factored."""
     for i in range(K):
         perm[i] = i
-        for j in range(K):
+        for j in range(i + 1):
             Lf[i, j] = A[i, j]
     d1 = 0.0
     for j in range(K):
-        best, arg = -1.0, j
+        best, p = -1.0, j
         for i in range(j, K):
             if Lf[i, i] > best:
-                best, arg = Lf[i, i], i
-        if arg != j:
-            for c in range(K):
-                Lf[j, c], Lf[arg, c] = Lf[arg, c], Lf[j, c]
-            for c in range(K):
-                Lf[c, j], Lf[c, arg] = Lf[c, arg], Lf[c, j]
-            perm[j], perm[arg] = perm[arg], perm[j]
+                best, p = Lf[i, i], i
+        if p != j:
+            for t in range(j):
+                Lf[j, t], Lf[p, t] = Lf[p, t], Lf[j, t]
+            Lf[j, j], Lf[p, p] = Lf[p, p], Lf[j, j]
+            for i in range(j + 1, p):
+                Lf[i, j], Lf[p, i] = Lf[p, i], Lf[i, j]
+            for i in range(p + 1, K):
+                Lf[i, j], Lf[i, p] = Lf[i, p], Lf[i, j]
+            perm[j], perm[p] = perm[p], perm[j]
         d = Lf[j, j]
         if j == 0:
             d1 = d
         if not d > 0.0:
             return 0.0
         dj = np.sqrt(d)
+        inv = 1.0 / dj
         Lf[j, j] = dj
         for i in range(j + 1, K):
-            Lf[i, j] /= dj
+            Lf[i, j] *= inv
         for c in range(j + 1, K):
+            lc = Lf[c, j]
             for i in range(c, K):
-                Lf[i, c] -= Lf[i, j] * Lf[c, j]
-                Lf[c, i] = Lf[i, c]
+                Lf[i, c] -= Lf[i, j] * lc
     return Lf[K - 1, K - 1] ** 2 / d1
 
 
 @kernel
 def pivoted_solve(Lf, perm, K, b, y, x):
     """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b); y (K,) is
-    scratch; b is left unchanged and may alias neither y nor x."""
+    scratch; b is left unchanged and may alias neither y nor x. x holds the reciprocals 1/L_ii until
+    the end (the substitutions multiply: no division on their dependency chain)."""
+    for i in range(K):
+        x[i] = 1.0 / Lf[i, i]
     for i in range(K):
         v = b[perm[i]]
         for k in range(i):
             v -= Lf[i, k] * y[k]
-        y[i] = v / Lf[i, i]
+        y[i] = v * x[i]
     for i in range(K - 1, -1, -1):
         v = y[i]
         for k in range(i + 1, K):
             v -= Lf[k, i] * y[k]
-        y[i] = v / Lf[i, i]
+        y[i] = v * x[i]
     for i in range(K):
         x[perm[i]] = y[i]
 

@@ -23,7 +23,8 @@ class PackedModel(NamedTuple):
 
     dof (r+1,) int: arm m's joints are dof[m]:dof[m+1]; base_pos (r, 3), base_rot (r, 3, 3) world←base;
     joint_pos (N, 3) in the parent frame; joint_rot (N, 3, 3) parent←joint frame at θ = 0;
-    joint_axis (N, 3) unit, joint frame; link_mass (N,) kg; link_com (N, 3) link frame;
+    joint_axis (N, 3) unit, joint frame; joint_k1, joint_k2 (N, 3, 3) R0[a×] and R0[a×]² (so that
+    R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2), joint_z (N, 3) R0 a (parent frame); link_mass (N,) kg; link_com (N, 3) link frame;
     link_inertia (N, 3, 3) about the centre of mass, link axes; ee_pos (r, 3), ee_rot (r, 3, 3)
     end-effector frame in the last link frame; obj_mass kg; obj_inertia (3, 3) about C, object axes;
     grasp_pos (r, 3), grasp_rot (r, 3, 3) EE frame m in the object frame; carrier: arm index;
@@ -39,6 +40,9 @@ class PackedModel(NamedTuple):
     joint_pos: np.ndarray
     joint_rot: np.ndarray
     joint_axis: np.ndarray
+    joint_k1: np.ndarray
+    joint_k2: np.ndarray
+    joint_z: np.ndarray
     link_mass: np.ndarray
     link_com: np.ndarray
     link_inertia: np.ndarray
@@ -66,14 +70,16 @@ class Workspace(NamedTuple):
     """Buffers of one evaluation (N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows).
     Link geometry, world axes: p, R, z, c, I (N, …) joint origins, frames, axes, centres of mass,
     inertias; p_ee (r, 3), R_ee (r, 3, 3); link motion at θ̈ = 0 with base acceleration −g:
-    w, dw, a (N, 3). Arm terms: Mb (N, nmax) mass-matrix blocks (arm m's
-    block in rows dof[m]:dof[m+1], columns 0:n_m), Lb (N, nmax) their Cholesky factors, h (N,) bias
-    forces h = −Re (object included in the carrier's rows), h_arm (N,) without the object, J (r, 6, nmax)
-    end-effector Jacobians, Jd_qd (r, 6). Object: p_C (3,), R_o (3, 3), K_o (3, 3), s (r, 3),
-    J_o (6, nmax), Jd_o_qd (6,), v_o (6,), Y_bias (6,) M_o J̇_oθ̇ + b_o. Closed chain: Lam (K, N),
-    Lam_dot_qd (K,), X (N, K) 𝐈⁻¹Λᵀ, x0 (N,), A (K, K), A_f (K, K) its factor, b (K,), F (K,), res (K,),
-    perm (K,) int, yK (K,) scratch, phi (K,) loop residual Φ; out: qdd (N,), tau (N,), cond (1,) and rank (1,) int.
-    dF (K,) refinement step; vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch."""
+    w, dw, a (N, 3). Arm terms: Mb (N, nmax) mass-matrix blocks (arm m's block in rows
+    dof[m]:dof[m+1], columns 0:n_m), Lb (N, nmax) their Cholesky factors L (lower triangle, and Lᵀ
+    in the strict upper triangle), Lb_inv (N,) the reciprocals of the factors' diagonals, h (N,)
+    bias forces h = −Re (object included in the carrier's rows), h_arm (N,) without the object,
+    J (r, 6, nmax) end-effector Jacobians, Jd_qd (r, 6). Object: p_C (3,), R_o (3, 3), K_o (3, 3),
+    s (r, 3), J_o (6, nmax), Jd_o_qd (6,), v_o (6,), Y_bias (6,) M_o J̇_oθ̇ + b_o. Closed chain:
+    Lam (K, N), Lam_dot_qd (K,), X (K, N) Λ L⁻ᵀ, x0 (N,) L⁻¹(τ − h) (𝐈 = L Lᵀ), A (K, K) Λ𝐈⁻¹Λᵀ,
+    A_f (K, K) its factor, b (K,), F (K,), res (K,), perm (K,) int, yK (K,) scratch, phi (K,) loop
+    residual Φ; out: qdd (N,), tau (N,), cond (1,) and rank (1,) int. dF (K,) refinement step;
+    vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch."""
 
     p: np.ndarray
     R: np.ndarray
@@ -87,6 +93,7 @@ class Workspace(NamedTuple):
     a: np.ndarray
     Mb: np.ndarray
     Lb: np.ndarray
+    Lb_inv: np.ndarray
     h: np.ndarray
     h_arm: np.ndarray
     J: np.ndarray
@@ -158,8 +165,14 @@ def pack(model: Model) -> PackedModel:
     cat = lambda name: _f(np.concatenate([getattr(a, name) for a in arms]))  # noqa: E731
     stack = lambda name: _f(np.array([getattr(a, name) for a in arms]))      # noqa: E731
     tq_off, tq_t, tq_v = torque_arrays(model.torques, model.n_total)
+    R0, a = cat("joint_rot"), cat("joint_axis")
+    ax = np.zeros((len(a), 3, 3))              # [a×]
+    ax[:, 0, 1], ax[:, 0, 2], ax[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
+    ax[:, 1, 0], ax[:, 2, 0], ax[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
+    K1 = R0 @ ax
     return PackedModel(
-        dof, stack("base_pos"), stack("base_rot"), cat("joint_pos"), cat("joint_rot"), cat("joint_axis"),
+        dof, stack("base_pos"), stack("base_rot"), cat("joint_pos"), R0, a,
+        _f(K1), _f(K1 @ ax), _f(np.einsum("nij,nj->ni", R0, a)),
         cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
         float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
         _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],
@@ -175,7 +188,7 @@ def workspace(P: PackedModel) -> Workspace:
     return Workspace(
         z((N, 3)), z((N, 3, 3)), z((N, 3)), z((N, 3)), z((N, 3, 3)), z((r, 3)), z((r, 3, 3)),
         z((N, 3)), z((N, 3)), z((N, 3)),
-        z((N, nmax)), z((N, nmax)), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
+        z((N, nmax)), z((N, nmax)), z(N), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
         z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),
-        z((K, N)), z(K), z((N, K)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
+        z((K, N)), z(K), z((K, N)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
         np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3), z((4, 3, 3)))

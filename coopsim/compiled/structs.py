@@ -6,24 +6,71 @@ Python builds and reads the NamedTuples (`packing`, `integrate`); `to_struct` gi
 StructRef holding the *same* arrays (no copy), through cached constructors. Field types are fixed:
 float64 / int64 C-contiguous arrays and scalars. (This file lists the fields of the NamedTuples in
 order; a test checks that the two stay in step.)
+
+Field reads are *borrowed*: compiled code gets a field's array without taking a reference to it (its
+meminfo is left null), so reading `W.X` or indexing `W.R[j]` costs no atomic reference-count update.
+numba's own StructRef getattr takes one per read, and its refcount pruning cannot remove those that
+live across a call or a loop: they were about a third of an evaluation's time. The record keeps its
+arrays alive; a field array read in compiled code is valid while the record is, so it must not be
+returned to Python or stored in another record (no kernel does either). Fields are still set with a
+reference (the constructors below).
 """
 
 from __future__ import annotations
 
 from numba import njit, types
+from numba.core import cgutils, imputils
+from numba.core.datamodel import default_manager, models
+from numba.core.extending import infer_getattr, lower_getattr_generic, lower_setattr_generic
+from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
+from numba.np.arrayobj import make_array
 
 _F, _I = types.float64, types.int64
 _f1, _f2, _f3 = (types.Array(types.float64, d, "C") for d in (1, 2, 3))
 _i1 = types.Array(types.int64, 1, "C")
 
 
-@structref.register
 class StructType(types.StructRef):
     """The numba type of a coopsim record (fields as declared below)."""
 
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+# As `structref.register`, with borrowed field reads (module docstring).
+default_manager.register(StructType, models.StructRefModel)
+
+
+@infer_getattr
+class _StructAttribute(AttributeTemplate):
+    key = StructType
+
+    def generic_resolve(self, typ, attr):
+        return typ.field_dict.get(attr)
+
+
+@lower_getattr_generic(StructType)
+def _struct_getattr(context, builder, typ, val, attr):
+    value = getattr(structref._Utils(context, builder, typ).get_data_struct(val), attr)
+    fieldtype = typ.field_dict[attr]
+    if isinstance(fieldtype, types.Array):
+        ary = make_array(fieldtype)(context, builder, value=value)
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)   # no reference taken: borrowed
+        ary.parent = cgutils.get_null_value(ary.parent.type)
+        return ary._getvalue()
+    return imputils.impl_ret_borrowed(context, builder, fieldtype, value)
+
+
+@lower_setattr_generic(StructType)
+def _struct_setattr(context, builder, sig, args, attr):
+    [inst_type, val_type], [instance, val] = sig.args, args
+    data = structref._Utils(context, builder, inst_type).get_data_struct(instance)
+    value = context.cast(builder, val, val_type, inst_type.field_dict[attr])
+    old = getattr(data, attr)
+    context.nrt.incref(builder, val_type, value)
+    context.nrt.decref(builder, val_type, old)     # after the incref: the new value may be the old one
+    setattr(data, attr, value)
 
 
 class Struct(structref.StructRefProxy):
@@ -39,6 +86,9 @@ PACKED_FIELDS = (
     ("joint_pos", _f2),
     ("joint_rot", _f3),
     ("joint_axis", _f2),
+    ("joint_k1", _f3),
+    ("joint_k2", _f3),
+    ("joint_z", _f2),
     ("link_mass", _f1),
     ("link_com", _f2),
     ("link_inertia", _f3),
@@ -76,6 +126,7 @@ WORKSPACE_FIELDS = (
     ("a", _f2),
     ("Mb", _f2),
     ("Lb", _f2),
+    ("Lb_inv", _f1),
     ("h", _f1),
     ("h_arm", _f1),
     ("J", _f3),
@@ -159,6 +210,9 @@ def _new_packed(r):
     s.joint_pos = r.joint_pos
     s.joint_rot = r.joint_rot
     s.joint_axis = r.joint_axis
+    s.joint_k1 = r.joint_k1
+    s.joint_k2 = r.joint_k2
+    s.joint_z = r.joint_z
     s.link_mass = r.link_mass
     s.link_com = r.link_com
     s.link_inertia = r.link_inertia
@@ -198,6 +252,7 @@ def _new_workspace(r):
     s.a = r.a
     s.Mb = r.Mb
     s.Lb = r.Lb
+    s.Lb_inv = r.Lb_inv
     s.h = r.h
     s.h_arm = r.h_arm
     s.J = r.J
