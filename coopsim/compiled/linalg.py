@@ -1,12 +1,12 @@
 """Small dense linear algebra, in place, for the compiled kernels (no allocation on the hot path).
 
 `block_cholesky` factors one diagonal block of the block-diagonal closed-chain mass matrix;
-`psd_solve` solves the constraint system (Λ𝐈⁻¹Λᵀ) F = b: a Cholesky factorization with diagonal
-pivoting when the matrix is safely of full rank, else the reference's eigen-decomposition
-(minimum-norm solution, numerical rank from eigenvalues above rank_tol·λ_max). The switch is exact in
-effect: with diagonal pivoting λ_max ≤ K d_1 and λ_min ≥ d_K·9/(4^K + 6K − 1) (Higham, *Accuracy and
-Stability of Numerical Algorithms*, 2nd ed., Thm. 8.13 applied to the unit factor with |l_ij| ≤ 1), so
-a pivot ratio d_K/d_1 above rank_tol·K·(4^K + 6K − 1)/9 proves λ_min/λ_max > rank_tol.
+the constraint system (Λ𝐈⁻¹Λᵀ) F = b is solved by a Cholesky factorization with diagonal pivoting
+when the matrix is provably of full rank, else by the reference's eigen-decomposition (minimum-norm
+solution, numerical rank from eigenvalues above rank_tol·λ_max). The proof is a certified lower bound
+of λ_min/λ_max from the factor: A⁻¹ = Pᵀ L⁻ᵀ L⁻¹ P, so λ_min = 1/‖A⁻¹‖₂ ≥ 1/‖L⁻¹‖_F², and
+λ_max ≤ trace A; the bound 1/(‖L⁻¹‖_F² trace A) is at most K² times below the true ratio, so the
+eigen-decomposition runs only for matrices within K² of the rank threshold (cost: K³/6 flops).
 """
 
 from __future__ import annotations
@@ -70,15 +70,14 @@ def block_solve_col(L, o, n, X, c):
 @kernel
 def pivoted_cholesky(A, Lf, perm, K):
     """Cholesky factorization with diagonal pivoting P A Pᵀ = L Lᵀ of the symmetric PSD A (K, K) into
-    Lf (lower), perm[i] the row of A in position i. Returns the pivot ratio d_K/d_1 (d = L_ii²;
-    0 if a pivot is not positive). Works on the lower triangle only (A's is read, Lf's upper triangle
-    is left as it was): a pivot swaps rows and columns j, p of the symmetric trailing matrix as
+    Lf (lower), perm[i] the row of A in position i. Returns the certified lower bound
+    1/(‖L⁻¹‖_F² trace A) of λ_min/λ_max (module docstring; 0 if a pivot is not positive). Works on the
+    lower triangle (A's is read; Lf's strict upper triangle is scratch for the columns of L⁻¹): a pivot swaps rows and columns j, p of the symmetric trailing matrix as
     LAPACK's dsyswapr does, and rows j, p of the columns already factored."""
     for i in range(K):
         perm[i] = i
         for j in range(i + 1):
             Lf[i, j] = A[i, j]
-    d1 = 0.0
     for j in range(K):
         best, p = -1.0, j
         for i in range(j, K):
@@ -94,8 +93,6 @@ def pivoted_cholesky(A, Lf, perm, K):
                 Lf[i, j], Lf[i, p] = Lf[i, p], Lf[i, j]
             perm[j], perm[p] = perm[p], perm[j]
         d = Lf[j, j]
-        if j == 0:
-            d1 = d
         if not d > 0.0:
             return 0.0
         dj = np.sqrt(d)
@@ -107,7 +104,33 @@ def pivoted_cholesky(A, Lf, perm, K):
             lc = Lf[c, j]
             for i in range(c, K):
                 Lf[i, c] -= Lf[i, j] * lc
-    return Lf[K - 1, K - 1] ** 2 / d1
+    return 1.0 / (inverse_factor_norm2(Lf, K) * trace(A, K))
+
+
+@kernel
+def trace(A, K):
+    v = 0.0
+    for i in range(K):
+        v += A[i, i]
+    return v
+
+
+@kernel
+def inverse_factor_norm2(Lf, K):
+    """‖L⁻¹‖_F² of the lower factor in Lf: column j of L⁻¹ by forward substitution (L x = e_j, x_i = 0
+    for i < j), its entries below the diagonal kept in row j of Lf's strict upper triangle."""
+    total = 0.0
+    for j in range(K):
+        xj = 1.0 / Lf[j, j]
+        total += xj * xj
+        for i in range(j + 1, K):
+            v = -Lf[i, j] * xj
+            for t in range(j + 1, i):
+                v -= Lf[i, t] * Lf[j, t]
+            v /= Lf[i, i]
+            Lf[j, i] = v
+            total += v * v
+    return total
 
 
 @kernel
@@ -133,8 +156,9 @@ def pivoted_solve(Lf, perm, K, b, y, x):
 
 @kernel
 def safe_pivot_ratio(K, rank_tol):
-    """The pivot ratio above which λ_min/λ_max > rank_tol is guaranteed (module docstring)."""
-    return rank_tol * K * (4.0 ** K + 6.0 * K - 1.0) / 9.0
+    """The value of `pivoted_cholesky`'s certified ratio above which λ_min/λ_max > rank_tol is proven:
+    rank_tol itself (the bound is rigorous; K is kept for the callers' signature)."""
+    return rank_tol
 
 
 @kernel
