@@ -298,12 +298,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _announce_compile() -> None:
-    """Say so before the first run on this machine compiles the native model (tens of seconds)."""
-    from .compiled.api import compile_pending
+    """Say so when the first run on this machine starts compiling the native model (tens of seconds)."""
+    from .compiled.api import set_compile_notice
 
-    if compile_pending():
-        print("coopsim: compiling the native model for this machine (first run only; about half a minute)...",
-              file=sys.stderr, flush=True)
+    set_compile_notice(lambda: print("coopsim: compiling the native model for this machine (first run only; "
+                                     "about half a minute)...", file=sys.stderr, flush=True))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -25,6 +25,22 @@ def run_cli(*args, cwd):
                           capture_output=True, text=True, timeout=600)
 
 
+def pytest_sessionstart(session):
+    """Compile the native model once, before any test (and before xdist starts its workers, whose
+    processes and the CLI subprocesses then load it from numba's cache instead of compiling it each)."""
+    if hasattr(session.config, "workerinput"):
+        return
+    from coopsim.compiled import api
+    from coopsim.inverse import inverse_problem
+    from coopsim.simulate import simulate
+    from coopsim.trajectory import from_simulation
+
+    model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
+    res = simulate(model, duration=0.02)
+    inverse_problem(model, from_simulation(res))
+    api.solve_arm(model, 0, res.object_pos[0], np.eye(3), np.zeros(6), np.zeros(6), res.q[0], max_iter=1)
+
+
 @pytest.fixture
 def workdir(tmp_path):
     """A temporary folder holding a copy of scenarios/."""

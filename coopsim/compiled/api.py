@@ -57,6 +57,15 @@ def compile_pending() -> bool:
         return False
 
 
+_notice: list = []
+
+
+def set_compile_notice(fn) -> None:
+    """Call fn() once, just before this process first packs a model while compiled code is missing
+    from the cache (the command line uses it to say that the first run compiles)."""
+    _notice[:] = [fn]
+
+
 def compiled(model: Model) -> Compiled:
     """The compiled form of `model`, built once per model object, and shared by models that differ
     only in what packing does not read (duration, output grid, tolerances, initial state, MuJoCo and
@@ -65,6 +74,8 @@ def compiled(model: Model) -> Compiled:
     if hit is None:
         key = _content_key(model)
         entry = _BY_CONTENT.pop(key, None)
+        if _notice and compile_pending():
+            _notice.pop()()
         if entry is None:
             P = pack(model)
             W = workspace(P)
