@@ -301,8 +301,14 @@ def _announce_compile() -> None:
     """Say so when the first run on this machine starts compiling the native model (tens of seconds)."""
     from .compiled.api import set_compile_notice
 
-    set_compile_notice(lambda: print("coopsim: compiling the native model for this machine (first run only; "
-                                     "about half a minute)...", file=sys.stderr, flush=True))
+    def notice():
+        print("coopsim: compiling the native model for this machine (first run only; about half a minute)...",
+              file=sys.stderr, flush=True)
+        from .compiled.warmup import warm_up
+
+        warm_up()
+
+    set_compile_notice(notice)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,17 +28,10 @@ def run_cli(*args, cwd):
 def pytest_sessionstart(session):
     """Compile the native model once, before any test (and before xdist starts its workers, whose
     processes and the CLI subprocesses then load it from numba's cache instead of compiling it each)."""
-    if hasattr(session.config, "workerinput"):
-        return
-    from coopsim.compiled import api
-    from coopsim.inverse import inverse_problem
-    from coopsim.simulate import simulate
-    from coopsim.trajectory import from_simulation
+    if not hasattr(session.config, "workerinput"):
+        from coopsim.compiled.warmup import warm_up
 
-    model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
-    res = simulate(model, duration=0.02)
-    inverse_problem(model, from_simulation(res))
-    api.solve_arm(model, 0, res.object_pos[0], np.eye(3), np.zeros(6), np.zeros(6), res.q[0], max_iter=1)
+        warm_up()
 
 
 @pytest.fixture
