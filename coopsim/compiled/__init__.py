@@ -4,15 +4,20 @@ The plain-NumPy modules (`coopsim.kinematics`, `gibbs_appell`, `grasp`, `closed_
 `integrate`) are the readable reference; this package runs the same equations compiled, with no
 Python and no allocation per evaluation, and is what the commands use. Stages, in the order they run:
 
+    jit.py         the two compilation modes: internal kernels and entries called from Python
     packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
-    linalg.py      small in-place factorizations (Cholesky, pivoted Cholesky, symmetric solves)
+    structs.py     both as numba StructRefs (passed by reference), built by cached constructors
+    linalg.py      small in-place factorizations (block Cholesky, pivoted Cholesky with a certified
+                   rank test, eigen fallback)
     spatial.py     3-vector / 3×3 helpers, rotation log, quaternion
     chain.py       kinematics → Gibbs–Appell arm terms → object/grasp terms → closed-chain solve
     manifold.py    loop-closure residual Φ, projection of positions and rates
-    integrate.py   DOP853 / DOPRI5 (dense output) / RK4 time loop, torque tables, stabilization
-    sample.py      every reported quantity at the output samples
-    batch.py       many states (and many parameter sets) at once, in parallel
-    api.py         the Python entry points and their error reporting
+    tableaux.py    DOP853 and Dormand–Prince coefficients, dense output included
+    integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop, torque tables, stabilization
+    sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
+    ik.py          one arm's inverse kinematics and rates
+    api.py         the Python entry points (batches on threads, parameter sets) and error reporting
+    warmup.py      the first compile, on two cores
 
 Tested against the reference stages at random states of every bundled scenario (≤ 1e-12 relative).
 """
