@@ -6,9 +6,10 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
 
     jit.py         the two compilation modes: internal kernels and entries called from Python
     packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
-    structs.py     both as numba StructRefs (passed by reference), built by cached constructors
-    linalg.py      small in-place factorizations (block Cholesky, pivoted Cholesky with a certified
-                   rank test, eigen fallback)
+    structs.py     both as numba StructRefs (passed by reference, fields read without reference
+                   counting), built by cached constructors
+    linalg.py      small in-place factorizations (pivoted Cholesky with a certified rank test, eigen
+                   fallback)
     spatial.py     3-vector / 3×3 helpers, rotation log, quaternion
     chain.py       kinematics → Gibbs–Appell arm terms → object/grasp terms → closed-chain solve
     manifold.py    loop-closure residual Φ, projection of positions and rates

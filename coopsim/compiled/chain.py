@@ -8,7 +8,8 @@ into the buffers of a `Workspace` (world axes, SI). Two algorithmic differences,
     first moment h_C = Σ m_i c_i, inertia about the arm's base point I_C), a unit θ̈_l needs the force
     f = z_l × (h_C − m_C p_l) and the moment (base point) n = I_C z_l − h_C × (z_l × p_l), so
     I_m[j, l] = z_j · (n − p_j × f) for j ≤ l — the same entries ∂²S/∂θ̈_j∂θ̈_l;
-  * 𝐈 is block diagonal (one block per arm, the object in the carrier's), factored block by block.
+  * 𝐈 is block diagonal (one block per arm, the object in the carrier's), factored block by block,
+    and Λ𝐈⁻¹Λᵀ is formed as YᵀY with Y = L⁻¹Λᵀ (`chain_solve`).
 Return codes of `chain_forward`: OK, NOT_PD (a mass-matrix block is not positive definite),
 RANK_DEFICIENT (Λ𝐈⁻¹Λᵀ lost rank: minimum-norm grasp wrenches were used), NON_FINITE.
 """
@@ -21,6 +22,7 @@ from .jit import kernel
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from .packing import STAB_BAUMGARTE
 from .spatial import rot_log
+from .structs import borrow
 
 OK, NOT_PD, RANK_DEFICIENT, NON_FINITE = 0, 1, 2, 3
 
@@ -385,12 +387,10 @@ def constraint_jacobian(P, W):
         s0, s1, s2 = s[m, 0], s[m, 1], s[m, 2]
         for i in range(k):
             row = g * k + i
-            for j in range(nm):
-                v = 0.0
-                for a in range(6):
-                    v += S[i, a] * J[m, a, j]
-                Lam[row, om + j] = v
             S0, S1, S2, S3, S4, S5 = S[i, 0], S[i, 1], S[i, 2], S[i, 3], S[i, 4], S[i, 5]
+            for j in range(nm):
+                Lam[row, om + j] = (S0 * J[m, 0, j] + S1 * J[m, 1, j] + S2 * J[m, 2, j] + S3 * J[m, 3, j]
+                                    + S4 * J[m, 4, j] + S5 * J[m, 5, j])
             for j in range(nc):
                 jw0, jw1, jw2 = J_o[3, j], J_o[4, j], J_o[5, j]
                 v = (S0 * (J_o[0, j] + s1 * jw2 - s2 * jw1) + S1 * (J_o[1, j] + s2 * jw0 - s0 * jw2)
@@ -508,6 +508,7 @@ def chain_solve(P, W, tau, stab):
     followed by its forward substitution; its transpose is kept in the strict upper triangle of
     W.Lb, so that both substitutions read rows. The loops run over views of one block, indexed
     from 0 (numba then need not wrap negative indices)."""
+    tau, stab = borrow(tau), borrow(stab)
     dof, c, k, rank_tol = P.dof, P.carrier, P.rows.shape[0], P.rank_tol
     Lam, Yt, z, h, Mb, Lb, Li, b, A = W.Lam, W.X, W.x0, W.h, W.Mb, W.Lb, W.Lb_inv, W.b, W.A
     F, qdd, res, A_f, perm, yK, dF, Ldq, rank = W.F, W.qdd, W.res, W.A_f, W.perm, W.yK, W.dF, W.Lam_dot_qd, W.rank
@@ -521,14 +522,13 @@ def chain_solve(P, W, tau, stab):
         if m != c:
             g = m - 1 if m > c else m
             i0, i1 = g * k, g * k + k
-        M, L, Lim, zm, taum, hm = Mb[o:e], Lb[o:e], Li[o:e], z[o:e], tau[o:e], h[o:e]
-        Ym, Lamm = Yt[i0:i1, o:e], Lam[i0:i1, o:e]
+        M, L, Ym, Lamm = Mb[o:e], Lb[o:e], Yt[i0:i1, o:e], Lam[i0:i1, o:e]
         for j in range(e - o):
             for t in range(j):
                 v = M[j, t]
                 for s in range(t):
                     v -= L[j, s] * L[t, s]
-                v *= Lim[t]
+                v *= Li[o + t]
                 L[j, t] = v
                 L[t, j] = v
             d = M[j, j]
@@ -539,11 +539,11 @@ def chain_solve(P, W, tau, stab):
             d = np.sqrt(d)
             inv = 1.0 / d
             L[j, j] = d
-            Lim[j] = inv
-            v = taum[j] - hm[j]
+            Li[o + j] = inv
+            v = tau[o + j] - h[o + j]
             for t in range(j):
-                v -= L[j, t] * zm[t]
-            zm[j] = v * inv
+                v -= L[j, t] * z[o + t]
+            z[o + j] = v * inv
             for i in range(i1 - i0):
                 v = Lamm[i, j]
                 for t in range(j):
@@ -580,15 +580,15 @@ def chain_solve(P, W, tau, stab):
             if m != c:
                 g = m - 1 if m > c else m
                 i0, i1 = g * k, g * k + k
-            L, Lim, zm, qm, Ym, Fm = Lb[o:e], Li[o:e], z[o:e], qdd[o:e], Yt[i0:i1, o:e], F[i0:i1]
+            L, Ym = Lb[o:e], Yt[i0:i1, o:e]
             n = e - o
             for j in range(n - 1, -1, -1):
-                v = zm[j]
+                v = z[o + j]
                 for i in range(i1 - i0):
-                    v -= Ym[i, j] * Fm[i]
+                    v -= Ym[i, j] * F[i0 + i]
                 for t in range(j + 1, n):
-                    v -= L[j, t] * qm[t]
-                qm[j] = v * Lim[j]
+                    v -= L[j, t] * qdd[o + t]
+                qdd[o + j] = v * Li[o + j]
         if it == 1:
             break
         # refinement: residual of Λθ̈ + Λ̇θ̇ + stab = 0
@@ -641,7 +641,9 @@ def chain_forward(P, W, q, qd, tau, stab):
 
     `chain_terms`, `baumgarte_rhs` and `chain_solve`, with the stages of the first called from here
     directly: every level of calls takes references to its array arguments that numba cannot prune
-    (atomic updates), and the Baumgarte kernel is only entered when selected."""
+    (atomic updates), and the Baumgarte kernel is only entered when selected. The array arguments
+    are borrowed at once (`structs.borrow`): no reference to them is held across the calls."""
+    q, qd, tau, stab = borrow(q), borrow(qd), borrow(tau), borrow(stab)
     for m in range(len(P.dof) - 1):
         arm_kinematics(P, W, m, q)
         arm_jacobian(P, W, m)

@@ -137,21 +137,22 @@ def stage_times(t0: float, t1: float, step: float, C: np.ndarray, stages: int) -
 @kernel
 def torque_at(P, t, tau):
     """τ(t) (N,) from the packed per-joint tables: linear between knots, held outside."""
+    off, tt, tv = P.tq_off, P.tq_t, P.tq_v
     for j in range(P.dof[-1]):
-        lo, hi = P.tq_off[j], P.tq_off[j + 1] - 1
-        if hi == lo or t <= P.tq_t[lo]:
-            tau[j] = P.tq_v[lo]
-        elif t >= P.tq_t[hi]:
-            tau[j] = P.tq_v[hi]
+        lo, hi = off[j], off[j + 1] - 1
+        if hi == lo or t <= tt[lo]:
+            tau[j] = tv[lo]
+        elif t >= tt[hi]:
+            tau[j] = tv[hi]
         else:
             while hi - lo > 1:
                 mid = (lo + hi) // 2
-                if P.tq_t[mid] <= t:
+                if tt[mid] <= t:
                     lo = mid
                 else:
                     hi = mid
-            t0 = P.tq_t[lo]
-            tau[j] = P.tq_v[lo] + (t - t0) / (P.tq_t[lo + 1] - t0) * (P.tq_v[lo + 1] - P.tq_v[lo])
+            t0 = tt[lo]
+            tau[j] = tv[lo] + (t - t0) / (tt[lo + 1] - t0) * (tv[lo + 1] - tv[lo])
 
 
 @kernel
@@ -197,20 +198,22 @@ def rhs(P, W, L, t, y, dy):
 @kernel
 def stage_input(tab, L, y, h, i):
     """L.ytmp ← y + h Σ_{j<i} a_ij K_j, the state at which stage i is evaluated."""
+    A, Ks, out = tab.A, L.K, L.ytmp
     for x in range(len(y)):
         acc = 0.0
         for j in range(i):
-            acc += tab.A[i, j] * L.K[j, x]
-        L.ytmp[x] = y[x] + h * acc
+            acc += A[i, j] * Ks[j, x]
+        out[x] = y[x] + h * acc
 
 
 @kernel
 def rk_combine(tab, L, y, h, out):
     """out ← y + h Σ_i b_i K_i."""
+    B, Ks, s = tab.B, L.K, tab.stages
     for x in range(len(y)):
         acc = 0.0
-        for i in range(tab.stages):
-            acc += tab.B[i] * L.K[i, x]
+        for i in range(s):
+            acc += B[i] * Ks[i, x]
         out[x] = y[x] + h * acc
 
 
@@ -219,15 +222,16 @@ def error_norm(tab, L, y, y_new, h, rtol, atol):
     """Scaled error of the step: DOP853 |h| ‖e5‖² / sqrt(n (‖e5‖² + 0.01 ‖e3‖²)) (Hairer's code),
     else |h| ‖e‖_RMS, with e = Σ_j E_j K_j / (atol + rtol max(|y|, |y_new|))."""
     n = len(y)
+    E5, E3, Ks, s = tab.E5, tab.E3, L.K, tab.stages
     e5 = 0.0
     e3 = 0.0
     for x in range(n):
         sc = atol + rtol * max(abs(y[x]), abs(y_new[x]))
         a5 = 0.0
         a3 = 0.0
-        for j in range(tab.stages + 1):
-            a5 += tab.E5[j] * L.K[j, x]
-            a3 += tab.E3[j] * L.K[j, x]
+        for j in range(s + 1):
+            a5 += E5[j] * Ks[j, x]
+            a3 += E3[j] * Ks[j, x]
         e5 += (a5 / sc) ** 2
         e3 += (a3 / sc) ** 2
     if tab.code == DOP853:
@@ -243,43 +247,47 @@ def dense_coefficients(tab, L, y, y_new, h):
     extra stages 13–15 in L.K): F_0 = Δy, F_1 = h f_0 − Δy, F_2 = 2Δy − h (f_0 + f_new), F_3…6 = h D K.
     Dormand–Prince: Q = Kᵀ Pd (rows 0…3 of Fd)."""
     n = len(y)
+    Ks, Fd = L.K, L.Fd
     if tab.code == DOPRI5:
+        Pd = tab.Pd
         for k in range(4):
             for x in range(n):
                 acc = 0.0
                 for j in range(7):
-                    acc += L.K[j, x] * tab.Pd[j, k]
-                L.Fd[k, x] = acc
+                    acc += Ks[j, x] * Pd[j, k]
+                Fd[k, x] = acc
         return
+    D = tab.D
     for x in range(n):
         dy = y_new[x] - y[x]
-        L.Fd[0, x] = dy
-        L.Fd[1, x] = h * L.K[0, x] - dy
-        L.Fd[2, x] = 2.0 * dy - h * (L.K[12, x] + L.K[0, x])
+        Fd[0, x] = dy
+        Fd[1, x] = h * Ks[0, x] - dy
+        Fd[2, x] = 2.0 * dy - h * (Ks[12, x] + Ks[0, x])
         for k in range(4):
             acc = 0.0
             for j in range(16):
-                acc += tab.D[k, j] * L.K[j, x]
-            L.Fd[3 + k, x] = h * acc
+                acc += D[k, j] * Ks[j, x]
+            Fd[3 + k, x] = h * acc
 
 
 @kernel
 def dense_eval(tab, L, y, h, u, out):
     """out ← the dense output at t + u h (0 ≤ u ≤ 1) of the prepared step from y."""
     n = len(y)
+    Fd = L.Fd
     if tab.code == DOPRI5:
         for x in range(n):
             acc = 0.0
             p = u
             for k in range(4):
-                acc += L.Fd[k, x] * p
+                acc += Fd[k, x] * p
                 p *= u
             out[x] = y[x] + h * acc
         return
     for x in range(n):
         acc = 0.0
         for i in range(7):
-            acc += L.Fd[6 - i, x]
+            acc += Fd[6 - i, x]
             acc *= u if i % 2 == 0 else 1.0 - u
         out[x] = y[x] + acc
 

@@ -1,70 +1,20 @@
 """Small dense linear algebra, in place, for the compiled kernels (no allocation on the hot path).
 
-`block_cholesky` factors one diagonal block of the block-diagonal closed-chain mass matrix;
-the constraint system (Λ𝐈⁻¹Λᵀ) F = b is solved by a Cholesky factorization with diagonal pivoting
+The constraint system (Λ𝐈⁻¹Λᵀ) F = b is solved by a Cholesky factorization with diagonal pivoting
 when the matrix is provably of full rank, else by the reference's eigen-decomposition (minimum-norm
 solution, numerical rank from eigenvalues above rank_tol·λ_max). The proof is a certified lower bound
 of λ_min/λ_max from the factor: A⁻¹ = Pᵀ L⁻ᵀ L⁻¹ P, so λ_min = 1/‖A⁻¹‖₂ ≥ 1/‖L⁻¹‖_F², and
 λ_max ≤ trace A; the bound 1/(‖L⁻¹‖_F² trace A) is at most K² times below the true ratio, so the
 eigen-decomposition runs only for matrices within K² of the rank threshold (cost: K³/6 flops).
+(The block-diagonal mass matrix is factored inside `chain.chain_solve`.) The factorization and the
+solve borrow their array arguments on entry (`structs.borrow`): no reference counting on them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from .jit import kernel
-
-
-@kernel
-def block_cholesky(M, L, o, n):
-    """Lower Cholesky factor of the SPD block M[o:o+n, 0:n] into L[o:o+n, 0:n]; False if not positive
-    definite (or not finite)."""
-    for j in range(n):
-        d = M[o + j, j]
-        for k in range(j):
-            d -= L[o + j, k] * L[o + j, k]
-        if not d > 0.0:
-            return False
-        d = np.sqrt(d)
-        L[o + j, j] = d
-        for i in range(j + 1, n):
-            v = M[o + i, j]
-            for k in range(j):
-                v -= L[o + i, k] * L[o + j, k]
-            L[o + i, j] = v / d
-        for i in range(j):
-            L[o + i, j] = 0.0
-    return True
-
-
-@kernel
-def block_solve(L, o, n, x, xo):
-    """x[xo:xo+n] ← (L Lᵀ)⁻¹ x[xo:xo+n] with the factor L[o:o+n, 0:n] (in place)."""
-    for i in range(n):
-        v = x[xo + i]
-        for k in range(i):
-            v -= L[o + i, k] * x[xo + k]
-        x[xo + i] = v / L[o + i, i]
-    for i in range(n - 1, -1, -1):
-        v = x[xo + i]
-        for k in range(i + 1, n):
-            v -= L[o + k, i] * x[xo + k]
-        x[xo + i] = v / L[o + i, i]
-
-
-@kernel
-def block_solve_col(L, o, n, X, c):
-    """X[o:o+n, c] ← (L Lᵀ)⁻¹ X[o:o+n, c] (column c of a matrix, rows of block o)."""
-    for i in range(n):
-        v = X[o + i, c]
-        for k in range(i):
-            v -= L[o + i, k] * X[o + k, c]
-        X[o + i, c] = v / L[o + i, i]
-    for i in range(n - 1, -1, -1):
-        v = X[o + i, c]
-        for k in range(i + 1, n):
-            v -= L[o + k, i] * X[o + k, c]
-        X[o + i, c] = v / L[o + i, i]
+from .structs import borrow
 
 
 @kernel
@@ -74,6 +24,7 @@ def pivoted_cholesky(A, Lf, perm, K):
     1/(‖L⁻¹‖_F² trace A) of λ_min/λ_max (module docstring; 0 if a pivot is not positive). Works on the
     lower triangle (A's is read; Lf's strict upper triangle is scratch for the columns of L⁻¹): a pivot swaps rows and columns j, p of the symmetric trailing matrix as
     LAPACK's dsyswapr does, and rows j, p of the columns already factored."""
+    A, Lf, perm = borrow(A), borrow(Lf), borrow(perm)
     for i in range(K):
         perm[i] = i
         for j in range(i + 1):
@@ -138,6 +89,7 @@ def pivoted_solve(Lf, perm, K, b, y, x):
     """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b); y (K,) is
     scratch; b is left unchanged and may alias neither y nor x. x holds the reciprocals 1/L_ii until
     the end (the substitutions multiply: no division on their dependency chain)."""
+    Lf, perm, b, y, x = borrow(Lf), borrow(perm), borrow(b), borrow(y), borrow(x)
     for i in range(K):
         x[i] = 1.0 / Lf[i, i]
     for i in range(K):

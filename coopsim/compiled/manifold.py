@@ -13,6 +13,7 @@ import numpy as np
 from .chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
 from .jit import kernel
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from .structs import borrow
 
 PROJECTION_FAILED = 7
 
@@ -31,23 +32,24 @@ def closure_kinematics(P, W, q):
 @kernel
 def min_norm_step(P, W, rhs, out):
     """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam."""
-    K, N = W.Lam.shape
+    Lam, A, A_f, perm, b, yK, dF, rank_tol = W.Lam, W.A, W.A_f, W.perm, W.b, W.yK, W.dF, P.rank_tol
+    K, N = Lam.shape
     for i in range(K):
         for l in range(i, K):
             v = 0.0
             for j in range(N):
-                v += W.Lam[i, j] * W.Lam[l, j]
-            W.A[i, l] = v
-            W.A[l, i] = v
-        W.b[i] = rhs[i]
-    if pivoted_cholesky(W.A, W.A_f, W.perm, K) > safe_pivot_ratio(K, P.rank_tol):
-        pivoted_solve(W.A_f, W.perm, K, W.b, W.yK, W.dF)
+                v += Lam[i, j] * Lam[l, j]
+            A[i, l] = v
+            A[l, i] = v
+        b[i] = rhs[i]
+    if pivoted_cholesky(A, A_f, perm, K) > safe_pivot_ratio(K, rank_tol):
+        pivoted_solve(A_f, perm, K, b, yK, dF)
     else:
-        eig_solve(W.A, W.b, W.dF, K, P.rank_tol)
+        eig_solve(A, b, dF, K, rank_tol)
     for j in range(N):
         v = 0.0
         for i in range(K):
-            v += W.Lam[i, j] * W.dF[i]
+            v += Lam[i, j] * dF[i]
         out[j] = v
 
 
@@ -69,6 +71,7 @@ def project_state(P, W, y, tol, max_iter, step):
     """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 (to max |Φ| ≤ tol, at most max_iter Gauss–Newton steps)
     and Λ(θ)θ̇ = 0, in place; step (N,) scratch. Returns 0 or PROJECTION_FAILED (W.phi holds the
     last residual)."""
+    y, step = borrow(y), borrow(step)
     N = P.dof[-1]
     q, qd = y[:N], y[N:]
     K = W.Lam.shape[0]
@@ -81,13 +84,14 @@ def project_state(P, W, y, tol, max_iter, step):
         min_norm_step(P, W, W.phi, step)
         for j in range(N):
             q[j] -= step[j]
+    Lam, res = W.Lam, W.res
     for _ in range(2):
         for i in range(K):
             v = 0.0
             for j in range(N):
-                v += W.Lam[i, j] * qd[j]
-            W.res[i] = v
-        min_norm_step(P, W, W.res, step)
+                v += Lam[i, j] * qd[j]
+            res[i] = v
+        min_norm_step(P, W, res, step)
         for j in range(N):
             qd[j] -= step[j]
     return 0

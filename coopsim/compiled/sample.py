@@ -51,20 +51,21 @@ def new_samples(S: int, N: int, r: int) -> Samples:
 @kernel
 def object_acceleration(P, W, qdd, out):
     """v̇_o (6,) = J_o θ̈_c + J̇_oθ̇_c."""
-    o = P.dof[P.carrier]
+    dof, c, J_o, Jd_o_qd = P.dof, P.carrier, W.J_o, W.Jd_o_qd
+    o, n = dof[c], dof[c + 1] - dof[c]
     for a in range(6):
-        v = W.Jd_o_qd[a]
-        for j in range(P.dof[P.carrier + 1] - o):
-            v += W.J_o[a, j] * qdd[o + j]
+        v = Jd_o_qd[a]
+        for j in range(n):
+            v += J_o[a, j] * qdd[o + j]
         out[a] = v
 
 
 @kernel
 def object_wrench(P, W, vd, out):
     """Y (6,) = M_o v̇_o + b_o = [m_o (v̇_C − g); K_o ω̇ + ω × K_o ω]."""
-    K, w = W.K_o, W.v_o[3:]
+    K, w, mo, g = W.K_o, W.v_o[3:], P.obj_mass, P.gravity
     for a in range(3):
-        out[a] = P.obj_mass * (vd[a] - P.gravity[a])
+        out[a] = mo * (vd[a] - g[a])
         out[3 + a] = K[a, 0] * vd[3] + K[a, 1] * vd[4] + K[a, 2] * vd[5]
     Kw0 = K[0, 0] * w[0] + K[0, 1] * w[1] + K[0, 2] * w[2]
     Kw1 = K[1, 0] * w[0] + K[1, 1] * w[1] + K[1, 2] * w[2]

@@ -21,7 +21,7 @@ from __future__ import annotations
 from numba import njit, types
 from numba.core import cgutils, imputils
 from numba.core.datamodel import default_manager, models
-from numba.core.extending import infer_getattr, lower_getattr_generic, lower_setattr_generic
+from numba.core.extending import infer_getattr, intrinsic, lower_getattr_generic, lower_setattr_generic
 from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
 from numba.np.arrayobj import make_array
@@ -50,16 +50,34 @@ class _StructAttribute(AttributeTemplate):
         return typ.field_dict.get(attr)
 
 
+def _borrow_array(context, builder, arytype, value):
+    """The array `value` with a null meminfo (and parent): numba takes no reference to it."""
+    ary = make_array(arytype)(context, builder, value=value)
+    ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+    ary.parent = cgutils.get_null_value(ary.parent.type)
+    return ary._getvalue()
+
+
 @lower_getattr_generic(StructType)
 def _struct_getattr(context, builder, typ, val, attr):
     value = getattr(structref._Utils(context, builder, typ).get_data_struct(val), attr)
     fieldtype = typ.field_dict[attr]
     if isinstance(fieldtype, types.Array):
-        ary = make_array(fieldtype)(context, builder, value=value)
-        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)   # no reference taken: borrowed
-        ary.parent = cgutils.get_null_value(ary.parent.type)
-        return ary._getvalue()
+        return _borrow_array(context, builder, fieldtype, value)
     return imputils.impl_ret_borrowed(context, builder, fieldtype, value)
+
+
+@intrinsic
+def borrow(typingctx, arr):
+    """`arr` borrowed, as a field read (module docstring): for a kernel's array arguments, whose
+    owner outlives the call, so that passing them on to other kernels costs no reference count."""
+    if not isinstance(arr, types.Array):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return _borrow_array(context, builder, sig.args[0], args[0])
+
+    return arr(arr), codegen
 
 
 @lower_setattr_generic(StructType)
