@@ -22,3 +22,35 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
 
 Tested against the reference stages at random states of every bundled scenario (≤ 1e-12 relative).
 """
+
+import hashlib as _hashlib
+from pathlib import Path as _Path
+
+from numba.core import config as _numba_config
+
+
+def _cache_dir() -> str:
+    """numba's cache for this package, keyed by the package's sources: numba re-validates a cached
+    entry against its own file only, though it holds the kernels of the other files compiled into it,
+    so an edited kernel would otherwise run stale from another entry's cache. Under NUMBA_CACHE_DIR
+    if that is set, else in this folder's __pycache__."""
+    here = _Path(__file__).resolve().parent
+    digest = _hashlib.sha256()
+    for path in sorted(here.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    base = _numba_config.CACHE_DIR or str(here / "__pycache__")
+    return str(_Path(base) / f"coopsim-{digest.hexdigest()[:16]}")
+
+
+def _import_kernels() -> None:
+    """Import every compiled module with numba's cache directory set to `_cache_dir()` (restored after:
+    the choice is made once per function, when it is decorated)."""
+    previous = _numba_config.CACHE_DIR
+    _numba_config.CACHE_DIR = _cache_dir()
+    try:
+        from . import api, chain, ik, integrate, linalg, manifold, sample, spatial, structs, warmup  # noqa: F401
+    finally:
+        _numba_config.CACHE_DIR = previous
+
+
+_import_kernels()
