@@ -48,7 +48,7 @@ def _import_kernels() -> None:
     previous = _numba_config.CACHE_DIR
     _numba_config.CACHE_DIR = _cache_dir()
     try:
-        from . import api, chain, ik, integrate, linalg, manifold, sample, spatial, structs, warmup  # noqa: F401
+        from . import api, chain, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
     finally:
         _numba_config.CACHE_DIR = previous
 
