@@ -396,6 +396,9 @@ _CUBE_SCHEMA = {
     "required": ["pose", "size", "color"],
 }
 
+# The published foxglove.SceneEntity requires every primitive array; these are written empty.
+_UNUSED_PRIMITIVES = ("arrows", "spheres", "cylinders", "lines", "triangles", "texts", "models")
+
 SCENE_UPDATE_SCHEMA: dict = {
     "title": "foxglove.SceneUpdate",
     "description": "An update to the entities displayed in a 3D scene",
@@ -415,7 +418,8 @@ SCENE_UPDATE_SCHEMA: dict = {
                              "description": "Type of deletion action to perform",
                              "oneOf": [{"title": "MATCHING_ID", "const": 0}, {"title": "ALL", "const": 1}]},
                     "id": {"type": "string", "description": "Identifier which must match if `type` is `MATCHING_ID`."},
-                }}},
+                },
+                "required": ["timestamp", "type", "id"]}},
         "entities": {
             "type": "array",
             "description": "Scene entities to add or replace",
@@ -441,8 +445,12 @@ SCENE_UPDATE_SCHEMA: dict = {
                                            "properties": {"key": {"type": "string"}, "value": {"type": "string"}},
                                            "required": ["key", "value"]}},
                     "cubes": {"type": "array", "description": "Cube primitives", "items": _CUBE_SCHEMA},
+                    **{kind: {"type": "array", "description": f"{kind.capitalize()} primitives (none written)",
+                              "maxItems": 0, "items": {"type": "object", "properties": {}}}
+                       for kind in _UNUSED_PRIMITIVES},
                 },
-                "required": ["timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "cubes"],
+                "required": ["timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "cubes",
+                             *_UNUSED_PRIMITIVES],
             }},
     },
     "required": ["deletions", "entities"],
@@ -551,7 +559,8 @@ def _cube_entity(frame: str, center, size, color: dict) -> dict:
     return {"timestamp": stamp(0), "frame_id": frame, "id": frame, "lifetime": {"sec": 0, "nsec": 0},
             "frame_locked": True, "metadata": [],
             "cubes": [{"pose": {"position": v3(center), "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
-                       "size": v3(size), "color": dict(color)}]}
+                       "size": v3(size), "color": dict(color)}],
+            **{kind: [] for kind in _UNUSED_PRIMITIVES}}
 
 
 def _model_entities(model: Model, root: str, color: dict) -> list[dict]:
