@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from coopsim.spatial import quat_to_rot
 from conftest import SCENARIOS
 
 SCENARIO_FILE = SCENARIOS / "paper_planar_2x3.yaml"
+FOXGLOVE_DATA = Path(__file__).resolve().parent / "data" / "foxglove"
 
 
 @pytest.fixture(scope="module")
@@ -153,10 +155,10 @@ def test_foxglove_schemas_and_frames_of_every_link(run, logged):
     path, data = logged
     assert data.schemas["/tf"] == "foxglove.FrameTransforms" and data.schemas["/scene"] == "foxglove.SceneUpdate"
     schemas = _file_schemas(path)
-    assert schemas["foxglove.FrameTransforms"] == L.FRAME_TRANSFORMS_SCHEMA
     item = schemas["foxglove.FrameTransforms"]["properties"]["transforms"]["items"]["properties"]
-    assert set(item) == {"timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"}
-    assert set(item["rotation"]["properties"]) == set("xyzw")
+    published = _published("FrameTransforms")["properties"]["transforms"]["items"]["properties"]
+    assert set(item) == set(published), f"FrameTransform fields {sorted(item)} vs published {sorted(published)}"
+    assert set(item["rotation"]["properties"]) == set(published["rotation"]["properties"]) == set("xyzw")
 
     expected = {f"{root}/{arm.name}/l{i}" for root in ("native", "mujoco") for arm in model.arms
                 for i in range(arm.n)} | {"native/object", "mujoco/object"}
@@ -215,15 +217,131 @@ def test_scene_draws_a_box_per_link_and_object_forever(run, logged):
     assert stamps == [0]
 
 
-def test_frame_transforms_validate_with_jsonschema(logged):
-    jsonschema = pytest.importorskip("jsonschema")
+# -- against Foxglove's published schemas (tests/data/foxglove: @foxglove/schemas 2.1.0, see README) --
+
+FOXGLOVE = {"/tf": "FrameTransforms", "/scene": "SceneUpdate"}
+
+
+def _published(name):
+    return json.loads((FOXGLOVE_DATA / f"{name}.json").read_text())
+
+
+def _unknown_fields(value, schema, where="$"):
+    """Paths of the object keys in `value` that `schema` (published) does not declare: a misspelt
+    field passes a JSON-Schema validator (extra properties are allowed) but Foxglove ignores it."""
+    out = []
+    if isinstance(value, dict):
+        props = schema.get("properties", {})
+        for key, sub in value.items():
+            out += [f"{where}.{key}"] if key not in props else _unknown_fields(sub, props[key], f"{where}.{key}")
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            out += _unknown_fields(item, schema.get("items", {}), f"{where}[{i}]")
+    return out
+
+
+def _schema_differences(ours, published, where="$"):
+    """Where our written schema departs from the published one: a field or title the published schema
+    does not have, another JSON type, other enum constants or integer bounds, a field the published
+    schema requires that ours does not declare."""
+    out = []
+    for key in ("title", "type"):
+        if key in ours and ours.get(key) != published.get(key):
+            out.append(f"{where}: {key} {ours.get(key)!r} vs published {published.get(key)!r}")
+    for key in ("minimum", "maximum"):
+        if ours.get(key) != published.get(key):
+            out.append(f"{where}: {key} {ours.get(key)!r} vs published {published.get(key)!r}")
+    if "oneOf" in ours or "oneOf" in published:
+        got = {(a.get("title"), a["const"]) for a in ours.get("oneOf", [])}
+        want = {(a.get("title"), a["const"]) for a in published.get("oneOf", [])}
+        if got != want:
+            out.append(f"{where}: enum {sorted(got)} vs published {sorted(want)}")
+    props, pub_props = ours.get("properties", {}), published.get("properties", {})
+    for key, sub in props.items():
+        if key not in pub_props:
+            out.append(f"{where}.{key}: not a published field")
+        else:
+            out += _schema_differences(sub, pub_props[key], f"{where}.{key}")
+    for key in published.get("required", []):
+        if key not in props:
+            out.append(f"{where}.{key}: required by the published schema, not declared")
+    if "items" in ours and ours.get("maxItems") != 0:  # an array always written empty has no items to describe
+        out += _schema_differences(ours["items"], published.get("items", {}), f"{where}[]")
+    return out
+
+
+def test_vendored_foxglove_schemas_are_the_published_files():
+    """The reference files are Foxglove's, byte for byte (sha256 as recorded in the README)."""
+    readme = (FOXGLOVE_DATA / "README.md").read_text()
+    for name in FOXGLOVE.values():
+        digest = hashlib.sha256((FOXGLOVE_DATA / f"{name}.json").read_bytes()).hexdigest()
+        assert f"`{name}.json` {digest}" in readme, f"{name}.json sha256 {digest} not the one recorded"
+        assert _published(name)["title"] == f"foxglove.{name}", f"{name}.json title"
+
+
+def test_written_foxglove_schemas_agree_with_the_published_ones(logged):
+    """Every field, title, type, enum and bound of the schemas in the file is the published one, and
+    every field the published schema requires is declared (the /scene entities write the primitive
+    arrays they do not use as empty arrays)."""
     path, data = logged
     schemas = _file_schemas(path)
-    jsonschema.Draft202012Validator(schemas["foxglove.FrameTransforms"]).validate(data.messages["/tf"][0])
-    jsonschema.Draft202012Validator(schemas["foxglove.SceneUpdate"]).validate(data.messages["/scene"][0])
+    for topic, name in FOXGLOVE.items():
+        assert data.schemas[topic] == f"foxglove.{name}", f"{topic} schema name {data.schemas[topic]!r}"
+        diffs = _schema_differences(schemas[f"foxglove.{name}"], _published(name))
+        assert diffs == [], f"{name}: written schema departs from Foxglove's: {diffs}"
+
+
+def test_written_foxglove_messages_validate_against_the_published_schemas(logged):
+    """Every /tf message and the /scene message: valid under Foxglove's schema (Draft 2020-12,
+    jsonschema) and without fields Foxglove does not know."""
+    jsonschema = pytest.importorskip("jsonschema")
+    path, data = logged
+    for topic, name in FOXGLOVE.items():
+        validator = jsonschema.Draft202012Validator(_published(name))
+        assert len(data.messages[topic]) >= 1, f"{topic}: no messages"
+        for k, msg in enumerate(data.messages[topic]):
+            errors = [f"{list(e.absolute_path)}: {e.message}" for e in validator.iter_errors(msg)]
+            assert errors == [], f"{topic} message {k} invalid under foxglove.{name}: {errors[:5]}"
+            assert _unknown_fields(msg, _published(name)) == [], f"{topic} message {k}: fields unknown to Foxglove"
+    # our own series schemas still describe their messages
     with open(path, "rb") as fh:
         _, _, msg = next(make_reader(fh).iter_messages(topics=["/native/grasp_wrench"]))
-    jsonschema.Draft202012Validator(schemas["coopsim.Wrenches"]).validate(json.loads(msg.data))
+    jsonschema.Draft202012Validator(_file_schemas(path)["coopsim.Wrenches"]).validate(json.loads(msg.data))
+
+
+def test_published_schema_checks_catch_wrong_messages_and_schemas(logged):
+    """The checks above can fail: a misspelt field, a quaternion component as a string, nsec out of
+    range, a missing primitive array, and a schema with a misspelt field or a wrong type."""
+    jsonschema = pytest.importorskip("jsonschema")
+    path, data = logged
+    tf = _published("FrameTransforms")
+    validator = jsonschema.Draft202012Validator(tf)
+    good = data.messages["/tf"][0]
+
+    def mutated(edit):
+        msg = json.loads(json.dumps(good))
+        edit(msg["transforms"][0])
+        return msg
+
+    misspelt = mutated(lambda f: f.update(translaton=f.pop("translation")))
+    assert _unknown_fields(misspelt, tf) == ["$.transforms[0].translaton"], "misspelt field not reported"
+    assert not validator.is_valid(misspelt), "missing translation accepted"
+    assert not validator.is_valid(mutated(lambda f: f["rotation"].update(w="1.0"))), "string quaternion accepted"
+    assert not validator.is_valid(mutated(lambda f: f["timestamp"].update(nsec=10**9))), "nsec = 1e9 accepted"
+    scene = json.loads(json.dumps(data.messages["/scene"][0]))
+    del scene["entities"][0]["spheres"]
+    assert not jsonschema.Draft202012Validator(_published("SceneUpdate")).is_valid(scene), "entity without spheres accepted"
+
+    ours = _file_schemas(path)["foxglove.FrameTransforms"]
+    bad = json.loads(json.dumps(ours))
+    item = bad["properties"]["transforms"]["items"]["properties"]
+    item["child_frame"] = item.pop("child_frame_id")
+    item["translation"]["properties"]["x"]["type"] = "string"
+    assert _schema_differences(bad, tf) == [
+        "$.transforms[].translation.x: type 'string' vs published 'number'",
+        "$.transforms[].child_frame: not a published field",
+        "$.transforms[].child_frame_id: required by the published schema, not declared",
+    ], "schema comparison missed a departure"
 
 
 # -- metadata -------------------------------------------------------------------------------------
