@@ -103,18 +103,103 @@ def test_matches_scipy_dop853_at_output_times():
     assert np.abs(Y - ref.y.T).max() <= 2e-9     # observed 3.0e-10
 
 
-def test_dop853_coefficients_match_scipy_tables():
-    try:
-        from scipy.integrate._ivp import dop853_coefficients as d
-    except ImportError:  # private module; layout may change between SciPy versions
-        pytest.skip("scipy.integrate._ivp.dop853_coefficients not available")
-    from coopsim import integrate as m
-    np.testing.assert_array_equal(m._DOP853_A, d.A[:12, :12])
-    np.testing.assert_array_equal(m._DOP853_B, d.B)
-    np.testing.assert_array_equal(m._DOP853_C, d.C[:12])
-    np.testing.assert_array_equal(m._DOP853_E3, d.E3[:12])
-    np.testing.assert_array_equal(m._DOP853_E5, d.E5[:12])
-    assert d.E3[12] == 0.0 and d.E5[12] == 0.0
+# --- the tableaux against SciPy's coefficients (scipy.integrate._ivp: RK45, dop853_coefficients) ---
+# SciPy's arrays are an independent transcription of Dormand & Prince / Hairer's DOP853 Fortran code
+# (private modules: a SciPy release that moves them fails these tests loudly, it does not skip them).
+
+from scipy.integrate._ivp import dop853_coefficients as _d853  # noqa: E402
+from scipy.integrate._ivp.rk import DOP853 as _SciDOP853, RK45 as _SciRK45  # noqa: E402
+
+from coopsim import integrate as _ref  # noqa: E402
+from coopsim.compiled import integrate as _cint, tableaux as _ctab  # noqa: E402
+
+TABLEAU_TOL = 1e-15  # absolute; every coefficient is O(1..500), measured differences are exactly 0
+
+
+def _same(name, ours, scipy_value, tol=TABLEAU_TOL):
+    ours, scipy_value = np.asarray(ours, dtype=float), np.asarray(scipy_value, dtype=float)
+    assert ours.shape == scipy_value.shape, f"{name}: shape {ours.shape} vs SciPy's {scipy_value.shape}"
+    diff = float(np.max(np.abs(ours - scipy_value))) if ours.size else 0.0
+    assert diff <= tol, f"{name}: max |coopsim − SciPy| = {diff:.3g} > {tol:g}"
+
+
+def test_reference_dopri5_tableau_is_scipys_rk45():
+    """coopsim.integrate's Dormand–Prince 5(4): A, B, C, E (FSAL stage included) and the error order
+    equal SciPy's RK45 (A is stored 6x6 here, 6x5 in SciPy: the last column is the zero diagonal)."""
+    t = _ref._DOPRI5
+    _same("DOPRI5 A", t.a[:, :5], _SciRK45.A)
+    assert np.all(t.a[:, 5] == 0.0), "DOPRI5 A: stage 6 feeds no stage"
+    _same("DOPRI5 B", t.b, _SciRK45.B)
+    _same("DOPRI5 C", t.c, _SciRK45.C)
+    _same("DOPRI5 E", t.e, _SciRK45.E)
+    assert (t.n_stages, t.err_order, t.fsal) == (_SciRK45.n_stages, _SciRK45.error_estimator_order, True), \
+        f"DOPRI5 stages/error order {t.n_stages}/{t.err_order} vs SciPy {_SciRK45.n_stages}/{_SciRK45.error_estimator_order}"
+
+
+def test_reference_dop853_tableau_is_scipys():
+    """coopsim.integrate's DOP853 step: A, B, C (12 stages), E3 and E5 (SciPy's 13th weight, that of
+    f(t + h, y_new), is 0 and dropped here) equal SciPy's, and the error order is 7."""
+    t = _ref._DOP853
+    _same("DOP853 A", t.a, _SciDOP853.A)
+    _same("DOP853 A (extended table)", t.a, _d853.A[:12, :12])
+    _same("DOP853 B", t.b, _SciDOP853.B)
+    _same("DOP853 C", t.c, _SciDOP853.C)
+    _same("DOP853 E3", t.e3, _SciDOP853.E3[:12])
+    _same("DOP853 E5", t.e, _SciDOP853.E5[:12])
+    assert _SciDOP853.E3[12] == 0.0 and _SciDOP853.E5[12] == 0.0, "SciPy's FSAL-stage error weights are no longer 0"
+    assert (t.n_stages, t.err_order) == (_SciDOP853.n_stages, _SciDOP853.error_estimator_order), \
+        f"DOP853 stages/error order {t.n_stages}/{t.err_order}"
+
+
+def test_compiled_tableau_arrays_are_scipys_including_dense_output():
+    """coopsim.compiled.tableaux, as printed there: DOP853's full 16-stage A and C (stages 13–16 are
+    the dense-output stages), B, E3, E5 and the dense-output matrix D (4, 16); DOPRI5's A, B, C, E and
+    Shampine's dense-output polynomial P (7, 4)."""
+    _same("compiled DOP853_A (16x16)", _ctab.DOP853_A, _d853.A)
+    _same("compiled DOP853_C (16)", _ctab.DOP853_C, _d853.C)
+    _same("compiled DOP853_B", _ctab.DOP853_B, _d853.B)
+    _same("compiled DOP853_E3", _ctab.DOP853_E3, _d853.E3)
+    _same("compiled DOP853_E5", _ctab.DOP853_E5, _d853.E5)
+    _same("compiled DOP853_D (dense output)", _ctab.DOP853_D, _d853.D)
+    _same("compiled DOPRI5_A", _ctab.DOPRI5_A, _SciRK45.A)
+    _same("compiled DOPRI5_B", _ctab.DOPRI5_B, _SciRK45.B)
+    _same("compiled DOPRI5_C", _ctab.DOPRI5_C, _SciRK45.C)
+    _same("compiled DOPRI5_E", _ctab.DOPRI5_E, _SciRK45.E)
+    _same("compiled DOPRI5_P (dense output)", _ctab.DOPRI5_P, _SciRK45.P)
+
+
+@pytest.mark.parametrize("method", ["dop853", "dopri5"])
+def test_compiled_kernel_tableau_is_scipys(method):
+    """The padded arrays the compiled time loop actually runs with (compiled.integrate.tableau): every
+    used slot equals SciPy's, every unused slot is 0."""
+    tab = _cint.tableau(method)
+    if method == "dop853":
+        s, (A, B, C, E3, E5) = 12, (_d853.A, _d853.B, _d853.C, _d853.E3, _d853.E5)
+        _same("kernel DOP853 D", tab.D, _d853.D)
+        assert not np.any(tab.Pd), "kernel DOP853: Dormand–Prince dense output set"
+    else:
+        s, (A, B, C, E3, E5) = 6, (_SciRK45.A, _SciRK45.B, _SciRK45.C, np.zeros(0), _SciRK45.E)
+        _same("kernel DOPRI5 P", tab.Pd, _SciRK45.P)
+        assert not np.any(tab.D), "kernel DOPRI5: DOP853 dense output set"
+    assert tab.stages == s, f"kernel {method}: {tab.stages} stages, SciPy {s}"
+    for name, ours, ref in (("A", tab.A, A), ("B", tab.B, B), ("C", tab.C, C), ("E3", tab.E3, E3), ("E5", tab.E5, E5)):
+        if ours.ndim == 2:
+            _same(f"kernel {method} {name}", ours[:ref.shape[0], :ref.shape[1]], ref)
+            rest = ours.copy()
+            rest[:ref.shape[0], :ref.shape[1]] = 0.0
+        else:
+            _same(f"kernel {method} {name}", ours[:len(ref)], ref)
+            rest = ours[len(ref):]
+        assert not np.any(rest), f"kernel {method} {name}: nonzero entry outside SciPy's table"
+    order = {"dop853": _SciDOP853, "dopri5": _SciRK45}[method].error_estimator_order
+    assert tab.err_order == order, f"kernel {method}: error order {tab.err_order} vs SciPy {order}"
+
+
+def test_dopri5_dense_output_ends_on_the_step():
+    """Independent of SciPy: Shampine's dense output y(t + θh) = y + h Σ_j k_j Σ_m P[j, m] θ^(m+1) at
+    θ = 1 is the step itself, Σ_m P[j, m] = b_j (b_7 = 0, the FSAL stage)."""
+    P = _ctab.DOPRI5_P
+    _same("DOPRI5 P row sums vs b", P.sum(axis=1), np.append(_ref._DOPRI5.b, 0.0), tol=4e-15)
 
 
 @pytest.mark.parametrize("name", ["_DOP853", "_DOPRI5", "_RK4"])
