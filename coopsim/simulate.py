@@ -75,11 +75,16 @@ def _describe(t: float, q: np.ndarray) -> str:
     return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
 
 
-def initial_state(model: Model) -> Projection:
-    """Consistent initial state: the scenario's (q0, qd0) projected onto the loop-closure manifold.
-    Raises ConstraintError naming the fields when the grasps cannot be reached from there."""
+def initial_state(model: Model, engine: str = "compiled") -> Projection:
+    """Consistent initial state: the scenario's (q0, qd0) projected onto the loop-closure manifold, on
+    the compiled engine or the NumPy reference (`engine`). Raises ConstraintError naming the fields
+    when the grasps cannot be reached from there."""
+    if engine == "compiled":
+        from .compiled.api import consistent_state as project
+    else:
+        project = consistent_state
     try:
-        proj = consistent_state(model, model.q0, model.qd0)
+        proj = project(model, model.q0, model.qd0)
     except ConstraintError as exc:
         raise ConstraintError(f"object.grasps: the arms cannot close the loop from arms[].initial: {exc}") from None
     worst = float(np.max(np.abs(proj.dq)))
@@ -161,9 +166,11 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    init = initial_state(model)
+    if isinstance(model.torques, TorqueFunction):
+        engine = "reference"
+    init = initial_state(model, engine)
     t_out = output_times(model.duration, model.integrator.output_dt)
-    if engine == "reference" or isinstance(model.torques, TorqueFunction):
+    if engine == "reference":
         if fixed_step is not None:
             raise ValueError("fixed_step needs the compiled engine and tabulated torques")
         return _simulate_reference(model, init, t_out, progress, start)

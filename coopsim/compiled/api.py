@@ -17,6 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..closed_chain import ConstraintError
+from ..manifold import Projection
 from ..model import Model
 from . import chain, ik, integrate, manifold, sample
 from .packing import PackedModel, Workspace, pack, tabulated_torques, workspace
@@ -145,8 +147,13 @@ def _f(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def threads() -> int:
-    return max(1, min(os.cpu_count() or 1, 8))
+MIN_PER_THREAD = 200   # states per thread below which a batch runs on the calling thread (a pool costs ~0.5 ms)
+
+
+def threads(S: int | None = None) -> int:
+    """Threads for a batch of S states: one per core (at most 8), at least MIN_PER_THREAD states each."""
+    n = max(1, min(os.cpu_count() or 1, 8))
+    return n if S is None else max(1, min(n, S // MIN_PER_THREAD))
 
 
 def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = False,
@@ -163,7 +170,7 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
             s = slice(idx[0], idx[-1] + 1)
             sample.evaluate(Ps, fresh_workspace(P), Y[s], sample.Samples(*(a[s] for a in out)), full)
 
-    _map(run, np.array_split(np.arange(len(Y)), n_threads or threads()))
+    _map(run, np.array_split(np.arange(len(Y)), n_threads or threads(len(Y))))
     return out
 
 
@@ -259,7 +266,7 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     Q, QD, QDD = _f(Q), _f(QD), _f(QDD)
     nmax = int(np.max(np.diff(P.dof)))
     out = sample.new_inverse_terms(len(Q), int(P.dof[-1]), len(P.dof) - 1, nmax)
-    chunks = np.array_split(np.arange(len(Q)), n_threads or threads())
+    chunks = np.array_split(np.arange(len(Q)), n_threads or threads(len(Q)))
 
     def run(idx):
         if len(idx):
@@ -269,6 +276,26 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
 
     _map(run, chunks)
     return out
+
+
+PROJECTION_MAX_ITER = 50
+
+
+def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,
+                     max_iter: int = PROJECTION_MAX_ITER) -> Projection:
+    """(q, qd) (N,) projected onto the loop-closure manifold as `coopsim.manifold.consistent_state`
+    does (Gauss–Newton to max |Φ| ≤ tol, default the scenario's projection_tol, then the rates),
+    compiled. Raises ConstraintError when the positions do not converge in max_iter steps."""
+    P, W, Ps, Ws = compiled(model)
+    q, qd = _f(q), _f(qd)
+    y = np.concatenate([q, qd])
+    info = np.zeros(3)
+    tol = model.integrator.projection_tol if tol is None else tol
+    if manifold.consistent(Ps, Ws, y, tol, max_iter, info) != 0:
+        raise ConstraintError(f"loop closure did not converge: max |Φ| = {info[1]:.3g} after {max_iter} "
+                              f"Gauss–Newton steps at q = {np.array2string(y[:len(q)], precision=6)}")
+    n = len(q)
+    return Projection(y[:n], y[n:], y[:n] - q, y[n:] - qd, float(info[0]), float(info[1]), int(info[2]))
 
 
 class ArmSolution(NamedTuple):

@@ -9,6 +9,8 @@ import numpy as np
 
 from .chain import arm_bias, arm_jacobian, arm_kinematics
 from .jit import entry, kernel
+from .linalg import lu_solve, singular_ratio
+from .manifold import max_abs
 from .spatial import matmul3_T, rot_log
 
 SOLVED, SINGULAR, NOT_CONVERGED = 0, 1, 2
@@ -39,6 +41,16 @@ def rows_jacobian(P, W, m, S):
     return SJ
 
 
+@kernel
+def rows_of(S, v, out):
+    """out (k,) ← S v for the row selector S (k, 6) and v (6,)."""
+    for i in range(S.shape[0]):
+        x = 0.0
+        for a in range(6):
+            x += S[i, a] * v[a]
+        out[i] = x
+
+
 @entry
 def arm_solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info):
     """Joint angles of arm m (written into its rows of the stacked q (N,), which hold the guess) putting
@@ -46,39 +58,41 @@ def arm_solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd,
     and acceleration [v; ω], [a; ω̇] (6,). info (3,) ← [σ_min/σ_max of S J at the failure, det S J,
     max |full pose error| (all six rows)]. Returns SOLVED, SINGULAR or NOT_CONVERGED."""
     o, n = P.dof[m], P.dof[m + 1] - P.dof[m]
-    e = np.empty(6)
+    k = S.shape[0]
+    e, Se, v = np.empty(6), np.empty(k), np.empty(n)
     status = NOT_CONVERGED
     for _ in range(max_iter):
         arm_kinematics(P, W, m, q)
         pose_error(P, W, m, p, R, e)
-        Se = S @ e
-        if np.max(np.abs(Se)) <= tol:
+        rows_of(S, e, Se)
+        if max_abs(Se) <= tol:
             status = SOLVED
             break
         arm_jacobian(P, W, m)
         SJ = rows_jacobian(P, W, m, S)
-        sv = np.linalg.svd(SJ)[1]
-        if sv[-1] < sing_tol * sv[0]:
-            info[0] = sv[-1] / sv[0]
+        ratio = singular_ratio(SJ, k, n)
+        if ratio < sing_tol:
+            info[0] = ratio
             return SINGULAR
-        dq = np.linalg.solve(SJ, Se)
+        lu_solve(SJ, n, Se, v)
         for j in range(n):
-            q[o + j] -= dq[j]
+            q[o + j] -= v[j]
     if status != SOLVED:
-        info[0] = np.max(np.abs(Se))
+        info[0] = max_abs(Se)
         return status
-    info[2] = np.max(np.abs(e))
+    info[2] = max_abs(e)
     arm_jacobian(P, W, m)
     SJ = rows_jacobian(P, W, m, S)
-    info[1] = np.linalg.det(SJ)
-    v = np.linalg.solve(SJ, S @ twist)
+    rows_of(S, twist, Se)
+    info[1] = lu_solve(SJ, n, Se, v)
     for j in range(n):
         qd[o + j] = v[j]
     arm_bias(P, W, m, qd)
     rhs = np.empty(6)
     for a in range(6):
         rhs[a] = acc[a] - W.Jd_qd[m, a]
-    v = np.linalg.solve(SJ, S @ rhs)
+    rows_of(S, rhs, Se)
+    lu_solve(SJ, n, Se, v)
     for j in range(n):
         qdd[o + j] = v[j]
     return SOLVED

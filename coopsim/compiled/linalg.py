@@ -117,8 +117,9 @@ def safe_pivot_ratio(K, rank_tol):
 def eig_solve(A, b, x, K, rank_tol):
     """Minimum-norm solution x of A x = b (A symmetric PSD) from its eigen-decomposition, keeping
     eigenvalues above rank_tol·λ_max; returns (condition number λ_max/λ_min, rank). Allocates:
-    used only off the hot path (near-singular systems, and condition numbers of output samples)."""
-    ev, V = np.linalg.eigh(A[:K, :K].copy())
+    used only off the hot path (near-singular systems)."""
+    ev, V = np.empty(K), np.empty((K, K))
+    jacobi_eigh(A, K, ev, V, True)
     top = ev[K - 1] if K > 0 else 0.0
     rank = 0
     for i in range(K):
@@ -134,6 +135,164 @@ def eig_solve(A, b, x, K, rank_tol):
                 x[i] += c * V[i, j]
     cond = top / ev[0] if K > 0 and ev[0] > 0 else np.inf
     return cond, rank
+
+
+JACOBI_SWEEPS = 100
+
+
+@kernel
+def jacobi_eigh(A, K, ev, V, vectors):
+    """Eigenvalues ev (K,) ascending of the symmetric A[:K, :K] (unchanged) and, with `vectors`, the
+    orthonormal eigenvectors as the columns of V (K, K), by the cyclic Jacobi method (Golub & Van Loan,
+    *Matrix Computations*, 4th ed., Alg. 8.5.3; rotations as Numerical Recipes' `jacobi`): sweeps of
+    plane rotations zeroing each off-diagonal entry, until the off-diagonal part is below ε²·‖A‖_F²
+    (absolute error ≈ ε‖A‖, as LAPACK's dsyev). Allocates a K × K copy. Replaces `np.linalg.eigh`,
+    whose numba wrapper costs seconds of compile time in every entry that reaches it."""
+    a = np.empty((K, K))
+    total = 0.0
+    for i in range(K):
+        for j in range(K):
+            a[i, j] = A[i, j]
+            total += A[i, j] * A[i, j]
+            if vectors:
+                V[i, j] = 1.0 if i == j else 0.0
+    for _ in range(JACOBI_SWEEPS):
+        off = 0.0
+        for p in range(K - 1):
+            for q in range(p + 1, K):
+                off += a[p, q] * a[p, q]
+        if not off > 1e-32 * total:
+            break
+        for p in range(K - 1):
+            for q in range(p + 1, K):
+                if a[p, q] != 0.0:
+                    _jacobi_rotate(a, V, K, p, q, vectors)
+    for i in range(K):
+        ev[i] = a[i, i]
+    _sort_pairs(ev, V, K, vectors)
+
+
+@kernel
+def _jacobi_rotate(a, V, K, p, q, vectors):
+    """a ← Jᵀ a J and V ← V J for the rotation J in the (p, q) plane that zeroes a[p, q]."""
+    theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+    t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+    if theta < 0.0:
+        t = -t
+    c = 1.0 / np.sqrt(t * t + 1.0)
+    s = t * c
+    for k in range(K):
+        akp, akq = a[k, p], a[k, q]
+        a[k, p] = c * akp - s * akq
+        a[k, q] = s * akp + c * akq
+    for k in range(K):
+        apk, aqk = a[p, k], a[q, k]
+        a[p, k] = c * apk - s * aqk
+        a[q, k] = s * apk + c * aqk
+    a[p, q] = 0.0
+    a[q, p] = 0.0
+    if vectors:
+        for k in range(K):
+            vkp, vkq = V[k, p], V[k, q]
+            V[k, p] = c * vkp - s * vkq
+            V[k, q] = s * vkp + c * vkq
+
+
+@kernel
+def _sort_pairs(ev, V, K, vectors):
+    """Sort ev (K,) ascending, the columns of V with it (selection sort: K is small)."""
+    for i in range(K - 1):
+        j = i
+        for k in range(i + 1, K):
+            if ev[k] < ev[j]:
+                j = k
+        if j != i:
+            ev[i], ev[j] = ev[j], ev[i]
+            if vectors:
+                for k in range(K):
+                    V[k, i], V[k, j] = V[k, j], V[k, i]
+
+
+@kernel
+def singular_ratio(G, m, n):
+    """σ_min/σ_max of G[:m, :n] (m ≥ n) by one-sided Jacobi (Hestenes; Demmel & Veselić 1992: high
+    relative accuracy), 0 for a zero or non-finite G. Allocates an m × n copy."""
+    U = np.empty((m, n))
+    for i in range(m):
+        for j in range(n):
+            U[i, j] = G[i, j]
+            if not np.isfinite(G[i, j]):
+                return 0.0
+    for _ in range(JACOBI_SWEEPS):
+        rotated = False
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                al, be, ga = 0.0, 0.0, 0.0
+                for k in range(m):
+                    al += U[k, i] * U[k, i]
+                    be += U[k, j] * U[k, j]
+                    ga += U[k, i] * U[k, j]
+                if abs(ga) <= 1e-15 * np.sqrt(al * be):
+                    continue
+                rotated = True
+                zeta = (be - al) / (2.0 * ga)
+                t = 1.0 / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                if zeta < 0.0:
+                    t = -t
+                c = 1.0 / np.sqrt(1.0 + t * t)
+                s = c * t
+                for k in range(m):
+                    ui, uj = U[k, i], U[k, j]
+                    U[k, i] = c * ui - s * uj
+                    U[k, j] = s * ui + c * uj
+        if not rotated:
+            break
+    lo, hi = np.inf, 0.0
+    for j in range(n):
+        v = 0.0
+        for k in range(m):
+            v += U[k, j] * U[k, j]
+        v = np.sqrt(v)
+        lo, hi = min(lo, v), max(hi, v)
+    return lo / hi if hi > 0.0 else 0.0
+
+
+@kernel
+def lu_solve(A, n, b, x):
+    """x (n,) ← A⁻¹ b for the square A[:n, :n] by Gaussian elimination with partial pivoting (A and b
+    unchanged); returns det A (0 for an exactly singular A, and then x is NaN). Allocates a copy."""
+    a = np.empty((n, n))
+    for i in range(n):
+        x[i] = b[i]
+        for j in range(n):
+            a[i, j] = A[i, j]
+    det = 1.0
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(a[i, k]) > abs(a[p, k]):
+                p = i
+        if a[p, k] == 0.0:
+            for i in range(n):
+                x[i] = np.nan
+            return 0.0
+        if p != k:
+            det = -det
+            x[k], x[p] = x[p], x[k]
+            for j in range(n):
+                a[k, j], a[p, j] = a[p, j], a[k, j]
+        det *= a[k, k]
+        for i in range(k + 1, n):
+            f = a[i, k] / a[k, k]
+            for j in range(k + 1, n):
+                a[i, j] -= f * a[k, j]
+            x[i] -= f * x[k]
+    for i in range(n - 1, -1, -1):
+        v = x[i]
+        for j in range(i + 1, n):
+            v -= a[i, j] * x[j]
+        x[i] = v / a[i, i]
+    return det
 
 
 @kernel

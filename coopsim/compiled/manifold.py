@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
-from .jit import kernel
+from .jit import entry, kernel
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from .structs import borrow
 
@@ -67,24 +67,26 @@ def max_abs(x):
 
 
 @kernel
-def project_state(P, W, y, tol, max_iter, step):
-    """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 (to max |Φ| ≤ tol, at most max_iter Gauss–Newton steps)
-    and Λ(θ)θ̇ = 0, in place; step (N,) scratch. Returns 0 or PROJECTION_FAILED (W.phi holds the
-    last residual)."""
-    y, step = borrow(y), borrow(step)
-    N = P.dof[-1]
-    q, qd = y[:N], y[N:]
-    K = W.Lam.shape[0]
+def project_positions(P, W, q, tol, max_iter, step):
+    """Gauss–Newton steps q ← q − Λ⁺Φ(q) in place until max |Φ| ≤ tol; returns the number of steps, or
+    −1 after max_iter steps without convergence. Leaves the kinematics, Λ and Φ of the final q in W."""
     for it in range(max_iter + 1):
         closure_kinematics(P, W, q)
         if max_abs(W.phi) <= tol:
-            break
+            return it
         if it == max_iter:
-            return PROJECTION_FAILED
+            return -1
         min_norm_step(P, W, W.phi, step)
-        for j in range(N):
+        for j in range(len(q)):
             q[j] -= step[j]
+    return -1
+
+
+@kernel
+def project_rates(P, W, qd, step):
+    """qd ← qd − Λ⁺Λ qd in place (twice: the second pass removes what rounding left), Λ from W."""
     Lam, res = W.Lam, W.res
+    K, N = Lam.shape
     for _ in range(2):
         for i in range(K):
             v = 0.0
@@ -94,4 +96,33 @@ def project_state(P, W, y, tol, max_iter, step):
         min_norm_step(P, W, res, step)
         for j in range(N):
             qd[j] -= step[j]
+
+
+@kernel
+def project_state(P, W, y, tol, max_iter, step):
+    """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 (to max |Φ| ≤ tol, at most max_iter Gauss–Newton steps)
+    and Λ(θ)θ̇ = 0, in place; step (N,) scratch. Returns 0 or PROJECTION_FAILED (W.phi holds the
+    last residual)."""
+    y, step = borrow(y), borrow(step)
+    N = P.dof[-1]
+    if project_positions(P, W, y[:N], tol, max_iter, step) < 0:
+        return PROJECTION_FAILED
+    project_rates(P, W, y[N:], step)
+    return 0
+
+
+@entry
+def consistent(P, W, y, tol, max_iter, info):
+    """A consistent initial state: y = [θ; θ̇] (2N,) projected in place as `project_state` does, and
+    info (3,) ← [max |Φ| before (m or rad), max |Φ| after, Gauss–Newton steps]. Returns 0 or
+    PROJECTION_FAILED (then y holds the last iterate and info[1] its residual)."""
+    N = P.dof[-1]
+    step = np.empty(N)
+    closure_kinematics(P, W, y[:N])
+    info[0] = max_abs(W.phi)
+    it = project_positions(P, W, y[:N], tol, max_iter, step)
+    info[1], info[2] = max_abs(W.phi), it if it >= 0 else max_iter
+    if it < 0:
+        return PROJECTION_FAILED
+    project_rates(P, W, y[N:], step)
     return 0

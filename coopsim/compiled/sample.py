@@ -17,7 +17,7 @@ import numpy as np
 
 from .chain import arm_terms, chain_forward, loop_residual, object_dynamics, object_pose
 from .jit import entry, kernel
-from .linalg import copy1, copy2, copy3
+from .linalg import copy1, copy2, copy3, jacobi_eigh
 from .manifold import max_abs
 from .spatial import rot_to_quat
 
@@ -132,9 +132,9 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
 
 @kernel
-def reported(P, W, i, qd, out, Yw):
+def reported(P, W, i, qd, out, Yw, ev):
     """Row i of `out` after an evaluation at rates qd: object pose, twist and acceleration, grasp and
-    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,) scratch."""
+    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,), ev (K,) scratch."""
     N = P.dof[-1]
     K = W.Lam.shape[0]
     copy1(W.p_C, out.object_pos[i])
@@ -153,7 +153,7 @@ def reported(P, W, i, qd, out, Yw):
         rv = max(rv, abs(v))
     out.residual_vel[i] = rv
     if K:
-        ev = np.linalg.eigvalsh(W.A)
+        jacobi_eigh(W.A, K, ev, W.m3[0], False)
         out.cond[i] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
     else:
         out.cond[i] = 1.0
@@ -165,12 +165,12 @@ def evaluate(P, W, Y, out, full):
     status codes into out.status; with `full`, every other field of `out` (Samples) too."""
     N = P.dof[-1]
     stab = np.zeros(W.Lam.shape[0])
-    Yw = np.empty(6)
+    Yw, ev = np.empty(6), np.empty(W.Lam.shape[0])
     for i in range(Y.shape[0]):
         out.status[i] = chain_forward(P, W, Y[i, :N], Y[i, N:], out.tau[i], stab)
         copy1(W.qdd, out.qdd[i])
         if full:
-            reported(P, W, i, Y[i, N:], out, Yw)
+            reported(P, W, i, Y[i, N:], out, Yw, ev)
 
 
 class InverseTerms(NamedTuple):
