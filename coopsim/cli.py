@@ -44,19 +44,21 @@ def _cmd_run(args) -> int:
     from .log import file_sha256, read_mcap, write_run_log
     from .plots import comparison_plots
     from .progress import ProgressBar
+    from .render import FigureWorkers
     from .scenario import load_scenario
     from .summary import run_summary
 
     model = load_scenario(args.scenario)
     out = Path(args.out or Path("out") / model.name)
     out.mkdir(parents=True, exist_ok=True)
-    bar = ProgressBar()
-    cv = cross_validate(model, duration=args.duration, progress=bar)
-    bar.close()
-    log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
-        "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
-        "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-    plots = comparison_plots(read_mcap(log_path), out)
+    with FigureWorkers() as workers:
+        bar = ProgressBar()
+        cv = cross_validate(model, duration=args.duration, progress=bar)
+        bar.close()
+        log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
+            "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+            "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
+        plots = comparison_plots(read_mcap(log_path), out, workers=workers)
     summary = run_summary(cv, log_path, plots)
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     if args.json:
@@ -116,18 +118,21 @@ def _cmd_inverse(args) -> int:
                                  json_safe)
     from .log import read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
+    from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario)
     methods = ("paper", "nonsqueezing", "min_energy", "bounded") if args.method == "all" else (args.method,)
-    study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
-                          bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
-    summary = inverse_summary(study)
-    out = Path(args.out or Path("out") / model.name)
-    log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
-        "scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)},
-        "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0], "moment_bound_Nm": study.bounds[1]}}))
-    plots = inverse_plots(read_mcap(log_path), out)
+    with FigureWorkers() as workers:
+        study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
+                              bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
+        summary = inverse_summary(study)
+        out = Path(args.out or Path("out") / model.name)
+        log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
+            "scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)},
+            "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
+                        "moment_bound_Nm": study.bounds[1]}}))
+        plots = inverse_plots(read_mcap(log_path), out, workers=workers)
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
     write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
     print(json.dumps(json_safe(summary), indent=2) if args.json else
@@ -145,18 +150,20 @@ def _cmd_capacity(args) -> int:
                                  format_capacity_summary, joint_names, json_safe)
     from .log import read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
+    from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
-    study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
-                           optimise=not args.no_optimise, check=args.check)
-    summary = capacity_summary(study)
-    out = Path(args.out or Path("out") / model.name)
-    meta = {"scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)}}
-    log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
-                          run_metadata(model, None, meta | capacity_metadata(summary)))
-    plots = capacity_plots(read_mcap(log_path), out)
+    with FigureWorkers() as workers:
+        study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
+                               optimise=not args.no_optimise, check=args.check)
+        summary = capacity_summary(study)
+        out = Path(args.out or Path("out") / model.name)
+        meta = {"scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)}}
+        log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
+                              run_metadata(model, None, meta | capacity_metadata(summary)))
+        plots = capacity_plots(read_mcap(log_path), out, workers=workers)
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
     write_text_atomic(out / "capacity.json", json.dumps(json_safe(summary), indent=2) + "\n")
     print(json.dumps(json_safe(summary), indent=2) if args.json else

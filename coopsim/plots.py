@@ -11,17 +11,16 @@ them); when the twin is sampled at other times it is interpolated linearly onto 
 from __future__ import annotations
 
 import json
-import multiprocessing
-import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from .atomic import atomic_path
 from .log import LogData
+from .render import FigureWorkers, render_figures
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 NATIVE, TWIN = "/native", "/mujoco"
 FILES = ("joint_angles.png", "joint_rates.png", "object_motion.png", "constraint_violation.png")
@@ -89,39 +88,6 @@ def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
         ax.text(0.5, 0.5, "difference exactly zero", ha="center", va="center", transform=ax.transAxes)
 
 
-_JOBS: list = []   # the figure jobs of the running `render_figures` call, read by its forked workers
-
-
-def render_figures(jobs: list) -> list[Path]:
-    """Build and write figures, each job (builder, args, path) as save_figure(builder(*args), path); on
-    two forked worker processes where the platform forks and has two cores (matplotlib draws on one
-    thread, about a second a figure on the development machine), else one after the other. Returns
-    the paths in job order; an error in a builder is raised here."""
-    global _JOBS
-    if len(jobs) < 2 or (os.cpu_count() or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return [save_figure(fn(*args), Path(path)) for fn, args, path in jobs]
-    _JOBS = list(jobs)
-    try:
-        with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork")) as pool:
-            return [Path(p) for p in pool.map(_render_job, range(len(jobs)))]
-    finally:
-        _JOBS = []
-
-
-def _render_job(i: int) -> str:
-    fn, args, path = _JOBS[i]
-    return str(save_figure(fn(*args), Path(path)))
-
-
-def save_figure(fig: Figure, path: Path) -> Path:
-    """Lay out and write `fig` as PNG (110 dpi) atomically; returns the path."""
-    FigureCanvasAgg(fig)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    return path
-
-
 def _compare_columns(axes, t, x, y, cols, labels, quantity: str, unit: str, title: str, diff_title: str) -> None:
     """Columns `cols` of x (native, solid) and y (twin, dashed; None: none) on axes[0], and their
     absolute difference on a log axis on axes[1] when the twin is there."""
@@ -140,6 +106,8 @@ def _compare_columns(axes, t, x, y, cols, labels, quantity: str, unit: str, titl
 
 
 def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list[str]) -> Figure:
+    from matplotlib.figure import Figure
+
     nat = log.topics[NATIVE + "/joint_state"]
     t, x = nat["t"], nat[key]
     y = _twin(log, "/joint_state", key, t)
@@ -156,6 +124,8 @@ def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list
 
 
 def _object_figure(log: LogData) -> Figure:
+    from matplotlib.figure import Figure
+
     nat = log.topics[NATIVE + "/object"]
     t = nat["t"]
     pos, twist = _twin(log, "/object", "position", t), _twin(log, "/object", "twist", t)
@@ -172,6 +142,8 @@ def _object_figure(log: LogData) -> Figure:
 
 
 def _constraint_figure(log: LogData) -> Figure:
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(8, 4))
     ax = fig.subplots()
     nat = log.topics[NATIVE + "/constraint"]
@@ -184,14 +156,16 @@ def _constraint_figure(log: LogData) -> Figure:
     return fig
 
 
-def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[Path]:
+def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None,
+                     workers: FigureWorkers | None = None) -> list[Path]:
     """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png into
     out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
-    (n,) labels the joints (default: the log's model metadata, else q0, q1, …)."""
+    (n,) labels the joints (default: the log's model metadata, else q0, q1, …); workers: where to draw
+    (`coopsim.render`; default: processes started for this call)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
     jobs = [(_joint_figure, (log, "angle", "angle", "rad", labels)), (_joint_figure, (log, "rate", "rate", "rad/s", labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
-    return render_figures([(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)])
+    return render_figures([(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)], workers)

@@ -12,11 +12,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from matplotlib.figure import Figure
 
 from .log import LogData
-from .plots import render_figures
+from .render import FigureWorkers, render_figures
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 STYLE = {"forward": dict(color="black", ls="--", lw=1.2), "paper": dict(color="tab:blue"),
          "nonsqueezing": dict(color="tab:green"), "min_energy": dict(color="tab:red"),
@@ -42,6 +46,8 @@ def _methods(log: LogData, prefix: str, suffix: str) -> list[str]:
 def inverse_torques_figure(log: LogData) -> Figure:
     """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint,
     with the motor lines of eq. 36 (grey)."""
+    from matplotlib.figure import Figure
+
     traj = log.topics["/inverse/trajectory"]
     t, n = traj["t"], traj["q"].shape[1]
     names = _joints(log, n)
@@ -68,6 +74,8 @@ def inverse_torques_figure(log: LogData) -> Figure:
 
 def inverse_norms_figure(log: LogData) -> Figure:
     """Fig. 7: the torque norm |τ| and the cost ½τᵀQτ of every resolution over time."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(8, 6))
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     for k in _methods(log, "/inverse/", "/torque"):
@@ -86,6 +94,8 @@ def inverse_norms_figure(log: LogData) -> Figure:
 def inverse_internal_figure(log: LogData) -> Figure:
     """What each resolution puts into the object: the largest internal force and moment over the arms
     (non-squeezing definition, at C) and, for a box, the peak normal stress over its cross-sections."""
+    from matplotlib.figure import Figure
+
     methods = _methods(log, "/inverse/", "/internal")
     has_stress = all(f"/inverse/{k}/stress" in log.topics for k in methods)
     rows = 3 if has_stress else 2
@@ -110,17 +120,19 @@ def inverse_internal_figure(log: LogData) -> Figure:
     return fig
 
 
-def inverse_plots(log: LogData, out_dir: str | Path) -> list[Path]:
-    """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir."""
+def inverse_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
+    """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir (drawn on `workers`)."""
     out = Path(out_dir)
     return render_figures([(inverse_torques_figure, (log,), out / "inverse_torques.png"),
                            (inverse_norms_figure, (log,), out / "inverse_norms.png"),
-                           (inverse_internal_figure, (log,), out / "inverse_internal.png")])
+                           (inverse_internal_figure, (log,), out / "inverse_internal.png")], workers)
 
 
 def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
     """Fig. 8: per resolution, the torque of the motor that saturates first, at the capacity mass,
     against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation."""
+    from matplotlib.figure import Figure
+
     lim = log.topics["/capacity/limits"]
     t = lim["t"]
     methods = _methods(log, "/capacity/", f"/{mode}")
@@ -155,6 +167,8 @@ def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
 def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
     """The largest mass each sample alone allows, per resolution and for the LP bound: the capacity is
     the lowest point of each curve."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(8, 4))
     ax = fig.add_subplot(1, 1, 1)
     for k in _methods(log, "/capacity/", f"/{mode}"):
@@ -169,8 +183,9 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
     return fig
 
 
-def capacity_plots(log: LogData, out_dir: str | Path) -> list[Path]:
-    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir."""
+def capacity_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
+    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir (drawn on
+    `workers`)."""
     out = Path(out_dir)
     jobs = []
     for mode in ("scaled", "payload"):
@@ -179,4 +194,4 @@ def capacity_plots(log: LogData, out_dir: str | Path) -> list[Path]:
         tag = "" if mode == "scaled" else "_payload"
         jobs += [(capacity_motor_figure, (log, mode), out / f"capacity_motors{tag}.png"),
                  (capacity_along_path_figure, (log, mode), out / f"capacity_along_path{tag}.png")]
-    return render_figures(jobs)
+    return render_figures(jobs, workers)

@@ -1,0 +1,108 @@
+"""Figure output: PNG files drawn by matplotlib's Agg canvas on worker processes.
+
+matplotlib draws on one thread and costs about a second to import and half a second to a second per
+figure, so the commands draw on worker processes (two, forked, where the platform forks and has two
+cores). `FigureWorkers` starts them at the beginning of a command: while the command computes on one
+core, they import matplotlib and draw a throw-away figure (font cache, mathtext parser) at a lower
+priority on the other; the command's figures are then drawn on both. A job is (builder, args, path):
+the worker writes save_figure(builder(*args), path). Builders and their arguments travel by pickle,
+so builders are module-level functions. This module does not import matplotlib itself.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .atomic import atomic_path
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+DPI = 110
+WORKER_NICENESS = 5   # the workers yield the CPU to the command while it computes
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Lay out and write `fig` as PNG (DPI dots per inch) atomically; returns the path."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=DPI)
+    return path
+
+
+def _warm_up() -> None:
+    """Worker initializer: lower the priority, import matplotlib and draw a small figure with a log
+    axis and a legend into memory (what a worker would otherwise do on its first job)."""
+    import io
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    os.nice(WORKER_NICENESS)
+    fig = Figure(figsize=(2, 2))
+    ax = fig.subplots()
+    ax.semilogy([0.0, 1.0], [1e-9, 1e-3], label="x")
+    ax.set(title="t", xlabel="x", ylabel="y")
+    ax.legend()
+    FigureCanvasAgg(fig)
+    fig.tight_layout()
+    fig.savefig(io.BytesIO(), format="png", dpi=DPI)
+
+
+def _render(job) -> str:
+    fn, args, path = job
+    return str(save_figure(fn(*args), Path(path)))
+
+
+def _can_fork(n: int) -> bool:
+    return n >= 2 and (os.cpu_count() or 1) >= 2 and "fork" in multiprocessing.get_all_start_methods()
+
+
+class FigureWorkers:
+    """n worker processes for figures (module docstring), started by the constructor and, with `warm`,
+    warmed up; without fork or a second core there are none and `render` draws in this process. Use
+    as a context manager, or call `close`."""
+
+    def __init__(self, n: int = 2, warm: bool = True):
+        self.pool = None
+        if _can_fork(n):
+            self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"),
+                                            initializer=_warm_up if warm else None)
+            self.pool.submit(int)   # a fork-context pool starts all its workers at the first submit
+
+    def render(self, jobs: list) -> list[Path]:
+        """Write every job's figure; returns the paths in job order. A builder's error is raised here."""
+        if self.pool is None or len(jobs) < 2:
+            return [Path(_render(job)) for job in jobs]
+        return [Path(p) for p in self.pool.map(_render, jobs)]
+
+    def close(self, stop: bool = False) -> None:
+        """Shut the workers down: after their jobs, or (stop) at once, e.g. when the command failed."""
+        if self.pool is None:
+            return
+        if stop:
+            for proc in list(getattr(self.pool, "_processes", {}).values()):
+                proc.terminate()
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        self.pool = None
+
+    def __enter__(self) -> FigureWorkers:
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(stop=exc_type is not None)
+
+
+def render_figures(jobs: list, workers: FigureWorkers | None = None) -> list[Path]:
+    """Write the figures of `jobs` on `workers` (default: workers started for this call only)."""
+    if workers is not None:
+        return workers.render(jobs)
+    with FigureWorkers(min(2, len(jobs)), warm=False) as own:
+        return own.render(jobs)
