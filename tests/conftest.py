@@ -54,6 +54,31 @@ def mutated(base: dict, path: list, value) -> dict:
     return data
 
 
+def paper_residual_by_hand() -> np.ndarray:
+    """The paper scenario's loop-closure residual [Δx, Δy, Δψ] (m, m, rad) at its rounded initial
+    angles, by planar trigonometry from the YAML's numbers (no coopsim code): each arm's end-effector
+    point Σ lᵢ (cos, sin)(θ₁+…+θᵢ) from its base; the bar's centre 0.2 m along arm 1's last link past
+    its end-effector (grasp at x = −0.2 in the bar frame, no rotation); arm 2's grasp 0.2 m further
+    along the bar, its end-effector turned 180° from the bar (grasp yaw 180°)."""
+    import yaml
+
+    data = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())
+    ends = []
+    for arm in data["arms"]:
+        x, y = arm["base"]["position"][:2]
+        heading = 0.0
+        for deg, link in zip(arm["initial"]["angles_deg"], arm["links"]):
+            heading += np.deg2rad(deg)
+            x, y = x + link["box"]["length"] * np.cos(heading), y + link["box"]["length"] * np.sin(heading)
+        ends.append((np.array([x, y]), heading))
+    (p1, h1), (p2, h2) = ends
+    g1, g2 = (np.array(g["position"][:2]) for g in data["object"]["grasps"])
+    along = np.array([np.cos(h1), np.sin(h1)])            # the bar's x axis = arm 1's end-effector x axis
+    grasp2 = p1 + (g2[0] - g1[0]) * along                 # arm 2's grasp point on the bar
+    dpsi = (h2 - (h1 + np.pi) + np.pi) % (2 * np.pi) - np.pi
+    return np.array([*(p2 - grasp2), dpsi])
+
+
 @pytest.fixture(scope="session")
 def paper():
     return load_scenario(SCENARIOS / "paper_planar_2x3.yaml")

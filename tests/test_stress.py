@@ -103,6 +103,9 @@ def test_what_zero_internal_force_protects_on_the_paper_run():
                           m.gravity, res.grasp_wrench[sub], m.rows)
         peaks[method] = (float(np.max(s.peak_normal)), float(np.max(s.peak_shear)))
     assert peaks["min_energy"][0] > peaks["paper"][0] > 2 * peaks["nonsqueezing"][0]
+    # regression pins (numbers produced by coopsim itself); the independent checks of what they are
+    # made of: the section loads against the other part's balance (test_section_loads_agree_with_the_
+    # other_part) and the stress formulas against closed-form beam cases (tests above)
     measured = {"paper": (1008.867, 57.6767), "nonsqueezing": (408.6333, 68.5114), "min_energy": (1513.206, 99.3963)}
     for method, (normal, shear) in measured.items():
         assert peaks[method] == pytest.approx((normal, shear), rel=1e-5), method
