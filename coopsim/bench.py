@@ -24,6 +24,7 @@ its load: compare within one report only.
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import os
 import subprocess
@@ -602,9 +603,11 @@ def scaling_fits(points: list[dict], key: str = "native_amortised_us") -> dict:
 # start-up
 
 
-_STARTUP_SCRIPT = ("import time; t0 = time.perf_counter(); from coopsim.scenario import load_scenario; "
-                   "from coopsim.simulate import simulate; "
-                   "simulate(load_scenario({path!r}), duration=0.05); print(time.perf_counter() - t0)")
+_STARTUP_SCRIPT = ("import json, time; t0 = time.perf_counter(); from coopsim.scenario import load_scenario; "
+                   "from coopsim.simulate import simulate; m = load_scenario({path!r}); t1 = time.perf_counter(); "
+                   "{warm}simulate(m, duration=0.05); t2 = time.perf_counter(); simulate(m, duration=0.05); "
+                   "t3 = time.perf_counter(); print(json.dumps({{'imports': t1 - t0, 'first': t2 - t1, 'again': t3 - t2}}))")
+_WARM_UP = "from coopsim.compiled.warmup import warm_up; warm_up(); "   # what the CLI does on a first run
 
 
 def _source_stamps() -> dict[str, int]:
@@ -614,32 +617,46 @@ def _source_stamps() -> dict[str, int]:
     return {str(p): p.stat().st_mtime_ns for p in sorted(root.glob("*.py"))}
 
 
-def _startup_once(code: str) -> dict:
+def startup_process(path: str, warm: bool, env: dict | None = None) -> tuple[float, dict]:
+    """(wall time s, phases) of one fresh process running the start-up script on the scenario file
+    `path` (with the CLI's warm-up first if `warm`); phases: 'imports', 'first' and 'again' (the two
+    0.05 s simulations), in s, as the process measures them."""
+    code = _STARTUP_SCRIPT.format(path=path, warm=_WARM_UP if warm else "")
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
+    wall = time.perf_counter() - start
+    if done.returncode:
+        raise CoopsimError(f"start-up measurement failed: {done.stderr.strip().splitlines()[-1:]}")
+    return wall, json.loads(done.stdout.splitlines()[-1])
+
+
+def _startup_once(path: str) -> dict:
     """One compile / cached pair of fresh processes (see `startup_times`)."""
     out = {}
     with tempfile.TemporaryDirectory(prefix="coopsim-numba-") as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        for key in ("compile", "cached"):
-            start = time.perf_counter()
-            done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
-            out[f"{key}_s"] = time.perf_counter() - start
-            if done.returncode:
-                raise CoopsimError(f"start-up measurement failed: {done.stderr.strip().splitlines()[-1:]}")
-            out[f"{key}_inside_s"] = float(done.stdout.split()[-1])
+        for key, warm in (("compile", True), ("cached", False)):
+            out[f"{key}_s"], phases = startup_process(path, warm, env)
+            out[f"{key}_inside_s"] = phases["imports"] + phases["first"]
+        out["jit_load_s"] = phases["first"] - phases["again"]
+        out["interpreter_s"] = out["cached_s"] - out["cached_inside_s"] - phases["again"]
     return out
 
 
 def startup_times(scenario: str | Path, attempts: int = 2) -> dict:
     """Wall time s of a fresh `python -c` process that imports coopsim and simulates 0.05 s of
-    `scenario`: 'compile_s' with NUMBA_CACHE_DIR an empty temporary folder (every kernel compiled),
-    'cached_s' the same again with that cache filled; '..._inside_s': the part after start-up of
-    the interpreter (imports and the run), as the process measures it. A source file changed
-    between the two processes invalidates the cache: the pair is then run again (up to `attempts`
-    times) and 'sources_changed' says whether the last pair still saw a change."""
-    code = _STARTUP_SCRIPT.format(path=str(Path(scenario).resolve()))
+    `scenario` twice: 'compile_s' with NUMBA_CACHE_DIR an empty temporary folder, compiling every
+    kernel first as the CLI's first run does (`coopsim.compiled.warmup`, two processes), 'cached_s'
+    the same again with that cache filled and no warm-up; '..._inside_s': imports and the first run,
+    as the process measures them; 'jit_load_s': the first run less the second (numba's import and
+    loading the compiled kernels from the cache); 'interpreter_s': the cached process's time before its
+    first line. A source file changed between the two processes invalidates the cache: the pair is
+    then run again (up to `attempts` times) and 'sources_changed' says whether the last pair still
+    saw a change."""
+    path = str(Path(scenario).resolve())
     for _ in range(max(1, attempts)):
         before = _source_stamps()
-        out = _startup_once(code)
+        out = _startup_once(path)
         out["sources_changed"] = _source_stamps() != before
         if not out["sources_changed"]:
             break

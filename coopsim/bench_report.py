@@ -211,9 +211,13 @@ def reference_line(sc: dict) -> str:
 
 def startup_line(st: dict) -> str:
     """One sentence on the compile and cached start-up times (`bench.startup_times`)."""
-    text = (f"First run with an empty numba cache (fresh process, compiles every kernel): {st['compile_s']:.1f} s; "
-            f"the same with the cache filled: {st['cached_s']:.2f} s (of which imports and a 0.05 s run: "
-            f"{st['cached_inside_s']:.2f} s).")
+    text = (f"First run with an empty numba cache (fresh process compiling every kernel on two processes, as the "
+            f"CLI's first run): {st['compile_s']:.1f} s; the same with the cache filled: {st['cached_s']:.2f} s "
+            f"(of which imports and a 0.05 s run: {st['cached_inside_s']:.2f} s")
+    if "jit_load_s" in st:
+        text += (f"; loading numba and the compiled kernels from the cache: {st['jit_load_s']:.2f} s; the "
+                 f"interpreter's own start: {st['interpreter_s']:.2f} s")
+    text += ")."
     if st.get("sources_changed"):
         text += " Sources changed between the two processes: the cached time includes a recompilation."
     return text

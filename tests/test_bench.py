@@ -216,6 +216,12 @@ def test_startup_is_measured_again_when_sources_change_in_between(monkeypatch):
     stamps = iter([{"a": 1}, {"a": 2}, {"a": 2}, {"a": 2}])
     runs = []
     monkeypatch.setattr(bench, "_source_stamps", lambda: next(stamps))
-    monkeypatch.setattr(bench, "_startup_once", lambda code: runs.append(code) or {"compile_s": 30.0, "cached_s": 1.0})
+    monkeypatch.setattr(bench, "_startup_once", lambda path: runs.append(path) or {"compile_s": 30.0, "cached_s": 1.0})
     out = bench.startup_times(SCENARIOS / "paper_planar_2x3.yaml")
-    assert len(runs) == 2 and out["sources_changed"] is False and "simulate(" in runs[0]
+    assert len(runs) == 2 and out["sources_changed"] is False and runs[0].endswith("paper_planar_2x3.yaml")
+
+
+def test_startup_script_reports_its_phases_from_a_filled_cache():
+    wall, phases = bench.startup_process(str(SCENARIOS / "paper_planar_2x3.yaml"), warm=False)
+    assert set(phases) == {"imports", "first", "again"}, f"phases {phases}"
+    assert 0 < phases["again"] < phases["first"] < wall, f"wall {wall:.3f} s, phases {phases}"
