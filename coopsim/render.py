@@ -24,14 +24,33 @@ if TYPE_CHECKING:
 
 DPI = 110
 WORKER_NICENESS = 5   # the workers yield the CPU to the command while it computes
+# Margins and gaps (inches) around a grid of axes with 10-point tick labels, axis labels and titles of
+# up to two lines: matplotlib's tight_layout finds them by drawing every text once more (about half
+# a second a figure), so the figures here use these instead.
+MARGIN = {"left": 0.85, "right": 0.2, "bottom": 0.55, "top": 0.5, "suptitle": 0.35, "wgap": 0.85, "hgap": 0.85}
+
+
+def fixed_layout(fig: Figure) -> None:
+    """Place fig's grid of subplots with the MARGIN gaps (inches), whatever the figure size."""
+    specs = [ax.get_subplotspec() for ax in fig.axes if ax.get_subplotspec() is not None]
+    if not specs:
+        return
+    rows, cols = specs[0].get_gridspec().get_geometry()
+    W, H = fig.get_size_inches()
+    top = MARGIN["top"] + (MARGIN["suptitle"] if fig.get_suptitle() else 0.0)
+    left, right, bottom = MARGIN["left"] / W, 1.0 - MARGIN["right"] / W, MARGIN["bottom"] / H
+    width = (W * (right - left) - MARGIN["wgap"] * (cols - 1)) / cols
+    height = (H * (1.0 - top / H - bottom) - MARGIN["hgap"] * (rows - 1)) / rows
+    fig.subplots_adjust(left=left, right=right, bottom=bottom, top=1.0 - top / H,
+                        wspace=MARGIN["wgap"] / width, hspace=MARGIN["hgap"] / height)
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
-    """Lay out and write `fig` as PNG (DPI dots per inch) atomically; returns the path."""
+    """Lay out (`fixed_layout`) and write `fig` as PNG (DPI dots per inch) atomically; returns the path."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
-    fig.tight_layout()
+    fixed_layout(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=DPI)
     return path
@@ -52,7 +71,7 @@ def _warm_up() -> None:
     ax.set(title="t", xlabel="x", ylabel="y")
     ax.legend()
     FigureCanvasAgg(fig)
-    fig.tight_layout()
+    fixed_layout(fig)
     fig.savefig(io.BytesIO(), format="png", dpi=DPI)
 
 
