@@ -7,6 +7,7 @@ import json
 import sys
 import warnings
 
+from . import __version__
 from .model import CoopsimError
 
 
@@ -213,7 +214,8 @@ def _display_path(path: str) -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="coopsim", description=(
         "Cooperative manipulators: recursive Gibbs-Appell closed-chain dynamics, validated against MuJoCo."))
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command")
     p = sub.add_parser("simulate", help="forward-simulate a scenario with the native model and print a summary",
                        description="Forward-simulate SCENARIO (YAML) with the native closed-chain model.")
     p.add_argument("scenario", help="scenario YAML file")
@@ -318,17 +320,42 @@ def _announce_compile() -> None:
     set_compile_notice(notice)
 
 
+INTERRUPTED = 130   # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; returns the exit status: 0, 1 (a check failed), 2 (bad input or a failure with
+    a one-line reason), 130 (interrupted). `coopsim` alone prints the help."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
     if getattr(args, "native", False):
         _announce_compile()
     with warnings.catch_warnings():
         warnings.simplefilter("default")
         try:
-            return args.func(args)
+            status = args.func(args)
+            sys.stdout.flush()   # a closed pipe shows here, not in the interpreter's exit
+            return status
         except (CoopsimError, OSError) as exc:
+            if isinstance(exc, BrokenPipeError):
+                return _closed_pipe()
             print(f"coopsim: error: {exc}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:
+            print("coopsim: interrupted", file=sys.stderr)
+            return INTERRUPTED
+
+
+def _closed_pipe() -> int:
+    """The reader of stdout went away (e.g. `coopsim ... | head`): stop quietly, as Python's docs advise
+    (point stdout at /dev/null so the interpreter's final flush does not fail again)."""
+    import os
+
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 1
 
 
 if __name__ == "__main__":
