@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .inverse import (InverseProblem, Resolution, distribute, energy, grasp_line_frames, internal_bound_components,
-                      internal_operator, min_energy_setup, min_energy_solve, resolve, torques_of)
+                      internal_operator, min_energy_setup, min_energy_solve, nan_peak, resolve, torques_of)
 from .model import Model, Motors
 from .qp import LPBatch, solve_lps
 
@@ -259,7 +259,9 @@ def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float
                         fractions=(1.0, 0.75, 0.5, 0.25, 0.1, 0.0)) -> list[dict]:
     """Energy of the bounded minimum-energy resolution for bounds = fraction × peak (peak = the
     minimum-energy distribution's peak internal-wrench components, N and N·m): a list of
-    {fraction, force_bound_N, moment_bound_Nm, energy, max_internal_force_N, max_internal_moment_Nm}."""
+    {fraction, force_bound_N, moment_bound_Nm, energy, max_internal_force_N, max_internal_moment_Nm,
+    failed_samples} — failed_samples: how many samples have no solution (then energy is nan and the
+    maxima leave them out)."""
     out = []
     for frac in fractions:
         r = replace(res, method="bounded", force_bound=frac * peak[0], moment_bound=frac * peak[1])
@@ -267,8 +269,9 @@ def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float
         F_I = result.internal_nonsqueezing if res.bound_definition == "nonsqueezing" else result.internal_paper
         out.append({"fraction": frac, "force_bound_N": frac * peak[0], "moment_bound_Nm": frac * peak[1],
                     "energy": energy(result),
-                    "max_internal_force_N": float(np.max(np.linalg.norm(F_I[..., :3], axis=-1))),
-                    "max_internal_moment_Nm": float(np.max(np.linalg.norm(F_I[..., 3:], axis=-1)))})
+                    "max_internal_force_N": float(nan_peak(np.linalg.norm(F_I[..., :3], axis=-1))),
+                    "max_internal_moment_Nm": float(nan_peak(np.linalg.norm(F_I[..., 3:], axis=-1))),
+                    "failed_samples": len(result.failures)})
     return out
 
 

@@ -36,6 +36,7 @@ pair). Planar scenes report out-of-plane components as zero (carried by the bear
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -53,6 +54,19 @@ METHODS = ("paper", "nonsqueezing", "min_energy", "bounded")
 
 class InverseError(CoopsimError):
     """The inverse dynamics cannot be resolved as asked (e.g. an infeasible bound with passive joints)."""
+
+
+class SampleFailureWarning(UserWarning):
+    """A resolution has no solution at some samples (e.g. 'bounded': an infeasible bound): they are
+    left out (nan) and listed in InverseResult.failures; the other samples are exact."""
+
+
+class SampleFailure(NamedTuple):
+    """A sample a resolution could not solve: index into the trajectory, time s, reason."""
+
+    index: int
+    time: float
+    reason: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,7 +134,8 @@ class Resolution:
 class InverseResult:
     """One resolution along the trajectory: t (N,) s; tau (N, n) N·m; grasp_wrench (N, r, 6) F_e^m;
     internal_paper and internal_nonsqueezing (N, r, 6) internal wrench at C by each definition;
-    cost (N,) ½ τᵀQτ (N²·m²); f (N, rk) grasp wrenches in the rows S."""
+    cost (N,) ½ τᵀQτ (N²·m²); f (N, rk) grasp wrenches in the rows S; failures: the samples it could
+    not solve (SampleFailure; every array is nan there)."""
 
     method: str
     t: np.ndarray
@@ -130,6 +145,7 @@ class InverseResult:
     internal_nonsqueezing: np.ndarray
     cost: np.ndarray
     f: np.ndarray
+    failures: tuple = ()
 
 
 def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.ndarray | None = None) -> InverseProblem:
@@ -409,25 +425,31 @@ def internal_wrench(prob: InverseProblem, f: np.ndarray, definition: str, Mstar:
     return np.einsum("nij,nj->ni", L, f).reshape(len(f), prob.r, 6)
 
 
-def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Resolution, Mstar: np.ndarray) -> np.ndarray:
+def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Resolution, Mstar: np.ndarray,
+                                    failures: list | None = None) -> np.ndarray:
     """Minimum energy with a bounded internal wrench (a QP per sample, all solved together by
-    `coopsim.qp.solve_qps`): min ½τᵀQτ s.t. A f = y, τ_j = 0 (passive), and for every arm m every
-    component of its internal wrench at C (definition res.bound_definition) in its grasp-line frame
-    (axial, 2 shear | torsion, 2 bending) within ± res.force_bound (N) | ± res.moment_bound (N·m).
-    Starts from the definition's zero-internal distribution (feasible) unless joints are passive (then
-    a feasibility LP)."""
+    `coopsim.qp.solve_qps`: HiGHS, polished to the exact minimiser): min ½τᵀQτ s.t. A f = y, τ_j = 0
+    (passive), and for every arm m every component of its internal wrench at C (definition
+    res.bound_definition) in its grasp-line frame (axial, 2 shear | torsion, 2 bending) within
+    ± res.force_bound (N) | ± res.moment_bound (N·m). A sample whose QP has no solution (infeasible:
+    a bound that passive joints cannot meet; or not solved) is nan, named in a SampleFailureWarning
+    and appended to `failures` (SampleFailure) — the other samples are unaffected."""
     C, bound, keep = internal_bound_components(grasp_line_frames(prob),
                                                internal_operator(prob, res.bound_definition, Mstar), res)
     hi = np.where(keep, bound, np.inf)
     sq = np.sqrt(np.where(res.passive, 0.0, res.weights))
     E = np.concatenate([prob.A, prob.JT[:, res.passive]], axis=1)
     e = np.concatenate([y, -prob.tau_arms[:, res.passive]], axis=1)
-    x0 = None
-    if not np.any(res.passive):
-        x0 = (nonsqueezing_distribution(prob, y, Mstar) if res.bound_definition == "nonsqueezing"
-              else paper_distribution(prob, y))
-    qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, C, -hi, hi, x0=x0)
-    return np.array([r.x for r in qps]).reshape(len(y), prob.r * prob.k)
+    qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, C, -hi, hi)
+    bad = [SampleFailure(int(i), float(prob.t[i]), qps.messages[i]) for i in np.flatnonzero(~qps.ok)]
+    if bad:
+        shown = ", ".join(f"t={b.time:.6g} s ({b.reason})" for b in bad[:3]) + (", ..." if len(bad) > 3 else "")
+        warnings.warn(f"'bounded' (|internal| <= {res.force_bound:.4g} N, {res.moment_bound:.4g} N·m): no solution at "
+                      f"{len(bad)} of {len(y)} samples: {shown}; they are left out (nan)", SampleFailureWarning,
+                      stacklevel=2)
+        if failures is not None:
+            failures.extend(bad)
+    return qps.x
 
 
 def internal_bound_components(frames: np.ndarray, L: np.ndarray, res: Resolution):
@@ -482,8 +504,9 @@ def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                       virtual_inertias(masses, obj.mass, obj.inertia), force_bound, moment_bound, bound_definition)
 
 
-def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution) -> np.ndarray:
-    """Grasp wrenches f (N, rk) of resolution `res` for the net object wrenches y (N, k)."""
+def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None) -> np.ndarray:
+    """Grasp wrenches f (N, rk) of resolution `res` for the net object wrenches y (N, k); nan at the
+    samples it cannot solve ('bounded' only), which are appended to `failures`."""
     if res.method == "paper":
         return paper_distribution(prob, y)
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
@@ -492,7 +515,7 @@ def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution) -> np.ndarr
     if res.method == "min_energy":
         return min_energy_distribution(prob, y, res.weights, res.passive)
     if res.method == "bounded":
-        return bounded_min_energy_distribution(prob, y, res, Mstar)
+        return bounded_min_energy_distribution(prob, y, res, Mstar, failures)
     raise ValueError(f"unknown method {res.method!r}")
 
 
@@ -501,17 +524,21 @@ def cost_of(tau: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return 0.5 * np.einsum("ni,i,ni->n", tau, weights, tau)
 
 
-def result_of(prob: InverseProblem, method: str, f: np.ndarray, res: Resolution) -> InverseResult:
+def result_of(prob: InverseProblem, method: str, f: np.ndarray, res: Resolution, failures=()) -> InverseResult:
     """Torques, grasp wrenches, both internal wrenches and cost of the distribution f."""
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
     tau = torques_of(prob, f)
     return InverseResult(method, prob.t, tau, grasp_wrenches(prob, f), internal_wrench(prob, f, "paper"),
-                         internal_wrench(prob, f, "nonsqueezing", Mstar), cost_of(tau, res.weights), f)
+                         internal_wrench(prob, f, "nonsqueezing", Mstar), cost_of(tau, res.weights), f,
+                         tuple(failures))
 
 
 def resolve(prob: InverseProblem, res: Resolution) -> InverseResult:
-    """Inverse dynamics of `prob` resolved by `res` (output per sample: τ, F_e, internal wrenches, cost)."""
-    return result_of(prob, res.method, distribute(prob, prob.y, res), res)
+    """Inverse dynamics of `prob` resolved by `res` (output per sample: τ, F_e, internal wrenches, cost;
+    nan at the samples listed in `failures`)."""
+    failures: list[SampleFailure] = []
+    f = distribute(prob, prob.y, res, failures)
+    return result_of(prob, res.method, f, res, failures)
 
 
 def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5) -> tuple[float, float]:
@@ -528,6 +555,13 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
     return fraction * peak_f, fraction * peak_m
 
 
+def nan_peak(a: np.ndarray, axis=None):
+    """np.max leaving out nan (the samples a resolution could not solve); nan where nothing is left."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmax(a, axis=axis)
+
+
 def energy(result: InverseResult) -> float:
     """∫ ½τᵀQτ dt over the trajectory (trapezoidal rule), N²·m²·s."""
     return float(np.trapezoid(result.cost, result.t))
@@ -540,19 +574,24 @@ def energy(result: InverseResult) -> float:
 @dataclass(frozen=True, eq=False)
 class Replay:
     """Forward simulation driven by a resolution's torques: sim (SimResult on the trajectory's sample
-    times), max_angle_error rad and max_rate_error rad/s against the trajectory."""
+    times), max_angle_error rad and max_rate_error rad/s against the trajectory. When the resolution
+    has no torques at some stage times (SampleFailure) nothing is simulated: sim None, errors nan,
+    `failures` (SampleFailure, indices into the stage times) says where."""
 
     sim: object
     max_angle_error: float
     max_rate_error: float
+    failures: tuple = ()
 
 
-def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.ndarray) -> np.ndarray:
+def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.ndarray,
+                  failures: list | None = None) -> np.ndarray:
     """τ (M, n) N·m of resolution `res` along `traj` at times t (M,) (relative to traj.t[0]): the
-    trajectory's quintic Hermite interpolant at each t, then the inverse dynamics of those states."""
+    trajectory's quintic Hermite interpolant at each t, then the inverse dynamics of those states
+    (nan where `res` has no solution; those times are appended to `failures`)."""
     q, qd, qdd = trajectory_at_times(traj, traj.t[0] + np.asarray(t, dtype=float))
     prob = inverse_problem(model, JointTrajectory(np.asarray(t, dtype=float), q, qd, qdd, traj.source))
-    return torques_of(prob, distribute(prob, prob.y, res))
+    return torques_of(prob, distribute(prob, prob.y, res, failures))
 
 
 def torque_function(model: Model, traj: JointTrajectory, res: Resolution) -> TorqueFunction:
@@ -580,7 +619,10 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     tab = tableau(REPLAY_METHOD)
     t_stage = np.unique(np.concatenate([stage_times(a, b, dt, tab.C, tab.stages)
                                         for a, b in zip(t_out[:-1], t_out[1:])]))
-    tau = stage_torques(model, traj, res, t_stage)
+    failures: list[SampleFailure] = []
+    tau = stage_torques(model, traj, res, t_stage, failures)
+    if failures:
+        return Replay(None, np.nan, np.nan, tuple(failures))
     tables = tuple(TorqueTable(t_stage, tau[:, sl]) for sl in model.dof_slices)
     replay_model = replace(model, torques=tables, q0=traj.q[0], qd0=traj.qd[0], duration=float(tr[-1]),
                            integrator=replace(model.integrator, method=REPLAY_METHOD, output_dt=dt))

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import capacity as cap
 from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy, grasp_line_frames,
-                      inverse_problem, replay, resolution_for, resolve, result_of, virtual_masses)
+                      inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
 from .log import Series, nonfinite_name
 from .model import Model
 from .stress import SectionLoads, decompose_internal, section_loads
@@ -102,8 +102,14 @@ def _trajectory_summary(model: Model, traj: JointTrajectory) -> dict:
             "max_abs_acceleration_rad_s2": np.max(np.abs(traj.qdd), axis=0).tolist()}
 
 
+def _failures(failures) -> list[dict]:
+    return [{"time_s": f.time, "reason": f.reason} for f in failures]
+
+
 def inverse_summary(study: InverseStudy) -> dict:
-    """JSON-ready summary of an inverse study (SI units)."""
+    """JSON-ready summary of an inverse study (SI units). Samples a resolution could not solve are
+    listed under its "failed_samples" (every statistic leaves them out; its energy, an integral over
+    the whole trajectory, is then nan); "complete" is false when any method or replay has one."""
     m = study.model
     e_min = energy(study.results["min_energy"]) if "min_energy" in study.results else None
     methods = {}
@@ -112,38 +118,43 @@ def inverse_summary(study: InverseStudy) -> dict:
         entry = {
             "energy": e,
             "energy_ratio_to_min_energy": None if not e_min else e / e_min,
-            "max_abs_torque_Nm": np.max(np.abs(r.tau), axis=0).tolist(),
-            "max_torque_norm_Nm": float(np.max(np.linalg.norm(r.tau, axis=1))),
-            "max_cost": float(np.max(r.cost)),
+            "max_abs_torque_Nm": nan_peak(np.abs(r.tau), axis=0).tolist(),
+            "max_torque_norm_Nm": float(nan_peak(np.linalg.norm(r.tau, axis=1))),
+            "max_cost": float(nan_peak(r.cost)),
+            "failed_samples": _failures(r.failures),
             "internal": {},
         }
         for d in DEFINITIONS:
             F_I, comp = getattr(r, f"internal_{d}"), study.components[k][d]
             entry["internal"][d] = {
-                "max_abs_component": float(np.max(np.abs(F_I))),
-                "max_force_N": float(np.max(np.linalg.norm(F_I[..., :3], axis=-1))),
-                "max_moment_Nm": float(np.max(np.linalg.norm(F_I[..., 3:], axis=-1))),
-                "max_stretch_N": float(max(0.0, np.max(comp["axial"]))),
-                "max_squeeze_N": float(max(0.0, -np.min(comp["axial"]))),
-                "max_shear_N": float(np.max(comp["shear"])),
-                "max_torsion_Nm": float(np.max(np.abs(comp["torsion"]))),
-                "max_bending_Nm": float(np.max(comp["bending"])),
+                "max_abs_component": float(nan_peak(np.abs(F_I))),
+                "max_force_N": float(nan_peak(np.linalg.norm(F_I[..., :3], axis=-1))),
+                "max_moment_Nm": float(nan_peak(np.linalg.norm(F_I[..., 3:], axis=-1))),
+                "max_stretch_N": float(max(0.0, nan_peak(comp["axial"]))),
+                "max_squeeze_N": float(max(0.0, nan_peak(-comp["axial"]))),
+                "max_shear_N": float(nan_peak(comp["shear"])),
+                "max_torsion_Nm": float(nan_peak(np.abs(comp["torsion"]))),
+                "max_bending_Nm": float(nan_peak(comp["bending"])),
             }
         if k in study.stress:
             s = study.stress[k]
-            entry["stress"] = {"peak_normal_Pa": float(np.max(s.peak_normal)), "peak_shear_Pa": float(np.max(s.peak_shear)),
-                               "max_axial_N": float(np.max(np.abs(s.axial))), "max_bending_Nm": float(np.max(s.bending))}
+            entry["stress"] = {"peak_normal_Pa": float(nan_peak(s.peak_normal)), "peak_shear_Pa": float(nan_peak(s.peak_shear)),
+                               "max_axial_N": float(nan_peak(np.abs(s.axial))), "max_bending_Nm": float(nan_peak(s.bending))}
         if np.any(m.motors.passive):
-            entry["max_abs_passive_torque_Nm"] = float(np.max(np.abs(r.tau[:, m.motors.passive])))
+            entry["max_abs_passive_torque_Nm"] = float(nan_peak(np.abs(r.tau[:, m.motors.passive])))
         if k in study.replays:
             rep = study.replays[k]
             entry["replay"] = {"max_angle_error_rad": rep.max_angle_error, "max_rate_error_rad_s": rep.max_rate_error}
+            if rep.failures:
+                entry["replay"]["failed_stage_times"] = _failures(rep.failures)
         methods[k] = entry
     masses, offset = virtual_masses(m.object.grasp_pos, m.object.mass, m.inverse.nonsqueezing_masses)
+    complete = not any(e["failed_samples"] or e.get("replay", {}).get("failed_stage_times") for e in methods.values())
     return {
         "scenario": m.name,
         "joints": joint_names(m),
         "trajectory": _trajectory_summary(m, study.traj),
+        "complete": complete,
         "energy_definition": "integral of 0.5 tau^T Q tau dt (trapezoidal), Q = diag(energy_weights)",
         "nonsqueezing": {"virtual_masses_kg": masses.tolist(), "centroid_offset_m": offset.tolist()},
         "bounded": {"force_bound_N": study.bounds[0], "moment_bound_Nm": study.bounds[1],
@@ -173,12 +184,25 @@ def format_inverse_summary(s: dict) -> str:
             f"{e['internal']['paper']['max_abs_component']:>11.3g}{e['internal']['nonsqueezing']['max_abs_component']:>10.3g}"
             f"{e['stress']['peak_normal_Pa'] if 'stress' in e else float('nan'):>11.4g}"
             f"{e['replay']['max_angle_error_rad'] if 'replay' in e else float('nan'):>10.2g}")
+    for k, e in s["methods"].items():
+        if e["failed_samples"]:
+            lines.append(f"{k}: NO SOLUTION at {len(e['failed_samples'])} of {tr['samples']} samples, left out (nan): "
+                         + _failure_list(e["failed_samples"]))
+        if e.get("replay", {}).get("failed_stage_times"):
+            lines.append(f"{k}: replay not run: no torques at {len(e['replay']['failed_stage_times'])} stage times: "
+                         + _failure_list(e["replay"]["failed_stage_times"]))
     if s["energy_stress_curve"]:
         lines += ["", "energy against the internal-wrench bound (bounded minimum energy):"]
         for c in s["energy_stress_curve"]:
             lines.append(f"  {c['fraction']:>5.2f} x peak: |F_I| <= {c['force_bound_N']:.4g} N, {c['moment_bound_Nm']:.4g} N·m"
-                         f"  energy {c['energy']:.5g}")
+                         f"  energy {c['energy']:.5g}"
+                         + (f"  (no solution at {c['failed_samples']} samples)" if c["failed_samples"] else ""))
     return "\n".join(lines)
+
+
+def _failure_list(failures: list[dict], shown: int = 3) -> str:
+    text = ", ".join(f"t={f['time_s']:.6g} s ({f['reason']})" for f in failures[:shown])
+    return text + (", ..." if len(failures) > shown else "")
 
 
 # ------------------------------------------------------------------------------------------------

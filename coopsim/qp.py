@@ -1,51 +1,79 @@
-"""Small dense convex QPs and LPs for the per-sample load-distribution problems (pure NumPy/SciPy),
-one at a time or a batch at once (one per sample of a trajectory).
+"""Small dense convex QPs and LPs for the per-sample load-distribution problems, one at a time or a
+batch at once (one per sample of a trajectory).
 
     minimise ½ |R x − d|²   subject to   E x = e,   lo <= C x <= hi
 
-Primal active-set method (Nocedal & Wright, *Numerical Optimization*, 2nd ed., Algorithm 16.3):
-from a feasible point, solve the equality-constrained QP on the working set, step until a constraint
-blocks, add it; when the step is zero, drop the constraint with the most negative multiplier, or stop
-when all multipliers are non-negative (the KKT conditions hold). The least-squares form keeps every
-sub-problem bounded below even when RᵀR is singular (the gradient Rᵀ(Rx − d) lies in range(RᵀR)); the
-KKT systems are solved in the least-squares sense, so redundant constraints and singular Hessians give
-a minimiser of minimum norm. A feasible start is taken from `x0` or from a HiGHS feasibility LP.
+QPs are solved by HiGHS's QP solver (`highspy`; a maintained primal active-set method that takes a
+positive *semi*definite Hessian, here H = RᵀR), then polished to the exact minimiser:
 
-A row with lo = hi is an equality: it stays in every working set (a degenerate vertex where both of
-its sides are active would otherwise let the iteration cycle).
-
-A batch (`solve_qps`, one problem per sample of a trajectory) runs the same iteration on every
-problem at once, vectorized over the problems not yet finished. The KKT systems of *regular*
-problems (E of full row rank, RᵀR positive definite on {E x = 0}, both with condition number below
-REGULAR_COND: then every working set's KKT matrix is non-singular) are solved together by LU; the
-others one by one in the least-squares sense, as above.
+1. HiGHS: the problems of a batch are stacked block-diagonally, CHUNK problems to one HiGHS QP (HiGHS's
+   fixed cost per call dominates problems this small, while its dense null-space factor makes one QP
+   of the whole batch slower again; measured on the paper scene's bounded problem). Rows are scaled to
+   a largest entry of 1 and the objective to a largest Hessian entry of 1.
+2. Polish: the working set is read from HiGHS's row duals (each row with a non-zero dual held at the
+   bound its sign names; rows with lo = hi and E always); the equality-constrained QP on it is solved
+   exactly (its KKT system, minimum-norm least squares: redundant rows and semidefinite Hessians are
+   allowed) and verified — every row feasible (PRIMAL_TOL), stationarity (STATIONARITY_TOL) and every
+   held inequality's multiplier of the right sign (DUAL_TOL). A row the polished point violates joins
+   the set, else a multiplier of the wrong sign leaves it, at most POLISH_STEPS times. HiGHS's answer is
+   only the guess of the active set: its tolerances (about 1e-7) never reach the result, which
+   satisfies its held rows to rounding error.
+3. A problem whose chunk HiGHS did not solve to optimality (one infeasible block makes its whole chunk
+   infeasible) or whose polish failed is solved alone, then polished again. What fails then is reported
+   in the result (status, message, x = nan) — `solve_qps` never raises for one problem; `solve_qp`
+   (one problem) raises QPError.
 
 `solve_lps` solves a batch of small LPs as one block-diagonal HiGHS LP.
 """
 
 from __future__ import annotations
 
+import threading
 from typing import NamedTuple
 
 import numpy as np
 
 from .model import CoopsimError
 
-REGULAR_COND = 1e8
+CHUNK_COLUMNS = 96         # variables per HiGHS QP (whole problems, at least one)
+POLISH_STEPS = 20          # working-set changes of the polish
+PRIMAL_TOL = 1e-12         # row violation, relative to the problem's largest |bound| or Σ|C_ij x_j|
+DUAL_TOL = 1e-10           # wrong-sign multiplier, relative to the largest |H x|, |g| (scaled problem)
+STATIONARITY_TOL = 1e-9    # |H x + g − Bᵀλ|, same scale
 
 
 class QPError(CoopsimError):
-    """The QP is infeasible or the active-set iteration did not finish."""
+    """The QP is infeasible, or no verified minimiser was found."""
 
 
 class QPResult(NamedTuple):
-    """x (n,) the minimiser; active: the working set at x, indices into the one-sided rows (the
-    finite upper bounds of C in row order, then the finite lower bounds); iterations: active-set
-    steps."""
+    """One solved QP: x (n,) the minimiser; active (m,) int8 per row of C: +1 held at hi (also rows
+    with lo = hi), −1 held at lo, 0 not in the working set; eq_mult (q,) and mult (m,) the multipliers:
+    Hx + g = Eᵀ eq_mult + Cᵀ mult (H = RᵀR, g = −Rᵀd), mult >= 0 at lo, <= 0 at hi, 0 off the set."""
 
     x: np.ndarray
-    active: list
-    iterations: int
+    active: np.ndarray
+    eq_mult: np.ndarray
+    mult: np.ndarray
+
+
+class QPBatch(NamedTuple):
+    """Solutions of a batch of N QPs: ok (N,) bool: a verified minimiser; x (N, n) (nan where not ok);
+    active (N, m), eq_mult (N, q), mult (N, m) as in QPResult (0 where not ok); messages: N strings
+    ('optimal', or why not: 'infeasible', or HiGHS's status and what the polish found)."""
+
+    ok: np.ndarray
+    x: np.ndarray
+    active: np.ndarray
+    eq_mult: np.ndarray
+    mult: np.ndarray
+    messages: list
+
+    def result(self, i: int) -> QPResult:
+        """Problem i as a QPResult; raises QPError with its message when it was not solved."""
+        if not self.ok[i]:
+            raise QPError(f"QP not solved: {self.messages[i]}")
+        return QPResult(self.x[i], self.active[i], self.eq_mult[i], self.mult[i])
 
 
 class LPBatch(NamedTuple):
@@ -133,203 +161,339 @@ def _store(out: LPBatch, idx: np.ndarray, sol, keep: np.ndarray) -> None:
         out.marginals[idx] = marg
 
 
-def feasible_points(E: np.ndarray, e: np.ndarray, C: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Points (N, n) with E x = e and lo <= C x <= hi for a batch (E (N, q, n), e (N, q), C (N, m, n),
-    lo/hi (N, m)): HiGHS LPs with a zero objective; raises QPError naming the first infeasible one."""
-    N, n = C.shape[0], C.shape[2]
-    G, h, _ = _one_sided(C, lo, hi)
-    res = solve_lps(np.zeros(n), G, h, E, e, [(None, None)] * n)
-    bad = np.flatnonzero(res.status != 0)
-    if len(bad):
-        raise QPError(f"no point satisfies the constraints ({res.messages[bad[0]]})")
-    return res.x
-
-
 # ------------------------------------------------------------------------------------------------
 # QPs
 # ------------------------------------------------------------------------------------------------
 
-def _one_sided(C, lo, hi):
-    """Rows G x <= h of a batch: G (N, 2m, n) = [C; −C], h (N, 2m) = [hi; −lo] (the C x <= hi rows
-    first, then −C x <= −lo, each in row order), and finite (N, 2m): the rows with a finite bound."""
-    h = np.concatenate([hi, -lo], axis=1)
-    return np.concatenate([C, -C], axis=1), h, np.isfinite(h)
-
-
 def solve_qp(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.ndarray, lo: np.ndarray,
-             hi: np.ndarray, x0: np.ndarray | None = None, tol: float = 1e-12, max_iter: int = 200) -> QPResult:
+             hi: np.ndarray) -> QPResult:
     """Minimise ½|R x − d|² subject to E x = e and lo <= C x <= hi (shapes: R (p, n), d (p,), E (q, n),
-    e (q,), C (m, n), lo/hi (m,), ±inf allowed). x0: a feasible start (else found by an LP).
-    tol: relative tolerance of the stationarity and feasibility tests."""
-    n = R.shape[1]
-    return solve_qps(R[None], np.asarray(d)[None], np.reshape(E, (1, -1, n)), np.asarray(e, float)[None],
-                     np.reshape(C, (1, -1, n)), np.asarray(lo, float)[None], np.asarray(hi, float)[None],
-                     None if x0 is None else np.asarray(x0)[None], tol, max_iter)[0]
+    e (q,), C (m, n), lo/hi (m,), ±inf allowed). Raises QPError when it is infeasible or no verified
+    minimiser is found."""
+    n = np.shape(R)[1]
+    one = lambda a: np.asarray(a, dtype=float).reshape(1, -1)          # noqa: E731
+    batch = solve_qps(np.asarray(R, dtype=float)[None], one(d), np.reshape(E, (1, -1, n)), one(e),
+                      np.reshape(C, (1, -1, n)), one(lo), one(hi))
+    return batch.result(0)
 
 
 def solve_qps(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.ndarray, lo: np.ndarray,
-              hi: np.ndarray, x0: np.ndarray | None = None, tol: float = 1e-12, max_iter: int = 200) -> list[QPResult]:
+              hi: np.ndarray) -> QPBatch:
     """`solve_qp` for a batch of N problems: R (N, p, n), d (N, p), E (N, q, n), e (N, q), C (N, m, n),
-    lo/hi (N, m), x0 (N, n) or None. Returns one QPResult per problem. A row with lo = hi is an
-    equality: its upper row is pinned (in every working set, never dropped), its lower row implied."""
-    N, n = R.shape[0], R.shape[2]
-    G, h, finite = _one_sided(C, lo, hi)
-    eq = np.isfinite(hi) & (lo == hi)
-    pinned = np.concatenate([eq, np.zeros_like(eq)], axis=1)
-    valid = finite & ~np.concatenate([np.zeros_like(eq), eq], axis=1)
-    used = finite.any(axis=0)
-    G, h, finite, valid, pinned = (a[:, used] for a in (G, h, finite, valid, pinned))
-    G, h = np.where(valid[..., None], G, 0.0), np.where(valid, h, np.inf)
-    x = np.array(feasible_points(E, e, C, lo, hi) if x0 is None else x0, dtype=float)
-    H, g = np.swapaxes(R, 1, 2) @ R, -np.einsum("npi,np->ni", R, d)
-    scale = np.maximum(1.0, np.max(np.abs(H), axis=(1, 2), initial=0.0))
-    gscale = np.maximum(1.0, np.max(np.abs(G), axis=(1, 2), initial=0.0))
-    slack_tol = tol * np.maximum(1.0, np.max(np.abs(np.where(valid, h, 0.0)), axis=1, initial=0.0))
-    work = pinned | (valid & (h - np.einsum("nmi,ni->nm", G, x) <= slack_tol[:, None]))
-    work = _independent(E, G, work, pinned)
-    order = np.where(work, np.arange(G.shape[1]), -1)             # insertion order in the working set
-    regular = _regular(H, E)
-    done, iters = np.zeros(N, bool), np.zeros(N, int)
-    for it in range(max_iter):
-        live = np.flatnonzero(~done)
+    lo/hi (N, m). A problem that fails is reported in the QPBatch (ok False, x nan, message), never
+    raised. Steps (module docstring): the equality rows eliminated; the minimiser on them alone, where
+    it is feasible; HiGHS in chunks for the others, polished; HiGHS alone for what still fails, polished."""
+    P = _Scaled.of(*(np.asarray(a, dtype=float) for a in (R, d, E, e, C, lo, hi)))
+    N, n = P.g.shape
+    q, r = np.shape(E)[1], P.B.shape[1]
+    red = _Reduced.of(P)
+    out = _Outcome.empty(N, n, r)
+    status = np.where(red.consistent, "", "Infeasible").astype(object)
+    cand = np.flatnonzero(red.consistent)
+    _polish(P, red, cand, np.zeros((len(cand), r), np.int8), 0, out)
+    rest = cand[~out.ok[cand]]
+    if len(rest):
+        guess_y = np.full(P.lo.shape, np.nan)
+        with _HIGHS_LOCK:
+            h = _highs()
+            for chunk in _chunks(rest, red.free[rest].sum(axis=1)):
+                _run_highs(h, red, chunk, guess_y, status)
+            _polish_guesses(P, red, rest, guess_y, out)
+            again = rest[~out.ok[rest]] if len(rest) > 1 else rest[:0]
+            guess_y[again] = np.nan
+            for i in again:                                   # alone: its own status, a fresh guess
+                _run_highs(h, red, np.array([i]), guess_y, status)
+            _polish_guesses(P, red, again, guess_y, out)
+        last = rest[~out.ok[rest]]                            # a working-set search of the polish's own
+        _polish(P, red, last, np.zeros((len(last), r), np.int8), POLISH_STEPS, out)
+    messages = []
+    for i in range(N):
+        if out.ok[i]:
+            messages.append("optimal")
+        elif not red.consistent[i]:
+            messages.append("infeasible (the equality rows are inconsistent)")
+        elif status[i] == "Infeasible":
+            messages.append("infeasible")
+        else:
+            messages.append(f"HiGHS: {status[i].lower()}; polish: {out.why[i]}")
+    x, lam, held = out.x, out.lam * P.D / P.sigma[:, None], out.held
+    x[~out.ok], lam[~out.ok], held[~out.ok] = np.nan, 0.0, 0
+    return QPBatch(out.ok, x, held[:, q:].copy(), lam[:, :q], lam[:, q:], messages)
+
+
+def _chunks(idx: np.ndarray, width: np.ndarray) -> list[np.ndarray]:
+    """idx cut into consecutive runs of about CHUNK_COLUMNS variables (width (len(idx),) each)."""
+    ends = np.cumsum(width)
+    cut = np.flatnonzero(np.diff(ends // CHUNK_COLUMNS)) + 1
+    return np.split(idx, cut)
+
+
+def _polish_guesses(P: _Scaled, red: "_Reduced", idx: np.ndarray, guess_y: np.ndarray, out: "_Outcome") -> None:
+    """Polish the problems idx that HiGHS gave a guess, from the working sets its duals name."""
+    idx = idx[np.all(np.isfinite(guess_y[idx]), axis=1)]
+    y, lo, hi = guess_y[idx], red.lo[idx], red.hi[idx]
+    W = np.zeros(y.shape, np.int8)
+    W[(y < 0) & np.isfinite(hi)] = 1                           # y < 0: held at hi, y > 0: at lo
+    W[(y > 0) & np.isfinite(lo)] = -1
+    _polish(P, red, idx, W, POLISH_STEPS, out)
+
+
+class _Scaled(NamedTuple):
+    """A batch with every row B = [E; C] scaled to a largest |entry| of 1 (D (N, r) = 1/that, 1 for a
+    zero row) and the objective ½xᵀHx + gᵀx (H = RᵀR, g = −Rᵀd) by sigma (N,) = 1/max|H| (1/max|g|
+    for H = 0): B (N, r, n), lo/hi (N, r) scaled bounds (E rows: lo = hi = e), eq (N, r) lo = hi,
+    ineq (N, r): the other rows with a finite bound (the rest are no constraint)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    B: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    eq: np.ndarray
+    ineq: np.ndarray
+    D: np.ndarray
+    sigma: np.ndarray
+
+    @classmethod
+    def of(cls, R, d, E, e, C, lo, hi):
+        H, g = np.swapaxes(R, 1, 2) @ R, -np.einsum("npi,np->ni", R, d)
+        B = np.concatenate([E, C], axis=1)
+        lo, hi = np.concatenate([e, lo], axis=1), np.concatenate([e, hi], axis=1)
+        big = np.max(np.abs(B), axis=2, initial=0.0)
+        D = 1.0 / np.where(big > 0, big, 1.0)
+        hmax = np.max(np.abs(H), axis=(1, 2), initial=0.0)
+        gmax = np.max(np.abs(g), axis=1, initial=0.0)
+        sigma = 1.0 / np.where(hmax > 0, hmax, np.where(gmax > 0, gmax, 1.0))
+        eq = (lo == hi) & np.isfinite(lo)
+        return cls(H * sigma[:, None, None], g * sigma[:, None], B * D[..., None], lo * D, hi * D, eq,
+                   (np.isfinite(lo) | np.isfinite(hi)) & ~eq, D, sigma)
+
+
+class _Reduced(NamedTuple):
+    """The problems with their equality rows (E, and rows of C with lo = hi) eliminated: x = xp + Z z.
+    Z (N, n, n): an orthonormal basis of the equality rows' null space in the columns `free` (N, n)
+    (the last n − rank), zero elsewhere; xp (N, n) their minimum-norm solution; consistent (N,): xp
+    satisfies them; Einv (N, r, n): (B_eqᵀ)⁺ (zero rows off the equality rows), for their multipliers;
+    in z: H (N, n, n) = ZᵀHZ + 1 on the diagonal off `free` (those z are 0), g (N, n) = Zᵀ(H xp + g),
+    C (N, r, n) = B Z, lo/hi (N, r) = bounds − B xp (the inequality rows' part)."""
+
+    Z: np.ndarray
+    xp: np.ndarray
+    free: np.ndarray
+    consistent: np.ndarray
+    Einv: np.ndarray
+    H: np.ndarray
+    g: np.ndarray
+    C: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @classmethod
+    def of(cls, P: _Scaled):
+        N, r, n = P.B.shape
+        rows = np.flatnonzero(P.eq.any(axis=0))
+        Eq = P.B[:, rows] * P.eq[:, rows, None]
+        e = np.where(P.eq[:, rows], P.lo[:, rows], 0.0)
+        Einv = np.zeros((N, r, n))
+        if len(rows):
+            U, s, Vt = np.linalg.svd(Eq)
+            k = s.shape[1]
+            big = s > s[:, :1] * max(len(rows), n) * np.finfo(float).eps
+            inv = np.divide(1.0, s, out=np.zeros_like(s), where=big)
+            xp = np.einsum("nji,nj->ni", Vt[:, :k], inv * np.einsum("nkj,nk->nj", U[:, :, :k], e))
+            Einv[:, rows] = U[:, :, :k] @ (inv[..., None] * Vt[:, :k])
+            free = np.arange(n)[None, :] >= big.sum(axis=1)[:, None]
+            Z = np.swapaxes(Vt, 1, 2) * free[:, None, :]
+        else:
+            xp, free, Z = np.zeros((N, n)), np.ones((N, n), bool), np.broadcast_to(np.eye(n), (N, n, n)).copy()
+        res = np.max(np.abs(np.einsum("nij,nj->ni", Eq, xp) - e), axis=1, initial=0.0)
+        scale = np.maximum(np.max(np.abs(e), axis=1, initial=0.0),
+                           np.max(np.abs(Eq) @ np.abs(xp)[..., None], axis=(1, 2), initial=0.0))
+        consistent = res <= PRIMAL_TOL * scale
+        Zt = np.swapaxes(Z, 1, 2)
+        H = Zt @ P.H @ Z
+        H[:, np.arange(n), np.arange(n)] += ~free
+        Bxp = np.einsum("nij,nj->ni", P.B, xp)
+        g = np.einsum("nij,nj->ni", Zt, np.einsum("nij,nj->ni", P.H, xp) + P.g)
+        return cls(Z, xp, free, consistent, Einv, H, g, P.B @ Z, np.where(P.ineq, P.lo - Bxp, -np.inf), np.where(P.ineq, P.hi - Bxp, np.inf))
+
+
+class _Outcome(NamedTuple):
+    """What the polish verified so far, per problem of the batch: ok (N,), x (N, n), lam (N, r) scaled
+    multipliers (Hx + g = Bᵀλ in the scaled problem), held (N, r) int8 (+1 at hi or an equality row,
+    −1 at lo, 0 free), why (N,) the last polish's reason for not ok."""
+
+    ok: np.ndarray
+    x: np.ndarray
+    lam: np.ndarray
+    held: np.ndarray
+    why: list
+
+    @classmethod
+    def empty(cls, N: int, n: int, r: int):
+        return cls(np.zeros(N, bool), np.full((N, n), np.nan), np.zeros((N, r)), np.zeros((N, r), np.int8), [""] * N)
+
+
+_HIGHS_LOCK = threading.RLock()
+_HIGHS = None
+
+
+def _highs():
+    """The process's HiGHS instance, silent. The first one HiGHS makes prints its banner on the C-level
+    standard output (it would corrupt `--json` output): that is sent to the null device."""
+    global _HIGHS
+    if _HIGHS is None:
+        import os
+        import sys
+
+        import highspy
+
+        try:
+            sys.stdout.flush()
+            saved = os.dup(1)
+        except (OSError, ValueError, AttributeError):
+            saved = None
+        try:
+            if saved is not None:
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, 1)
+                os.close(null)
+            h = highspy.Highs()
+            h.setOptionValue("output_flag", False)
+        finally:
+            if saved is not None:
+                _flush_c_stdout()
+                os.dup2(saved, 1)
+                os.close(saved)
+        h.setOptionValue("small_matrix_value", 1e-12)
+        _HIGHS = h
+    return _HIGHS
+
+
+def _flush_c_stdout() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):
+        pass
+
+
+def _run_highs(h, red: _Reduced, idx: np.ndarray, guess_y: np.ndarray, status: np.ndarray) -> None:
+    """Solve the reduced problems idx (z in their `free` columns, inequality rows only: HiGHS's QP
+    solver reports solve errors on these problems with their equality rows, and none without) as one
+    block-diagonal HiGHS QP; store its row duals (gradient = Cᵀy, scaled problem; 0 off the
+    inequality rows) as their guesses (they stay nan when HiGHS has none) and HiGHS's model status as
+    theirs."""
+    k, n = len(idx), red.g.shape[1]
+    fr = red.free[idx]
+    keep = np.isfinite(red.lo[idx]) | np.isfinite(red.hi[idx])
+    A = red.C[idx][keep]
+    col = np.cumsum(fr.ravel()).reshape(k, n) - 1                # global column of each free (problem, j)
+    blk = np.nonzero(keep)[0]
+    nz = (np.abs(A) > 1e-12) & fr[blk]                          # HiGHS drops them anyway (small_matrix_value)
+    a_start = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
+    b_col = np.nonzero(fr)[0]
+    Hc = np.swapaxes(np.tril(red.H[idx]), 1, 2)[fr]             # column (b, c): H[b, r >= c, c]
+    qnz = (np.abs(Hc) > 1e-12) & fr[b_col]
+    q_start = np.concatenate([[0], np.cumsum(qnz.sum(axis=1))[:-1]]).astype(np.int32)
+    ncol = len(b_col)
+    inf = np.full(ncol, np.inf)
+    h.passModel(ncol, len(A), int(nz.sum()), int(qnz.sum()), 2, 1, 1, 0.0, red.g[idx][fr], -inf, inf,
+                red.lo[idx][keep], red.hi[idx][keep], a_start, col[blk][nz].astype(np.int32), A[nz],
+                q_start, col[b_col][qnz].astype(np.int32), Hc[qnz], np.zeros(ncol, np.int32))
+    h.run()
+    status[idx] = h.modelStatusToString(h.getModelStatus())
+    duals = np.asarray(h.getSolution().row_dual, dtype=float)
+    if len(duals) == len(A):                  # also after a solve error: a guess, which the polish verifies
+        y = np.zeros(keep.shape)
+        y[keep] = duals
+        guess_y[idx] = y
+
+
+def _polish(P: _Scaled, red: _Reduced, idx: np.ndarray, W: np.ndarray, steps: int, out: _Outcome) -> None:
+    """Polish the problems idx from the inequality working sets W (len(idx), r) (module docstring, step
+    2), at most `steps` working-set changes: the KKT system of the reduced problem on W (`_kkt`), x =
+    xp + Z z, verified in the scaled problem. Records every verified problem in `out`, and the reason
+    of every other (an earlier verified entry is kept)."""
+    W = W.copy()
+    live = np.arange(len(idx))
+    finite = lambda b: np.where(np.isfinite(b), np.abs(b), 0.0)  # noqa: E731
+    for step in range(steps + 1):
         if not len(live):
             break
-        sol = _eqp(H[live], np.einsum("nij,nj->ni", H[live], x[live]) + g[live], E[live], G[live], work[live],
-                   order[live], regular[live])
-        p, mult = sol[:, :n], sol[:, n + E.shape[1]:]
-        moving = np.max(np.abs(p), axis=1) > tol * np.maximum(1.0, np.max(np.abs(x[live]), axis=1))
-        _drop_or_finish(live[~moving], mult[~moving], work, pinned, order, done, iters, it, -tol * scale * gscale)
-        _step(live[moving], p[moving], G, h, valid, work, order, x, tol * gscale, it + G.shape[1])
-    if not done.all():
-        raise QPError(f"active-set iteration did not converge in {max_iter} steps")
-    return [QPResult(xi, a, it) for xi, a, it in zip(x, _active_lists(order, work, finite), iters.tolist())]
+        i_ = idx[live]
+        Wl, Hz, gz, Cz = W[live], red.H[i_], red.g[i_], red.C[i_]
+        target = np.where(Wl > 0, red.hi[i_], np.where(Wl < 0, red.lo[i_], 0.0))
+        z, lz = _kkt(Hz, gz, Cz, Wl != 0, target)
+        x = red.xp[i_] + np.einsum("pij,pj->pi", red.Z[i_], z)
+        B, lo, hi = P.B[i_], P.lo[i_], P.hi[i_]
+        Bx = np.einsum("pij,pj->pi", B, x)
+        v_lo, v_hi = lo - Bx, Bx - hi                           # −inf where that side is unbounded
+        viol = np.maximum(np.maximum(v_lo, v_hi), 0.0)
+        pscale = np.maximum(np.max(np.maximum(finite(lo), finite(hi)), axis=1, initial=0.0),
+                            np.max(np.abs(B) @ np.abs(x)[..., None], axis=(1, 2), initial=0.0))
+        sscale = np.maximum(np.max(np.abs(Hz) @ np.abs(z)[..., None], axis=(1, 2), initial=0.0),
+                            np.max(np.abs(gz), axis=1, initial=0.0))
+        stat = np.max(np.abs(np.einsum("pij,pj->pi", Hz, z) + gz - np.einsum("pji,pj->pi", Cz, lz)),
+                      axis=1, initial=0.0)
+        wrong = np.where(Wl != 0, Wl * lz, -np.inf)             # > 0: a wrong sign (λ <= 0 at hi, >= 0 at lo)
+        worst_v, worst_w = np.max(viol, axis=1, initial=0.0), np.max(wrong, axis=1, initial=-np.inf)
+        feasible = worst_v <= PRIMAL_TOL * pscale
+        stationary = stat <= STATIONARITY_TOL * np.maximum(sscale, 1e-300)
+        done = feasible & stationary & (worst_w <= DUAL_TOL * sscale)
+        j_v, j_w = np.argmax(viol, axis=1), np.argmax(wrong, axis=1)
+        stuck = ~done & (~stationary | (~feasible & ((Wl[np.arange(len(live)), j_v] != 0) | P.eq[i_, j_v])))
+        last = step == steps
+        for p in np.flatnonzero(done | stuck | last):
+            i = i_[p]
+            if done[p]:
+                grad = np.einsum("ij,j->i", P.H[i], x[p]) + P.g[i] - B[p].T @ lz[p]
+                lam = lz[p] + red.Einv[i] @ grad                  # equality rows' multipliers
+                held = np.where(P.eq[i], 1, Wl[p]).astype(np.int8)
+                out.ok[i], out.x[i], out.lam[i], out.held[i], out.why[i] = True, x[p], lam, held, ""
+            elif not stationary[p]:
+                out.why[i] = f"the KKT system of the working set has no stationary solution (residual {stat[p]:.2g})"
+            else:
+                out.why[i] = (f"no verified minimiser in {steps} working-set changes (violation {worst_v[p]:.2g}, "
+                              f"wrong-sign multiplier {max(worst_w[p], 0.0):.2g}, scaled)")
+        move = np.flatnonzero(~(done | stuck))
+        if last:
+            break
+        add = move[~feasible[move]]
+        W[live[add], j_v[add]] = np.where(v_hi[add, j_v[add]] > v_lo[add, j_v[add]], 1, -1)
+        drop = move[feasible[move]]
+        W[live[drop], j_w[drop]] = 0
+        live = live[move]
 
 
-def _active_lists(order: np.ndarray, work: np.ndarray, valid: np.ndarray) -> list[list]:
-    """Working sets (N lists, insertion order) as indices into each problem's finite one-sided rows."""
-    index = np.cumsum(valid, axis=1) - 1
-    rows = np.argsort(np.where(work, order, np.iinfo(order.dtype).max), axis=1, kind="stable")
-    sets = np.take_along_axis(index, rows, axis=1).tolist()
-    return [s[:k] for s, k in zip(sets, work.sum(axis=1).tolist())]
-
-
-def _drop_or_finish(idx, mult, work, pinned, order, done, iters, it, floor) -> None:
-    """Problems idx whose step is zero: finished when no working inequality (pinned rows are
-    equalities) has a multiplier below floor (N,); else the most negative one (first added on ties)
-    leaves."""
-    if not len(idx):
-        return
-    w = work[idx] & ~pinned[idx]
-    m = np.where(w, mult, np.inf)
-    low = np.min(m, axis=1, initial=np.inf)
-    finish = ~w.any(axis=1) | (low >= floor[idx])
-    done[idx[finish]], iters[idx[finish]] = True, it
-    drop = ~finish
-    if drop.any():
-        tie = w[drop] & (m[drop] == low[drop, None])
-        j = np.argmin(np.where(tie, order[idx[drop]], np.iinfo(order.dtype).max), axis=1)
-        work[idx[drop], j], order[idx[drop], j] = False, -1
-
-
-def _step(idx, p, G, h, valid, work, order, x, thr, stamp) -> None:
-    """Problems idx move along p (n_idx, n) until the first blocking constraint (h − G x)/(G p), as the
-    sequential scan does: a negative ratio (a row already slightly violated) stops at 0 on the last
-    such row; otherwise the smallest ratio below 1 (first on ties); the blocking row joins the set."""
-    if not len(idx) or not G.shape[1]:
-        x[idx] += p
-        return
-    Gp = np.einsum("nmi,ni->nm", G[idx], p)
-    elig = valid[idx] & ~work[idx] & (Gp > (thr[idx] * np.max(np.abs(p), axis=1))[:, None])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(elig, (h[idx] - np.einsum("nmi,ni->nm", G[idx], x[idx])) / Gp, np.inf)
-    neg = ratio < 0
-    last_neg = ratio.shape[1] - 1 - np.argmax(neg[:, ::-1], axis=1)
-    first_min = np.argmin(ratio, axis=1)
-    has_neg, blocks = neg.any(axis=1), ratio[np.arange(len(idx)), first_min] < 1.0
-    block = np.where(has_neg, last_neg, first_min)
-    alpha = np.where(has_neg, 0.0, np.where(blocks, ratio[np.arange(len(idx)), first_min], 1.0))
-    x[idx] += alpha[:, None] * p
-    hit = has_neg | blocks
-    work[idx[hit], block[hit]], order[idx[hit], block[hit]] = True, stamp
-
-
-def _regular(H: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """(N,) bool: E (N, q, n) has full row rank and H (N, n, n) is positive definite on its null space,
-    both with condition number below REGULAR_COND — then every KKT matrix of the iteration (E and
-    independent working rows) is non-singular."""
-    N, q, n = E.shape
-    if q > n:
-        return np.zeros(N, bool)
-    if q:
-        _, s, Vt = np.linalg.svd(E)
-        ok = s[:, -1] > s[:, 0] / REGULAR_COND
-        Z = np.swapaxes(Vt[:, q:], 1, 2)
-    else:
-        ok, Z = np.ones(N, bool), np.broadcast_to(np.eye(n), (N, n, n))
-    if q == n:
-        return ok
-    lam = np.linalg.eigvalsh(np.swapaxes(Z, 1, 2) @ H @ Z)
-    return ok & (lam[:, 0] > lam[:, -1] / REGULAR_COND)
-
-
-def _eqp(H, grad, E, G, work, order, regular):
-    """Steps p and multipliers of min ½pᵀHp + gradᵀp s.t. E p = 0, G_w p = 0 for a batch: (N, n + q + M)
-    = [p; ν; λ] with λ_j = 0 off the working set. KKT [H Bᵀ; B 0][p; λ] = [−grad; 0], B = [E; G_w]:
-    LU for regular problems (all at once, rows off the working set replaced by λ_j = 0), least squares
-    (minimum norm) for the others."""
-    N, n = grad.shape
-    q, M = E.shape[1], G.shape[1]
-    out = np.zeros((N, n + q + M))
-    reg = np.flatnonzero(regular)
-    if len(reg):
-        try:
-            out[reg] = _kkt_lu(H[reg], grad[reg], E[reg], G[reg], work[reg])
-        except np.linalg.LinAlgError:                   # a singular system after all: all by least squares
-            regular = np.zeros_like(regular)
-    for i in np.flatnonzero(~regular):
-        rows = np.flatnonzero(work[i])
-        rows = rows[np.argsort(order[i, rows], kind="stable")]
-        B = np.vstack([E[i], G[i, rows]])
-        k = len(B)
-        K = np.block([[H[i], B.T], [B, np.zeros((k, k))]])
-        sol = np.linalg.lstsq(K, np.concatenate([-grad[i], np.zeros(k)]), rcond=None)[0]
-        out[i, :n + q], out[i, n + q + rows] = sol[:n + q], sol[n + q:]
-    return out
-
-
-def _kkt_lu(H, grad, E, G, work):
-    """[p; ν; λ] (N, n + q + M) of the padded KKT systems, solved together by LU: the rows in no
-    problem's working set are left out, the others off a problem's set give λ_j = 0."""
-    N, n = grad.shape
-    q, M = E.shape[1], G.shape[1]
-    cols = np.flatnonzero(work.any(axis=0))
-    w = work[:, cols]
-    GW = G[:, cols] * w[..., None]
-    S = n + q + len(cols)
-    K = np.zeros((N, S, S))
-    K[:, :n, :n], K[:, :n, n:n + q], K[:, n:n + q, :n] = H, np.swapaxes(E, 1, 2), E
-    K[:, :n, n + q:], K[:, n + q:, :n] = np.swapaxes(GW, 1, 2), GW
-    K[:, np.arange(n + q, S), np.arange(n + q, S)] = ~w
-    rhs = np.zeros((N, S, 1))
-    rhs[:, :n, 0] = -grad
-    sol = np.linalg.solve(K, rhs)[..., 0]
-    out = np.zeros((N, n + q + M))
-    out[:, :n + q], out[:, n + q + cols] = sol[:, :n + q], sol[:, n + q:]
-    return out
-
-
-def _independent(E: np.ndarray, G: np.ndarray, work: np.ndarray, pinned: np.ndarray) -> np.ndarray:
-    """The largest greedy subset of each problem's working rows — the pinned ones first, each group in
-    row order — that, with E, is linearly independent (numpy's matrix_rank tolerance on
-    [E; kept; candidate])."""
-    keep = np.zeros_like(work)
-    q, n = E.shape[1], E.shape[2]
-    for group in (work & pinned, work & ~pinned):
-        for j in np.flatnonzero(group.any(axis=0)):
-            idx = np.flatnonzero(group[:, j])
-            trial = np.concatenate([E[idx], G[idx] * keep[idx][..., None], G[idx, j:j + 1]], axis=1)
-            s = np.linalg.svd(trial, compute_uv=False)
-            count = q + keep[idx].sum(axis=1) + 1
-            tol = s[:, 0] * np.maximum(count, n) * np.finfo(float).eps
-            keep[idx[np.sum(s > tol[:, None], axis=1) == count], j] = True
-    return keep
+def _kkt(H: np.ndarray, g: np.ndarray, C: np.ndarray, W: np.ndarray, target: np.ndarray):
+    """z (P, n) and λ (P, r) of min ½zᵀHz + gᵀz s.t. C_j z = target_j for the rows W (P, r) bool: the
+    KKT systems [H C_Wᵀ; C_W 0][z; −λ] = [−g; target_W], padded with λ_j = 0 off W (rows in no
+    problem's W left out), solved together by LU with two steps of iterative refinement (multipliers
+    far larger than z would otherwise leave the held rows off by eps·|λ|); a singular one, or one whose
+    solution is 1e12 times its right-hand side, alone in the minimum-norm least-squares sense
+    (redundant rows, flat directions). Hz + g = Cᵀλ."""
+    P, n = g.shape
+    cols = np.flatnonzero(W.any(axis=0))
+    w = W[:, cols]
+    CW = C[:, cols] * w[..., None]
+    S = n + len(cols)
+    K = np.zeros((P, S, S))
+    K[:, :n, :n], K[:, :n, n:], K[:, n:, :n] = H, np.swapaxes(CW, 1, 2), CW
+    K[:, np.arange(n, S), np.arange(n, S)] = ~w
+    rhs = np.concatenate([-g, np.where(w, target[:, cols], 0.0)], axis=1)
+    try:
+        sol = np.linalg.solve(K, rhs[..., None])[..., 0]
+        for _ in range(2):
+            sol += np.linalg.solve(K, (rhs - np.einsum("pij,pj->pi", K, sol))[..., None])[..., 0]
+        bad = ~np.all(np.isfinite(sol), axis=1)
+    except np.linalg.LinAlgError:
+        sol, bad = np.zeros((P, S)), np.ones(P, bool)
+    size = np.max(np.abs(rhs), axis=1, initial=0.0)
+    bad |= np.max(np.abs(sol), axis=1, initial=0.0) > 1e12 * np.maximum(size, 1e-300)
+    for p in np.flatnonzero(bad):
+        sol[p] = np.linalg.lstsq(K[p], rhs[p], rcond=None)[0]
+    lam = np.zeros(W.shape)
+    lam[:, cols] = -sol[:, n:]
+    return sol[:, :n], lam
