@@ -6,21 +6,26 @@ batch at once (one per sample of a trajectory).
 QPs are solved by HiGHS's QP solver (`highspy`; a maintained primal active-set method that takes a
 positive *semi*definite Hessian, here H = RᵀR), then polished to the exact minimiser:
 
-1. HiGHS: the problems of a batch are stacked block-diagonally, CHUNK problems to one HiGHS QP (HiGHS's
-   fixed cost per call dominates problems this small, while its dense null-space factor makes one QP
-   of the whole batch slower again; measured on the paper scene's bounded problem). Rows are scaled to
-   a largest entry of 1 and the objective to a largest Hessian entry of 1.
-2. Polish: the working set is read from HiGHS's row duals (each row with a non-zero dual held at the
-   bound its sign names; rows with lo = hi and E always); the equality-constrained QP on it is solved
-   exactly (its KKT system, minimum-norm least squares: redundant rows and semidefinite Hessians are
-   allowed) and verified — every row feasible (PRIMAL_TOL), stationarity (STATIONARITY_TOL) and every
-   held inequality's multiplier of the right sign (DUAL_TOL). A row the polished point violates joins
-   the set, else a multiplier of the wrong sign leaves it, at most POLISH_STEPS times. HiGHS's answer is
-   only the guess of the active set: its tolerances (about 1e-7) never reach the result, which
-   satisfies its held rows to rounding error.
-3. A problem whose chunk HiGHS did not solve to optimality (one infeasible block makes its whole chunk
-   infeasible) or whose polish failed is solved alone, then polished again. What fails then is reported
-   in the result (status, message, x = nan) — `solve_qps` never raises for one problem; `solve_qp`
+1. The equality rows (E, and rows of C with lo = hi) are eliminated, x = xp + Z z (HiGHS's QP solver
+   reports solve errors on these problems when it is given them, and none without). Rows are scaled
+   to a largest entry of 1, the objective to a largest Hessian entry of 1.
+2. Polish (`_polish`): the equality-constrained QP on a working set of inequality rows, each held at
+   one bound, is solved exactly (its KKT system in z, LU with iterative refinement; minimum-norm
+   least squares when singular: redundant rows, semidefinite Hessians) and verified in the original
+   rows — every row feasible (PRIMAL_TOL), stationarity (STATIONARITY_TOL) and every held row's
+   multiplier of the right sign (DUAL_TOL): a KKT point of a convex QP, so the minimiser. A row the
+   polished point violates joins the set, else a multiplier of the wrong sign leaves it, at most
+   POLISH_STEPS times.
+3. Order: the empty working set (the minimiser on the equality rows alone); for the problems it does
+   not verify, every SEED_STRIDE-th goes to HiGHS (block-diagonal, about CHUNK_COLUMNS variables to a
+   HiGHS QP: its fixed cost per call dominates problems this small, while its dense null-space factor
+   makes one QP of a whole batch slower again), polished from the rows its duals name; the others
+   start from the nearest verified problem's working set (a batch along a trajectory rarely changes
+   its active set between samples); what is left goes to HiGHS in chunks, then alone, each polished,
+   and last to the polish from an empty set with POLISH_STEPS changes. HiGHS's answer is only the
+   guess of the active set: its tolerances (about 1e-7) never reach the result.
+4. What is not verified then is reported in the result (ok False, x = nan, message: 'infeasible', or
+   HiGHS's status and what the polish found) — `solve_qps` never raises for one problem; `solve_qp`
    (one problem) raises QPError.
 
 `solve_lps` solves a batch of small LPs as one block-diagonal HiGHS LP.
@@ -36,6 +41,7 @@ import numpy as np
 from .model import CoopsimError
 
 CHUNK_COLUMNS = 96         # variables per HiGHS QP (whole problems, at least one)
+SEED_STRIDE = 8            # every 8th problem to HiGHS first; the others start from a neighbour's working set
 POLISH_STEPS = 20          # working-set changes of the polish
 PRIMAL_TOL = 1e-12         # row violation, relative to the problem's largest |bound| or Σ|C_ij x_j|
 DUAL_TOL = 1e-10           # wrong-sign multiplier, relative to the largest |H x|, |g| (scaled problem)
@@ -181,8 +187,7 @@ def solve_qps(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.
               hi: np.ndarray) -> QPBatch:
     """`solve_qp` for a batch of N problems: R (N, p, n), d (N, p), E (N, q, n), e (N, q), C (N, m, n),
     lo/hi (N, m). A problem that fails is reported in the QPBatch (ok False, x nan, message), never
-    raised. Steps (module docstring): the equality rows eliminated; the minimiser on them alone, where
-    it is feasible; HiGHS in chunks for the others, polished; HiGHS alone for what still fails, polished."""
+    raised. The steps are in the module docstring."""
     P = _Scaled.of(*(np.asarray(a, dtype=float) for a in (R, d, E, e, C, lo, hi)))
     N, n = P.g.shape
     q, r = np.shape(E)[1], P.B.shape[1]
@@ -196,9 +201,15 @@ def solve_qps(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.
         guess_y = np.full(P.lo.shape, np.nan)
         with _HIGHS_LOCK:
             h = _highs()
-            for chunk in _chunks(rest, red.free[rest].sum(axis=1)):
+            seeds = rest[::SEED_STRIDE]
+            for chunk in _chunks(seeds, red.free[seeds].sum(axis=1)):
                 _run_highs(h, red, chunk, guess_y, status)
-            _polish_guesses(P, red, rest, guess_y, out)
+            _polish_guesses(P, red, seeds, guess_y, out)
+            _polish_from_neighbours(P, red, rest, out)
+            todo = rest[~out.ok[rest]]
+            for chunk in _chunks(todo, red.free[todo].sum(axis=1)):
+                _run_highs(h, red, chunk, guess_y, status)
+            _polish_guesses(P, red, todo, guess_y, out)
             again = rest[~out.ok[rest]] if len(rest) > 1 else rest[:0]
             guess_y[again] = np.nan
             for i in again:                                   # alone: its own status, a fresh guess
@@ -226,6 +237,18 @@ def _chunks(idx: np.ndarray, width: np.ndarray) -> list[np.ndarray]:
     ends = np.cumsum(width)
     cut = np.flatnonzero(np.diff(ends // CHUNK_COLUMNS)) + 1
     return np.split(idx, cut)
+
+
+def _polish_from_neighbours(P: _Scaled, red: "_Reduced", idx: np.ndarray, out: "_Outcome") -> None:
+    """Polish the problems idx not yet verified from the working set of the nearest verified one in
+    idx (batch order: along a trajectory the active set rarely changes from one sample to the next)."""
+    done, todo = idx[out.ok[idx]], idx[~out.ok[idx]]
+    if not len(done) or not len(todo):
+        return
+    pos = np.clip(np.searchsorted(done, todo), 1, len(done)) - 1
+    right = np.minimum(pos + 1, len(done) - 1)
+    near = np.where(np.abs(done[right] - todo) < np.abs(todo - done[pos]), done[right], done[pos])
+    _polish(P, red, todo, np.where(P.ineq[todo], out.held[near], 0).astype(np.int8), POLISH_STEPS, out)
 
 
 def _polish_guesses(P: _Scaled, red: "_Reduced", idx: np.ndarray, guess_y: np.ndarray, out: "_Outcome") -> None:
@@ -316,6 +339,13 @@ class _Reduced(NamedTuple):
         Bxp = np.einsum("nij,nj->ni", P.B, xp)
         g = np.einsum("nij,nj->ni", Zt, np.einsum("nij,nj->ni", P.H, xp) + P.g)
         return cls(Z, xp, free, consistent, Einv, H, g, P.B @ Z, np.where(P.ineq, P.lo - Bxp, -np.inf), np.where(P.ineq, P.hi - Bxp, np.inf))
+
+
+    def refine(self, P: _Scaled, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The least correction (len(idx), n) of x to the equality rows, B_eq⁺ (e − B_eq x): xp + Z z
+        meets them only to eps·|x|·(number of columns), as Z's null space is exact only to rounding."""
+        res = np.where(P.eq[idx], P.lo[idx] - np.einsum("pij,pj->pi", P.B[idx], x), 0.0)
+        return np.einsum("prj,pr->pj", self.Einv[idx], res)
 
 
 class _Outcome(NamedTuple):
@@ -427,6 +457,7 @@ def _polish(P: _Scaled, red: _Reduced, idx: np.ndarray, W: np.ndarray, steps: in
         target = np.where(Wl > 0, red.hi[i_], np.where(Wl < 0, red.lo[i_], 0.0))
         z, lz = _kkt(Hz, gz, Cz, Wl != 0, target)
         x = red.xp[i_] + np.einsum("pij,pj->pi", red.Z[i_], z)
+        x += red.refine(P, i_, x)
         B, lo, hi = P.B[i_], P.lo[i_], P.hi[i_]
         Bx = np.einsum("pij,pj->pi", B, x)
         v_lo, v_hi = lo - Bx, Bx - hi                           # −inf where that side is unbounded
@@ -445,17 +476,15 @@ def _polish(P: _Scaled, red: _Reduced, idx: np.ndarray, W: np.ndarray, steps: in
         j_v, j_w = np.argmax(viol, axis=1), np.argmax(wrong, axis=1)
         stuck = ~done & (~stationary | (~feasible & ((Wl[np.arange(len(live)), j_v] != 0) | P.eq[i_, j_v])))
         last = step == steps
-        for p in np.flatnonzero(done | stuck | last):
-            i = i_[p]
-            if done[p]:
-                grad = np.einsum("ij,j->i", P.H[i], x[p]) + P.g[i] - B[p].T @ lz[p]
-                lam = lz[p] + red.Einv[i] @ grad                  # equality rows' multipliers
-                held = np.where(P.eq[i], 1, Wl[p]).astype(np.int8)
-                out.ok[i], out.x[i], out.lam[i], out.held[i], out.why[i] = True, x[p], lam, held, ""
-            elif not stationary[p]:
-                out.why[i] = f"the KKT system of the working set has no stationary solution (residual {stat[p]:.2g})"
-            else:
-                out.why[i] = (f"no verified minimiser in {steps} working-set changes (violation {worst_v[p]:.2g}, "
+        p = np.flatnonzero(done)
+        i = i_[p]
+        grad = np.einsum("pij,pj->pi", P.H[i], x[p]) + P.g[i] - np.einsum("pji,pj->pi", B[p], lz[p])
+        out.ok[i], out.x[i], out.held[i] = True, x[p], np.where(P.eq[i], 1, Wl[p])
+        out.lam[i] = lz[p] + np.einsum("prn,pn->pr", red.Einv[i], grad)   # + the equality rows' multipliers
+        for p in np.flatnonzero(stuck | (last & ~done)):
+            out.why[i_[p]] = (f"the KKT system of the working set has no stationary solution (residual {stat[p]:.2g})"
+                              if not stationary[p] else
+                              f"no verified minimiser in {steps} working-set changes (violation {worst_v[p]:.2g}, "
                               f"wrong-sign multiplier {max(worst_w[p], 0.0):.2g}, scaled)")
         move = np.flatnonzero(~(done | stuck))
         if last:
