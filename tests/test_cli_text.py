@@ -37,7 +37,10 @@ def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "coopsim.cli", "run", str(SCENARIOS / "spatial_6r_pair.yaml"),
                              "--out", str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tmp_path)
-    time.sleep(1.5)                           # inside the imports or the run
+    deadline = time.monotonic() + 60
+    while not (tmp_path / "out").exists() and time.monotonic() < deadline:   # made once the scenario is read
+        time.sleep(0.05)
+    time.sleep(0.3)                           # inside the run
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("\r")]

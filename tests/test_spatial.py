@@ -268,13 +268,9 @@ def _check_compiled(near_pi: bool):
 
 
 def test_compiled_rot_log_and_rot_to_quat_away_from_pi():
-    """Angles up to π − 1e-3 (measured: 2.4e-13 rad at π − 1e-3 for the compiled rot_log's present
-    sin φ form, ~1e-15 elsewhere)."""
+    """Angles up to π − 1e-3."""
     _check_compiled(near_pi=False)
 
 
-@pytest.mark.xfail(strict=True, reason="coopsim/compiled/spatial.py rot_log still divides by sin φ: 2.3e-5 rad "
-                                       "at π − 1e-11, wrong sign below π − 1e-12 (#8; the quaternion form is "
-                                       "in coopsim.spatial.rot_log). Remove this mark when it is changed.")
 def test_compiled_rot_log_near_pi():
     _check_compiled(near_pi=True)

@@ -62,31 +62,29 @@ def rotate_inertia(R, I, tmp, out):
 
 @kernel
 def rot_log(R, out):
-    """out (3,) ← rotation vector φ (|φ| ≤ π) with exp([φ×]) = R; accurate near the identity (as
-    `coopsim.spatial.rot_log`)."""
-    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
-    c = min(1.0, max(-1.0, c))
-    w0 = 0.5 * (R[2, 1] - R[1, 2])
-    w1 = 0.5 * (R[0, 2] - R[2, 0])
-    w2 = 0.5 * (R[1, 0] - R[0, 1])
-    s = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    angle = np.arctan2(s, c)
-    if s < 1e-12:
-        if c > 0:
-            out[0], out[1], out[2] = w0, w1, w2
-            return
-        best, k = -np.inf, 0
-        for i in range(3):
-            if 0.5 * (R[i, i] + 1.0) > best:
-                best, k = 0.5 * (R[i, i] + 1.0), i
-        a0 = 0.5 * (R[k, 0] + (1.0 if k == 0 else 0.0))
-        a1 = 0.5 * (R[k, 1] + (1.0 if k == 1 else 0.0))
-        a2 = 0.5 * (R[k, 2] + (1.0 if k == 2 else 0.0))
-        nrm = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        out[0], out[1], out[2] = np.pi * a0 / nrm, np.pi * a1 / nrm, np.pi * a2 / nrm
-        return
-    f = angle / s
-    out[0], out[1], out[2] = w0 * f, w1 * f, w2 * f
+    """out (3,) ← rotation vector φ (|φ| ≤ π) with exp([φ×]) = R, through the quaternion (Shepperd's
+    branches, w ≥ 0) as `coopsim.spatial.rot_log`: φ = 2 atan2(|v|, w) v/|v|, ~1e-15 rad at every
+    angle, near π included."""
+    t = R[0, 0] + R[1, 1] + R[2, 2]
+    if t > 0.0:
+        s = 2.0 * np.sqrt(1.0 + t)
+        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
+    elif R[0, 0] >= R[1, 1] and R[0, 0] >= R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[1, 0] + R[0, 1]) / s, (R[2, 0] + R[0, 2]) / s
+    elif R[1, 1] >= R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[2, 2] - R[0, 0])
+        w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[2, 1] + R[1, 2]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    nq = np.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / nq, x / nq, y / nq, z / nq
+    n = np.sqrt(x * x + y * y + z * z)
+    f = 2.0 / w if n < 1e-8 else 2.0 * np.arctan2(n, w) / n
+    out[0], out[1], out[2] = f * x, f * y, f * z
 
 
 @kernel
