@@ -119,15 +119,27 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
                     "" if feasible else "no mass keeps every torque within its limits", per_sample)
 
 
+LINEAR_METHODS = ("paper", "nonsqueezing", "min_energy")
+
+
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                     passive_tol: float = 1e-9) -> Capacity:
-    """DLCC of resolution `res` (closed form). Passive joints must carry no torque: 'min_energy' and
-    'bounded' enforce it; for the others a passive torque above passive_tol N·m makes it infeasible."""
+    """DLCC of resolution `res` (closed form), for the resolutions linear in the net object wrench
+    (LINEAR_METHODS); 'bounded' is refused (ValueError): its bounds make the torques a nonlinear function
+    of the carried mass, which the two-point affine fit would silently get wrong. Passive joints must
+    carry no torque: 'min_energy' enforces it; for the others a passive torque above passive_tol N·m
+    makes it infeasible."""
+    if res.method not in LINEAR_METHODS:
+        why = ("its internal-wrench bounds make it a QP whose torques are not affine in the carried mass"
+               if res.method == "bounded" else "it is not a known linear resolution")
+        raise ValueError(f"method_capacity: resolution {res.method!r} has no closed-form capacity: {why} "
+                         f"(closed form for {', '.join(LINEAR_METHODS)}; lp_capacity with internal_bound bounds "
+                         f"every distribution within the bounds)")
     a, b = affine_torques(prob, res, mode)
     lo, hi = torque_limits(motors, prob.qd)
     passive = res.passive
     cap = affine_capacity(a, b, lo, hi, prob.t, ~passive)
-    if np.any(passive) and res.method not in ("min_energy", "bounded"):
+    if np.any(passive) and res.method != "min_energy":
         if np.max(np.abs(a[:, passive])) > passive_tol or np.max(np.abs(b[:, passive])) > passive_tol:
             return replace(cap, feasible=False, note=f"'{res.method}' puts torque on passive joints")
     return cap

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from .gibbs_appell import arm_dynamics
 from .grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
@@ -89,14 +90,18 @@ def grasp_offsets(model: Model, obj: ObjectPose) -> np.ndarray:
 
 def position_residual(model: Model, q: np.ndarray) -> np.ndarray:
     """Loop-closure residual Φ (k(r−1),): for each arm m ≠ c, S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)]
-    (m and rad, world axes), the grasp frame carried by the object on the carrier arm."""
+    (m and rad, world axes), the grasp frame carried by the object on the carrier arm. The position
+    error is formed without world positions (module `kinematics`), as the base offset
+    o_m − o_c plus p_EE,m − p_grasp,m relative to the bases, p_grasp,m = p_EE,c + R_o (g_m − g_c)."""
     poses = arm_poses(model, q)
     obj = carrier_object(model, poses)
+    c, gp = model.object.carrier, model.object.grasp_pos
     rows = []
     for m in _others(model):
         R_des = obj.R_o @ model.object.grasp_rot[m]
-        p_des = obj.p_C + obj.R_o @ model.object.grasp_pos[m]
-        err = np.concatenate([poses[m].p_ee - p_des, rot_log(poses[m].R_ee @ R_des.T)])
+        p_grasp = poses[c].p_ee_rel + obj.R_o @ (gp[m] - gp[c])             # relative to o_c
+        p_err = (poses[m].origin - poses[c].origin) + (poses[m].p_ee_rel - p_grasp)
+        err = np.concatenate([p_err, rot_log(poses[m].R_ee @ R_des.T)])
         rows.append(model.rows @ err)
     return np.concatenate(rows)
 
@@ -153,12 +158,13 @@ def forward_dynamics(model: Model, terms: ChainTerms, tau: np.ndarray,
                      stabilization: np.ndarray | None = None) -> ChainAcceleration:
     """θ̈ (eqs. 25–27) and the grasp wrenches for joint torques tau (n,) N·m.
     stabilization (k(r−1),): extra right-hand side of Λθ̈ = −Λ̇θ̇ − stabilization (Baumgarte)."""
+    # 𝐈 = L Lᵀ (LAPACK potrf: fails unless 𝐈 is positive definite) and both solves on that factor
+    # (potrs; scipy's solve_triangular would cost ~10× more on these tiny matrices)
     try:
-        np.linalg.cholesky(terms.M)  # the check that 𝐈 is positive definite
+        factor = cho_factor(terms.M, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
         raise ConstraintError("closed-chain mass matrix is not positive definite") from None
-    # LAPACK gesv: for these tiny matrices scipy's threaded triangular solves cost 20× more
-    X = np.linalg.solve(terms.M, np.column_stack([tau - terms.h, terms.Lam.T]))
+    X = cho_solve(factor, np.column_stack([tau - terms.h, terms.Lam.T]), check_finite=False)
     x0, IinvLamT = X[:, 0], X[:, 1:]
     A = terms.Lam @ IinvLamT
     b = terms.Lam @ x0 + terms.Lam_dot_qd

@@ -29,12 +29,13 @@ def gibbs_gradient_of_motion(arm: ArmModel, pose: ArmPose, motion: LinkMotion) -
     """∂S/∂θ̈ (n,) N·m for a link motion of the forward recursion: the backward recursion
     F_j = m_j a_cj + F_{j+1},
     N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1} + (p_{j+1} − p_j) × F_{j+1},
-    ∂S/∂θ̈_j = z_j · N_j (evaluated with reverse prefix sums)."""
+    ∂S/∂θ̈_j = z_j · N_j (evaluated with reverse prefix sums: moments about the arm's base point,
+    then moved to p_j, positions relative to the base point so that no lever arm is a world position)."""
     ma = arm.link_mass[:, None] * link_com_accelerations(motion, pose)
     Iw = np.einsum("nij,nj->ni", pose.I, motion.w)
-    local = cross(pose.c, ma) + np.einsum("nij,nj->ni", pose.I, motion.dw) + cross(motion.w, Iw)
+    local = cross(pose.c_rel, ma) + np.einsum("nij,nj->ni", pose.I, motion.dw) + cross(motion.w, Iw)
     F = np.cumsum(ma[::-1], axis=0)[::-1]
-    N = np.cumsum(local[::-1], axis=0)[::-1] - cross(pose.p, F)
+    N = np.cumsum(local[::-1], axis=0)[::-1] - cross(pose.p_rel, F)
     return np.einsum("ni,ni->n", pose.z, N)
 
 
@@ -43,7 +44,7 @@ def mass_matrix(arm: ArmModel, pose: ArmPose) -> np.ndarray:
     accelerations Jv_ci[:, j] = z_j × (c_i − p_j), Jω_i[:, j] = z_j for j ≤ i (zero for j > i)."""
     n = arm.n
     below = np.tril(np.ones((n, n)))[:, :, None]  # [i, j] = 1 where j <= i
-    Jv = cross(pose.z[None, :, :], pose.c[:, None, :] - pose.p[None, :, :]) * below
+    Jv = cross(pose.z[None, :, :], pose.c_rel[:, None, :] - pose.p_rel[None, :, :]) * below
     Jw = np.broadcast_to(pose.z[None, :, :], (n, n, 3)) * below
     M = np.einsum("i,ijk,ilk->jl", arm.link_mass, Jv, Jv)
     M += np.einsum("ijk,ikm,ilm->jl", Jw, pose.I, Jw)

@@ -3,6 +3,12 @@
 All outputs are in world axes. The twist of a point P of the last link is [v_P; ω] and its
 "acceleration" is [a_P; ω̇] with a_P = dv_P/dt (classical point acceleration), so that
 [a_P; ω̇] = J_P θ̈ + J̇_P θ̇ (paper eqs. 3, 13).
+
+Every lever arm (Jacobian columns z_j × (P − p_j), the recursion's ω × r terms, the moments of the
+Gibbs–Appell backward recursion) is formed from positions relative to the arm's base point
+(`ArmPose.p_rel`, `c_rel`, `p_ee_rel`, computed from the base without its world position), never from
+world positions: a scene moved far from the world origin (100 km) gives the same Jacobians, mass
+matrices and bias forces to the last bit, where world positions would lose ~1e-11 m to rounding.
 """
 
 from __future__ import annotations
@@ -18,7 +24,9 @@ from .spatial import axis_angle_to_rot, cross
 class ArmPose(NamedTuple):
     """Configuration-dependent geometry of one arm (world axes, SI).
     p (n, 3) joint origins; R (n, 3, 3) link frames; z (n, 3) joint axes; c (n, 3) link centres of
-    mass; I (n, 3, 3) link inertias about c; p_ee (3,), R_ee (3, 3) end-effector frame."""
+    mass; I (n, 3, 3) link inertias about c; p_ee (3,), R_ee (3, 3) end-effector frame;
+    origin (3,) the arm's base point (world); p_rel (n, 3), c_rel (n, 3), p_ee_rel (3,): p, c and
+    p_ee relative to origin, computed without it (the dynamics use these: module docstring)."""
 
     p: np.ndarray
     R: np.ndarray
@@ -27,6 +35,10 @@ class ArmPose(NamedTuple):
     I: np.ndarray
     p_ee: np.ndarray
     R_ee: np.ndarray
+    origin: np.ndarray
+    p_rel: np.ndarray
+    c_rel: np.ndarray
+    p_ee_rel: np.ndarray
 
 
 class LinkMotion(NamedTuple):
@@ -40,11 +52,12 @@ class LinkMotion(NamedTuple):
 
 def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
     """Forward kinematics of one arm at joint angles q (n,) rad:
-    R_i = R_{i−1} R0_i Rot(axis_i, θ_i), p_i = p_{i−1} + R_{i−1} d_i."""
+    R_i = R_{i−1} R0_i Rot(axis_i, θ_i), p_i = p_{i−1} + R_{i−1} d_i, the positions accumulated from
+    the base point (p_rel, c_rel, p_ee_rel) and the world ones that plus base_pos."""
     n = arm.n
     p = np.empty((n, 3))
     R = np.empty((n, 3, 3))
-    p_prev, R_prev = arm.base_pos, arm.base_rot
+    p_prev, R_prev = np.zeros(3), arm.base_rot
     for i in range(n):
         p[i] = p_prev + R_prev @ arm.joint_pos[i]
         R[i] = R_prev @ arm.joint_rot[i] @ axis_angle_to_rot(arm.joint_axis[i], q[i])
@@ -54,7 +67,8 @@ def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
     I = np.einsum("nij,njk,nlk->nil", R, arm.link_inertia, R)
     p_ee = p[-1] + R[-1] @ arm.ee_pos
     R_ee = R[-1] @ arm.ee_rot
-    return ArmPose(p, R, z, c, I, p_ee, R_ee)
+    o = np.asarray(arm.base_pos, dtype=float)
+    return ArmPose(o + p, R, z, o + c, I, o + p_ee, R_ee, o, p, c, p_ee)
 
 
 def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarray) -> LinkMotion:
@@ -63,7 +77,7 @@ def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarr
     a_{i+1} = a_i + ω̇_i × (p_{i+1} − p_i) + ω_i × (ω_i × (p_{i+1} − p_i)),  a_0 = a_base
     (gravity enters as an upward base acceleration a_base = −g). The recursions are evaluated as
     prefix sums, which is the same recursion unrolled."""
-    z, p = pose.z, pose.p
+    z, p = pose.z, pose.p_rel
     w = np.cumsum(z * qd[:, None], axis=0)
     w_prev = np.vstack([np.zeros(3), w[:-1]])
     dw = np.cumsum(z * qdd[:, None] + cross(w_prev, z) * qd[:, None], axis=0)
@@ -74,32 +88,34 @@ def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarr
 
 
 def point_acceleration(motion: LinkMotion, pose: ArmPose, i: int, point: np.ndarray) -> np.ndarray:
-    """Acceleration (3,) of a point fixed in link i: a_i + ω̇_i × r + ω_i × (ω_i × r), r = point − p_i."""
-    r = point - pose.p[i]
+    """Acceleration (3,) of a point fixed in link i, `point` given relative to the arm's base point
+    (pose.origin): a_i + ω̇_i × r + ω_i × (ω_i × r), r = point − p_i."""
+    r = point - pose.p_rel[i]
     w = motion.w[i]
     return motion.a[i] + cross(motion.dw[i], r) + cross(w, cross(w, r))
 
 
 def link_com_accelerations(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
     """Centre-of-mass accelerations a_ci (n, 3) of every link (paper eq. 9)."""
-    r = pose.c - pose.p
+    r = pose.c_rel - pose.p_rel
     return motion.a + cross(motion.dw, r) + cross(motion.w, cross(motion.w, r))
 
 
 def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
-    """Geometric Jacobian J (6, n) of a point fixed in the last link: columns [z_j × (P − p_j); z_j]."""
-    Jv = cross(pose.z, point - pose.p).T
+    """Geometric Jacobian J (6, n) of a point P fixed in the last link, given relative to the arm's
+    base point (pose.origin): columns [z_j × (P − p_j); z_j]."""
+    Jv = cross(pose.z, point - pose.p_rel).T
     return np.vstack([Jv, pose.z.T])
 
 
 def ee_jacobian(pose: ArmPose) -> np.ndarray:
     """End-effector Jacobian J_m (6, n): twist [v_EE; ω] = J_m θ̇ (world axes)."""
-    return point_jacobian(pose, pose.p_ee)
+    return point_jacobian(pose, pose.p_ee_rel)
 
 
 def ee_acceleration(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
     """End-effector [a_EE; ω̇] (6,) of a link motion."""
-    return np.concatenate([point_acceleration(motion, pose, len(pose.p) - 1, pose.p_ee), motion.dw[-1]])
+    return np.concatenate([point_acceleration(motion, pose, len(pose.p) - 1, pose.p_ee_rel), motion.dw[-1]])
 
 
 def ee_bias_acceleration(pose: ArmPose, qd: np.ndarray) -> np.ndarray:

@@ -65,6 +65,16 @@ class _Section:
             self.fail(key, f"must be non-negative, got {v}")
         return v
 
+    def whole(self, key, default=_REQUIRED, positive=False, nonneg=False) -> int | None:
+        """A whole number: an integer, or a float without a fractional part (10.0); 10.5 is refused,
+        never truncated."""
+        v = self.number(key, default, positive=positive, nonneg=nonneg)
+        if v is None:
+            return None
+        if not v.is_integer():
+            self.fail(key, f"must be a whole number, got {self.data.get(key, v)!r}")
+        return int(v)
+
     def string(self, key, choices=None, default=_REQUIRED) -> str:
         v = self.raw(key, default)
         if not isinstance(v, str):
@@ -91,16 +101,23 @@ class _Section:
             self.fail(key, f"must be non-negative, got {a.tolist()}")
         return a
 
-    def angles(self, key, shape, default=_REQUIRED) -> np.ndarray:
-        """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
-        degrees (|x| > 2π), are rejected."""
+    def rad_or_deg(self, key, shape, default=_REQUIRED) -> np.ndarray:
+        """Values under `key` (rad, or rad/s) or `key_deg` (deg, deg/s), in radians; both at once are
+        rejected."""
         deg = f"{key}_deg"
         if self.has(key) and self.has(deg):
             self.fail(key, f"give either {key} (rad) or {deg} (deg), not both")
         if self.has(deg):
             return np.deg2rad(self.array(deg, shape))
-        a = self.array(key, shape, default=default)
-        if np.any(np.abs(a) > 2 * np.pi + 1e-9):
+        return self.array(key, shape, default=default)
+
+    def angles(self, key, shape, default=_REQUIRED) -> np.ndarray:
+        """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
+        degrees (|x| > 2π), are rejected (`rad_or_deg` for quantities that are not angles, such as
+        rates, which may exceed a turn)."""
+        deg = f"{key}_deg"
+        a = self.rad_or_deg(key, shape, default)
+        if not self.has(deg) and np.any(np.abs(a) > 2 * np.pi + 1e-9):
             self.fail(key, f"{np.max(np.abs(a)):g} rad is more than a turn: degrees? use {deg}")
         return a
 
@@ -226,7 +243,7 @@ def _arm(sec: _Section, index: int) -> tuple[ArmModel, dict]:
 def _arm_state(sec: _Section, n: int):
     init = sec.section("initial")
     q0 = init.angles("angles", (n,))
-    qd0 = init.angles("rates", (n,), default=np.zeros(n))
+    qd0 = init.rad_or_deg("rates", (n,), default=np.zeros(n))   # rad/s (rates_deg: deg/s): no turn limit
     init.done()
     return q0, qd0
 
@@ -320,7 +337,7 @@ def _mujoco(sec: _Section | None) -> MujocoSettings:
         weld_solref=None if solref is None else (float(solref[0]), float(solref[1])),
         weld_solimp=tuple(float(x) for x in sec.array("weld_solimp", (5,), default=d.weld_solimp)),
         tolerance=sec.number("tolerance", d.tolerance, positive=True),
-        iterations=int(sec.number("iterations", d.iterations, positive=True)),
+        iterations=sec.whole("iterations", d.iterations, positive=True),
         object_mass_scale=sec.number("object_mass_scale", d.object_mass_scale, positive=True),
     )
     sec.done()
@@ -473,7 +490,8 @@ def _resolve_grasps(arms, q0, order, grasp, pose, where):
         if pose is None:
             pose = (np.mean([p.p_ee for p in poses], axis=0), poses[0].R_ee)
         p_C, R_o = pose
-        gp = np.array([R_o.T @ (p.p_ee - p_C) for p in poses])
+        # p_EE − p_C as (base − p_C) + p_EE relative to the base: no world position in the difference
+        gp = np.array([R_o.T @ ((p.origin - p_C) + p.p_ee_rel) for p in poses])
         gr = np.array([R_o.T @ p.R_ee for p in poses])
         return gp, gr
     gp = np.array([grasp[m][0] for m in range(r)])

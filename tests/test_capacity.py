@@ -192,3 +192,34 @@ def test_energy_stress_curve():
 
 _SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist",
             "acc", "p_grasp")
+
+
+def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
+    """'bounded' (minimum energy with bounded internal wrench, a QP per sample) is not affine in the
+    carried mass: the two-point fit τ(μ) = a + μ b that the closed form rests on misses its torques at
+    the paper object's own 18.84 kg by 0.138 N·m (measured; peak torque 0.254 N·m), where the linear
+    'min_energy' fit is exact (1.6e-15). method_capacity therefore refuses it, naming the method and why,
+    instead of returning a capacity computed from that wrong fit."""
+    m, _, _ = run(PAPER)
+    P = problem(PAPER)
+    R = inv.resolution_for(m, "min_energy")
+    fb, mb = inv.default_bounds(P, R)
+    bounded = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
+    mu = m.object.mass
+    off = {}
+    for name, res in (("min_energy", R), ("bounded", bounded)):
+        a, b = cap.affine_torques(P, res, "scaled")
+        tau = inv.torques_of(P, inv.distribute(P, mu * P.y_unit, res))
+        off[name] = float(np.max(np.abs(tau - (a + mu * b))))
+    assert off["min_energy"] <= 1e-12 and off["bounded"] >= 0.1, off
+    msg = ("method_capacity: resolution 'bounded' has no closed-form capacity: its internal-wrench bounds make it "
+           "a QP whose torques are not affine in the carried mass (closed form for paper, nonsqueezing, "
+           "min_energy; lp_capacity with internal_bound bounds every distribution within the bounds)")
+    for mode in cap.MODES:
+        with pytest.raises(ValueError) as exc:
+            cap.method_capacity(P, bounded, m.motors, mode)
+        assert str(exc.value) == msg
+    with pytest.raises(ValueError, match="resolution 'bounded' has no closed-form capacity"):
+        cap.method_capacity(P, inv.resolution_for(m, "bounded"), m.motors)     # even with infinite bounds
+    with pytest.raises(ValueError, match="resolution 'nope' has no closed-form capacity: it is not a known linear"):
+        cap.method_capacity(P, replace(R, method="nope"), m.motors)

@@ -10,6 +10,8 @@ into the buffers of a `Workspace` (world axes, SI). Two algorithmic differences,
     I_m[j, l] = z_j · (n − p_j × f) for j ≤ l — the same entries ∂²S/∂θ̈_j∂θ̈_l;
   * 𝐈 is block diagonal (one block per arm, the object in the carrier's), factored block by block,
     and Λ𝐈⁻¹Λᵀ is formed as YᵀY with Y = L⁻¹Λᵀ (`chain_solve`).
+As in the reference, every lever arm is formed from positions relative to the arm's base point
+(W.p_rel, W.c_rel, W.p_ee_rel), never from world positions (W.p, W.c, W.p_ee, W.p_C are outputs).
 Return codes of `chain_forward`: OK, NOT_PD (a mass-matrix block is not positive definite),
 RANK_DEFICIENT (Λ𝐈⁻¹Λᵀ lost rank: minimum-norm grasp wrenches were used), NON_FINITE.
 """
@@ -37,13 +39,16 @@ def arm_kinematics(P, W, m, q):
     p_i = p_{i−1} + R_{i−1} d_i; z_i, c_i, I_i (world) and the end-effector frame. With Rodrigues'
     Rot(a, θ) = 1 + sinθ [a×] + (1 − cosθ)[a×]², R0_i Rot(a_i, θ_i) = R0_i + sinθ K1_i + (1 − cosθ) K2_i
     (K1 = R0[a×], K2 = R0[a×]² packed), z_i = R_i a_i = R_{i−1} (R0_i a_i) (Rot(a, θ) a = a), and
-    I_i = R_i I_link R_iᵀ formed as a symmetric matrix. The parent frame is carried in scalars."""
+    I_i = R_i I_link R_iᵀ formed as a symmetric matrix. The parent frame is carried in scalars. Positions
+    are accumulated from the base point (W.p_rel, c_rel, p_ee_rel); the world ones add base_pos."""
     dof = P.dof
     bp, br, jp, jr, k1, k2, jz = P.base_pos, P.base_rot, P.joint_pos, P.joint_rot, P.joint_k1, P.joint_k2, P.joint_z
     lc, li, eep, eer = P.link_com, P.link_inertia, P.ee_pos, P.ee_rot
     p, R, z, cw, Iw, p_ee, R_ee = W.p, W.R, W.z, W.c, W.I, W.p_ee, W.R_ee
+    pr, cr, per = W.p_rel, W.c_rel, W.p_ee_rel
     o, e = dof[m], dof[m + 1]
-    x0, x1, x2 = bp[m, 0], bp[m, 1], bp[m, 2]
+    o0, o1, o2 = bp[m, 0], bp[m, 1], bp[m, 2]
+    x0 = x1 = x2 = 0.0
     a00, a01, a02 = br[m, 0, 0], br[m, 0, 1], br[m, 0, 2]
     a10, a11, a12 = br[m, 1, 0], br[m, 1, 1], br[m, 1, 2]
     a20, a21, a22 = br[m, 2, 0], br[m, 2, 1], br[m, 2, 2]
@@ -78,11 +83,14 @@ def arm_kinematics(P, W, m, q):
         R[j, 0, 0], R[j, 0, 1], R[j, 0, 2] = b00, b01, b02
         R[j, 1, 0], R[j, 1, 1], R[j, 1, 2] = b10, b11, b12
         R[j, 2, 0], R[j, 2, 1], R[j, 2, 2] = b20, b21, b22
-        p[j, 0], p[j, 1], p[j, 2] = x0, x1, x2
+        pr[j, 0], pr[j, 1], pr[j, 2] = x0, x1, x2
+        p[j, 0], p[j, 1], p[j, 2] = o0 + x0, o1 + x1, o2 + x2
         l0, l1, l2 = lc[j, 0], lc[j, 1], lc[j, 2]
-        cw[j, 0] = x0 + b00 * l0 + b01 * l1 + b02 * l2
-        cw[j, 1] = x1 + b10 * l0 + b11 * l1 + b12 * l2
-        cw[j, 2] = x2 + b20 * l0 + b21 * l1 + b22 * l2
+        y0 = x0 + b00 * l0 + b01 * l1 + b02 * l2
+        y1 = x1 + b10 * l0 + b11 * l1 + b12 * l2
+        y2 = x2 + b20 * l0 + b21 * l1 + b22 * l2
+        cr[j, 0], cr[j, 1], cr[j, 2] = y0, y1, y2
+        cw[j, 0], cw[j, 1], cw[j, 2] = o0 + y0, o1 + y1, o2 + y2
         i00, i01, i02 = li[j, 0, 0], li[j, 0, 1], li[j, 0, 2]
         i10, i11, i12 = li[j, 1, 0], li[j, 1, 1], li[j, 1, 2]
         i20, i21, i22 = li[j, 2, 0], li[j, 2, 1], li[j, 2, 2]
@@ -106,9 +114,11 @@ def arm_kinematics(P, W, m, q):
         Iw[j, 1, 2], Iw[j, 2, 1] = v12, v12
         a00, a01, a02, a10, a11, a12, a20, a21, a22 = b00, b01, b02, b10, b11, b12, b20, b21, b22
     e0, e1, e2 = eep[m, 0], eep[m, 1], eep[m, 2]
-    p_ee[m, 0] = x0 + a00 * e0 + a01 * e1 + a02 * e2
-    p_ee[m, 1] = x1 + a10 * e0 + a11 * e1 + a12 * e2
-    p_ee[m, 2] = x2 + a20 * e0 + a21 * e1 + a22 * e2
+    y0 = x0 + a00 * e0 + a01 * e1 + a02 * e2
+    y1 = x1 + a10 * e0 + a11 * e1 + a12 * e2
+    y2 = x2 + a20 * e0 + a21 * e1 + a22 * e2
+    per[m, 0], per[m, 1], per[m, 2] = y0, y1, y2
+    p_ee[m, 0], p_ee[m, 1], p_ee[m, 2] = o0 + y0, o1 + y1, o2 + y2
     for b in range(3):
         f0, f1, f2 = eer[m, 0, b], eer[m, 1, b], eer[m, 2, b]
         R_ee[m, 0, b] = a00 * f0 + a01 * f1 + a02 * f2
@@ -118,9 +128,10 @@ def arm_kinematics(P, W, m, q):
 
 @kernel
 def arm_jacobian(P, W, m):
-    """End-effector Jacobian J_m (6, n_m): columns [z_j × (p_EE − p_j); z_j] (world axes)."""
+    """End-effector Jacobian J_m (6, n_m): columns [z_j × (p_EE − p_j); z_j] (world axes; positions
+    relative to the base point)."""
     dof = P.dof
-    p, z, p_ee, J = W.p, W.z, W.p_ee, W.J
+    p, z, p_ee, J = W.p_rel, W.z, W.p_ee_rel, W.J
     o, e = dof[m], dof[m + 1]
     e0, e1, e2 = p_ee[m, 0], p_ee[m, 1], p_ee[m, 2]
     for j in range(o, e):
@@ -147,8 +158,8 @@ def arm_bias(P, W, m, qd):
     F_j = m_j a_cj + F_{j+1}, N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1}
     + (p_{j+1} − p_j) × F_{j+1}, h_j = z_j · N_j."""
     dof, g, lm = P.dof, P.gravity, P.link_mass
-    p, z, cw, Iw, Ww, DW, Aw = W.p, W.z, W.c, W.I, W.w, W.dw, W.a
-    h, h_arm, Jd_qd, p_ee = W.h, W.h_arm, W.Jd_qd, W.p_ee
+    p, z, cw, Iw, Ww, DW, Aw = W.p_rel, W.z, W.c_rel, W.I, W.w, W.dw, W.a
+    h, h_arm, Jd_qd, p_ee = W.h, W.h_arm, W.Jd_qd, W.p_ee_rel
     o, e = dof[m], dof[m + 1]
     g0, g1, g2 = g[0], g[1], g[2]
     w0 = w1 = w2 = 0.0
@@ -222,16 +233,15 @@ def arm_bias(P, W, m, qd):
 def arm_mass_matrix(P, W, m):
     """I_m (n_m, n_m) of arm m by the composite-rigid-body recursion (module docstring), positions
     taken relative to the arm's base point, into W.Mb rows dof[m]:dof[m+1]."""
-    dof, bp, lm = P.dof, P.base_pos, P.link_mass
-    cw, Iw, z, p, Mb = W.c, W.I, W.z, W.p, W.Mb
+    dof, lm = P.dof, P.link_mass
+    cw, Iw, z, p, Mb = W.c_rel, W.I, W.z, W.p_rel, W.Mb
     o, e = dof[m], dof[m + 1]
-    b0, b1, b2 = bp[m, 0], bp[m, 1], bp[m, 2]
     mc = 0.0
     hc0 = hc1 = hc2 = 0.0
     c00 = c01 = c02 = c11 = c12 = c22 = 0.0     # I_C (symmetric)
     for l in range(e - 1, o - 1, -1):
         mi = lm[l]
-        c0, c1, c2 = cw[l, 0] - b0, cw[l, 1] - b1, cw[l, 2] - b2
+        c0, c1, c2 = cw[l, 0], cw[l, 1], cw[l, 2]
         cc = c0 * c0 + c1 * c1 + c2 * c2
         c00 += Iw[l, 0, 0] + mi * (cc - c0 * c0)
         c11 += Iw[l, 1, 1] + mi * (cc - c1 * c1)
@@ -244,7 +254,7 @@ def arm_mass_matrix(P, W, m):
         hc1 += mi * c1
         hc2 += mi * c2
         z0, z1, z2 = z[l, 0], z[l, 1], z[l, 2]
-        p0, p1, p2 = p[l, 0] - b0, p[l, 1] - b1, p[l, 2] - b2
+        p0, p1, p2 = p[l, 0], p[l, 1], p[l, 2]
         u0, u1, u2 = hc0 - mc * p0, hc1 - mc * p1, hc2 - mc * p2
         f0, f1, f2 = z1 * u2 - z2 * u1, z2 * u0 - z0 * u2, z0 * u1 - z1 * u0
         v0, v1, v2 = z1 * p2 - z2 * p1, z2 * p0 - z0 * p2, z0 * p1 - z1 * p0
@@ -252,7 +262,7 @@ def arm_mass_matrix(P, W, m):
         n1 = c01 * z0 + c11 * z1 + c12 * z2 - (hc2 * v0 - hc0 * v2)
         n2 = c02 * z0 + c12 * z1 + c22 * z2 - (hc0 * v1 - hc1 * v0)
         for j in range(o, l + 1):
-            q0, q1, q2 = p[j, 0] - b0, p[j, 1] - b1, p[j, 2] - b2
+            q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
             m0 = n0 - (q1 * f2 - q2 * f1)
             m1 = n1 - (q2 * f0 - q0 * f2)
             m2 = n2 - (q0 * f1 - q1 * f0)
@@ -448,9 +458,11 @@ def chain_terms(P, W, q, qd):
 @kernel
 def loop_residual(P, W):
     """Φ (K,) into W.phi from the current kinematics: for each arm m ≠ c,
-    S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)] (m, rad), the grasp frame carried by the object."""
-    S, dof, c, gr = P.rows, P.dof, P.carrier, P.grasp_rot
-    R_o, R_ee, p_ee, p_C, s, phi, lg, m3 = W.R_o, W.R_ee, W.p_ee, W.p_C, W.s, W.phi, W.v3, W.m3
+    S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)] (m, rad), the grasp frame carried by the object.
+    No world position enters: p_EE,m − p_grasp,m = (o_m − o_c) + (p_EE,m − p_EE,c − s_c + s_m), the
+    end-effectors relative to their bases o (p_grasp,m = p_C − s_m, p_C = p_EE,c + s_c)."""
+    S, dof, c, gr, bp = P.rows, P.dof, P.carrier, P.grasp_rot, P.base_pos
+    R_o, R_ee, p_ee, s, phi, lg, m3 = W.R_o, W.R_ee, W.p_ee_rel, W.s, W.phi, W.v3, W.m3
     Rd, E = m3[0], m3[1]
     k = S.shape[0]
     g = 0
@@ -464,8 +476,9 @@ def loop_residual(P, W):
             for b in range(3):
                 E[a, b] = R_ee[m, a, 0] * Rd[b, 0] + R_ee[m, a, 1] * Rd[b, 1] + R_ee[m, a, 2] * Rd[b, 2]
         rot_log(E, lg)
-        # p_des = p_C + R_o g_m = p_C − s_m
-        e0, e1, e2 = p_ee[m, 0] - p_C[0] + s[m, 0], p_ee[m, 1] - p_C[1] + s[m, 1], p_ee[m, 2] - p_C[2] + s[m, 2]
+        e0 = (bp[m, 0] - bp[c, 0]) + (p_ee[m, 0] - (p_ee[c, 0] + s[c, 0] - s[m, 0]))
+        e1 = (bp[m, 1] - bp[c, 1]) + (p_ee[m, 1] - (p_ee[c, 1] + s[c, 1] - s[m, 1]))
+        e2 = (bp[m, 2] - bp[c, 2]) + (p_ee[m, 2] - (p_ee[c, 2] + s[c, 2] - s[m, 2]))
         for i in range(k):
             phi[g * k + i] = (S[i, 0] * e0 + S[i, 1] * e1 + S[i, 2] * e2 + S[i, 3] * lg[0] + S[i, 4] * lg[1]
                               + S[i, 5] * lg[2])

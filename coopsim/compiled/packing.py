@@ -69,7 +69,10 @@ class PackedModel(NamedTuple):
 class Workspace(NamedTuple):
     """Buffers of one evaluation (N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows).
     Link geometry, world axes: p, R, z, c, I (N, …) joint origins, frames, axes, centres of mass,
-    inertias; p_ee (r, 3), R_ee (r, 3, 3); link motion at θ̈ = 0 with base acceleration −g:
+    inertias; p_ee (r, 3), R_ee (r, 3, 3); p_rel, c_rel (N, 3), p_ee_rel (r, 3): p, c, p_ee relative to
+    their arm's base point, accumulated from the base without its world position (every lever arm of
+    the kernels is formed from these, so that a scene far from the world origin loses nothing to
+    rounding; p, c, p_ee are those plus base_pos, for output); link motion at θ̈ = 0 with base acceleration −g:
     w, dw, a (N, 3). Arm terms: Mb (N, nmax) mass-matrix blocks (arm m's block in rows
     dof[m]:dof[m+1], columns 0:n_m), Lb (N, nmax) their Cholesky factors L (lower triangle, and Lᵀ
     in the strict upper triangle), Lb_inv (N,) the reciprocals of the factors' diagonals, h (N,)
@@ -88,6 +91,9 @@ class Workspace(NamedTuple):
     I: np.ndarray
     p_ee: np.ndarray
     R_ee: np.ndarray
+    p_rel: np.ndarray
+    c_rel: np.ndarray
+    p_ee_rel: np.ndarray
     w: np.ndarray
     dw: np.ndarray
     a: np.ndarray
@@ -187,6 +193,7 @@ def workspace(P: PackedModel) -> Workspace:
     z = np.zeros
     return Workspace(
         z((N, 3)), z((N, 3, 3)), z((N, 3)), z((N, 3)), z((N, 3, 3)), z((r, 3)), z((r, 3, 3)),
+        z((N, 3)), z((N, 3)), z((r, 3)),
         z((N, 3)), z((N, 3)), z((N, 3)),
         z((N, nmax)), z((N, nmax)), z(N), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
         z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),

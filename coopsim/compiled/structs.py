@@ -139,6 +139,9 @@ WORKSPACE_FIELDS = (
     ("I", _f3),
     ("p_ee", _f2),
     ("R_ee", _f3),
+    ("p_rel", _f2),
+    ("c_rel", _f2),
+    ("p_ee_rel", _f2),
     ("w", _f2),
     ("dw", _f2),
     ("a", _f2),
@@ -265,6 +268,9 @@ def _new_workspace(r):
     s.I = r.I
     s.p_ee = r.p_ee
     s.R_ee = r.R_ee
+    s.p_rel = r.p_rel
+    s.c_rel = r.c_rel
+    s.p_ee_rel = r.p_ee_rel
     s.w = r.w
     s.dw = r.dw
     s.a = r.a
