@@ -69,6 +69,12 @@ class SampleFailure(NamedTuple):
     reason: str
 
 
+def failure_text(failures: list[tuple[float, str]], shown: int = 3) -> str:
+    """'t=0.35 s (infeasible), …' for the first `shown` of (time s, reason) pairs."""
+    text = ", ".join(f"t={t:.6g} s ({reason})" for t, reason in failures[:shown])
+    return text + (", ..." if len(failures) > shown else "")
+
+
 @dataclass(frozen=True, eq=False)
 class InverseProblem:
     """Per-sample terms of the inverse dynamics along a trajectory (N samples, n joints, r arms, k rows).
@@ -443,10 +449,9 @@ def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Re
     qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, C, -hi, hi)
     bad = [SampleFailure(int(i), float(prob.t[i]), qps.messages[i]) for i in np.flatnonzero(~qps.ok)]
     if bad:
-        shown = ", ".join(f"t={b.time:.6g} s ({b.reason})" for b in bad[:3]) + (", ..." if len(bad) > 3 else "")
         warnings.warn(f"'bounded' (|internal| <= {res.force_bound:.4g} N, {res.moment_bound:.4g} N·m): no solution at "
-                      f"{len(bad)} of {len(y)} samples: {shown}; they are left out (nan)", SampleFailureWarning,
-                      stacklevel=2)
+                      f"{len(bad)} of {len(y)} samples: {failure_text([(b.time, b.reason) for b in bad])}; they are "
+                      f"left out (nan)", SampleFailureWarning, stacklevel=2)
         if failures is not None:
             failures.extend(bad)
     return qps.x

@@ -14,8 +14,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import capacity as cap
-from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy, grasp_line_frames,
-                      inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
+from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy, failure_text,
+                      grasp_line_frames, inverse_problem, nan_peak, replay, resolution_for, resolve, result_of,
+                      virtual_masses)
 from .log import Series, nonfinite_name
 from .model import Model
 from .stress import SectionLoads, decompose_internal, section_loads
@@ -200,9 +201,8 @@ def format_inverse_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
-def _failure_list(failures: list[dict], shown: int = 3) -> str:
-    text = ", ".join(f"t={f['time_s']:.6g} s ({f['reason']})" for f in failures[:shown])
-    return text + (", ..." if len(failures) > shown else "")
+def _failure_list(failures: list[dict]) -> str:
+    return failure_text([(f["time_s"], f["reason"]) for f in failures])
 
 
 # ------------------------------------------------------------------------------------------------

@@ -338,8 +338,8 @@ class _Reduced(NamedTuple):
         H[:, np.arange(n), np.arange(n)] += ~free
         Bxp = np.einsum("nij,nj->ni", P.B, xp)
         g = np.einsum("nij,nj->ni", Zt, np.einsum("nij,nj->ni", P.H, xp) + P.g)
-        return cls(Z, xp, free, consistent, Einv, H, g, P.B @ Z, np.where(P.ineq, P.lo - Bxp, -np.inf), np.where(P.ineq, P.hi - Bxp, np.inf))
-
+        return cls(Z, xp, free, consistent, Einv, H, g, P.B @ Z,
+                   np.where(P.ineq, P.lo - Bxp, -np.inf), np.where(P.ineq, P.hi - Bxp, np.inf))
 
     def refine(self, P: _Scaled, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The least correction (len(idx), n) of x to the equality rows, B_eq⁺ (e − B_eq x): xp + Z z
