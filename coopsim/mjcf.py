@@ -4,6 +4,15 @@ Only what the scene needs: one body per link (explicit inertia, hinge joint, a v
 contacts), the object as a child body of the carrier arm's last link (an exact rigid attachment),
 one `weld` equality per other arm, one `motor` per joint, contacts disabled. Sites mark each
 end-effector and each grasp on the object.
+
+The files in `models/` (`mjcf_text`) add what a viewer needs and nothing the dynamics sees: a keyframe
+`initial` holding the consistent initial state (`simulate.initial_state`, the state `coopsim run`
+starts the twin from) and τ(0) as controls, a directional light, a floor grid below the scene
+(normal against gravity; no contacts, no mass) and a fixed camera `view` with the `statistic`
+center/extent and free-camera angles framing it. They are saved as written (`savecompiled="false"`),
+so every number is exact and the file compiles to the same model as the spec. MuJoCo loads the
+model at `qpos0` (all angles zero: the loop open), so a run from the file starts with
+`mj_resetDataKeyframe(m, d, 0)`; `launch_viewer` opens MuJoCo's viewer there.
 """
 
 from __future__ import annotations
@@ -11,8 +20,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .model import ArmModel, Model, MujocoSettings
-from .spatial import rot_to_quat
+from .model import ArmModel, Model, MujocoSettings, torque_at
+from .spatial import axis_angle_to_rot, rot_to_quat
 
 
 _INTEGRATORS = {"RK4": mujoco.mjtIntegrator.mjINT_RK4, "Euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -50,8 +59,12 @@ def _visual_box(body, size: np.ndarray, pos: np.ndarray, rgba=(0.6, 0.6, 0.7, 1.
 
 
 def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_object: bool = True,
-               with_geoms: bool = True) -> mujoco.MjSpec:
-    """MjSpec of the scene (with_object=False: the open arms alone, for stage tests)."""
+               with_geoms: bool = True, initial: tuple[np.ndarray, np.ndarray] | None = None,
+               scene: bool = False) -> mujoco.MjSpec:
+    """MjSpec of the scene (with_object=False: the open arms alone, for stage tests). initial = (q, qd)
+    in coopsim's joint order adds the keyframe `initial` (time 0, that state, ctrl τ(0)); scene=True
+    adds the light, the floor (where there is gravity) and the camera framing the scene at `initial`
+    (or at qpos0). Neither changes the dynamics."""
     st = settings or model.mujoco
     spec = mujoco.MjSpec()
     spec.modelname = model.name
@@ -70,7 +83,98 @@ def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_obj
                               gear=[1, 0, 0, 0, 0, 0])
     if with_object:
         _add_object(spec, model, last, with_geoms, st)
+    if initial is not None:
+        _add_keyframe(spec, model, *initial)
+    if scene:
+        _add_scene(spec, model)
     return spec
+
+
+KEYFRAME = "initial"
+
+
+def _add_keyframe(spec: mujoco.MjSpec, model: Model, q: np.ndarray, qd: np.ndarray):
+    """Keyframe `initial`: time 0, (q, qd) placed at the twin's qpos/dof addresses, ctrl τ(0)."""
+    m = spec.compile()
+    qpos, qvel = m.qpos0.copy(), np.zeros(m.nv)
+    qpos[qpos_address(m, model)], qvel[dof_address(m, model)] = q, qd
+    ctrl = np.zeros(m.nu)
+    ctrl[[m.actuator(f"a{a}_m{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)]] = \
+        torque_at(model.torques, 0.0)
+    spec.add_key(name=KEYFRAME, time=0.0, qpos=qpos.tolist(), qvel=qvel.tolist(), ctrl=ctrl.tolist())
+
+
+def _scene_points(spec: mujoco.MjSpec) -> np.ndarray:
+    """World corners of every box geom and every site, at the first keyframe (or qpos0)."""
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    if m.nkey:
+        mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_kinematics(m, d)
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    points = [d.site_xpos]
+    for g in np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_BOX):
+        points.append(d.geom_xpos[g] + (signs * m.geom_size[g]) @ d.geom_xmat[g].reshape(3, 3).T)
+    return np.vstack(points)
+
+
+def _view_angles(model: Model) -> tuple[float, float]:
+    """Free-camera azimuth and elevation (deg, MuJoCo's z-up convention): a planar scene seen along its
+    plane normal (tilted 15° down if the plane is vertical, from 70° above if it is horizontal), a
+    spatial one obliquely."""
+    if model.plane is None:
+        return 120.0, -25.0
+    n = model.plane[2] / np.linalg.norm(model.plane[2])
+    if abs(n[2]) > np.cos(np.deg2rad(45.0)):
+        return 90.0, -70.0
+    azimuth = np.rad2deg(np.arctan2(n[1], n[0]))
+    if not 0.0 < azimuth <= 180.0:        # look from the -y side (x to the right) where possible
+        azimuth = np.rad2deg(np.arctan2(-n[1], -n[0]))
+    return float(azimuth), -15.0
+
+
+def _add_scene(spec: mujoco.MjSpec, model: Model):
+    """Light, floor and camera: visual only (no mass, no contacts, no constraint), framing the scene."""
+    points = _scene_points(spec)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    center = 0.5 * (lo + hi)
+    radius = max(float(np.max(np.linalg.norm(points - center, axis=1))), 0.1)
+    fovy = spec.visual.global_.fovy
+    distance = 1.1 * radius / np.sin(np.deg2rad(fovy) / 2)
+    azimuth, elevation = _view_angles(model)
+    a, e = np.deg2rad(azimuth), np.deg2rad(elevation)
+    forward = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right = right / np.linalg.norm(right) if np.linalg.norm(right) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    z_cam = -forward
+    R_cam = np.column_stack([right, np.cross(z_cam, right), z_cam])
+    spec.worldbody.add_camera(name="view", pos=center - distance * forward, quat=rot_to_quat(R_cam),
+                              fovy=fovy)
+    # MuJoCo's free camera looks at stat.center from 1.5·stat.extent along (azimuth, elevation).
+    spec.stat.center, spec.stat.extent = center, distance / 1.5
+    spec.visual.global_.azimuth, spec.visual.global_.elevation = azimuth, elevation
+    g = np.linalg.norm(model.gravity)
+    up = -model.gravity / g if g > 0 else np.array([0.0, 0.0, 1.0])
+    spec.worldbody.add_light(name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+                             pos=center + 2.0 * radius * up, dir=-up, diffuse=[0.6, 0.6, 0.6],
+                             specular=[0.2, 0.2, 0.2], castshadow=True)
+    if g > 0:
+        spec.add_texture(name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                         builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, mark=mujoco.mjtMark.mjMARK_EDGE,
+                         rgb1=[0.22, 0.25, 0.3], rgb2=[0.28, 0.31, 0.36], markrgb=[0.6, 0.6, 0.6],
+                         width=300, height=300)
+        cell = 10.0 ** np.round(np.log10(radius / 5.0))     # squares of 0.1 m, 1 m, ...
+        material = spec.add_material(name="grid", texrepeat=[0.5 / cell, 0.5 / cell], texuniform=True,
+                                     reflectance=0.1)
+        material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
+        below = float(np.max((center - points) @ up))
+        tilt = np.cross([0.0, 0.0, 1.0], up)
+        angle = np.arctan2(np.linalg.norm(tilt), up[2])
+        R_floor = np.eye(3) if np.linalg.norm(tilt) < 1e-12 else axis_angle_to_rot(tilt, angle)
+        spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, material="grid",
+                                pos=center - (below + 0.05 * radius) * up, quat=rot_to_quat(R_floor),
+                                size=[3.0 * radius, 3.0 * radius, cell], contype=0, conaffinity=0,
+                                mass=0.0)
 
 
 def _add_object(spec, model: Model, last: list, with_geoms: bool, st: MujocoSettings):
@@ -117,10 +221,46 @@ def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
                      for m, arm in enumerate(model.arms) for i in range(arm.n)])
 
 
+def mjcf_spec(model: Model) -> mujoco.MjSpec:
+    """The spec of a file in `models/`: the twin, its keyframe at the consistent initial state of
+    `coopsim run` (`simulate.initial_state`) and the scene (light, floor, camera), saved as written."""
+    from .simulate import initial_state
+
+    init = initial_state(model)
+    spec = build_spec(model, initial=(init.q, init.qd), scene=True)
+    spec.compiler.degree = False
+    spec.compiler.savecompiled = False   # every number as written, exactly (not 6 digits)
+    spec.compiler.savecanonical = False
+    return spec
+
+
 def mjcf_text(model: Model, source: str) -> str:
-    """The twin as MJCF text, with a header naming its source scenario. MuJoCo's XML writer keeps 6
-    significant digits, so the file is for viewing and sharing; the harness compiles the MjSpec at
-    full precision."""
+    """The twin as MJCF text (`mjcf_spec`), with a header naming its source scenario."""
     header = (f"<!-- Generated by coopsim from {source}; do not edit: run `coopsim mjcf {source}`.\n"
-              f"     Numbers are rounded to 6 significant digits by MuJoCo's XML writer. -->\n")
-    return header + build_spec(model).to_xml()
+              f"     Numbers are exact. MuJoCo loads the model with every joint angle at zero (the loop open):\n"
+              f"     start from the keyframe '{KEYFRAME}' (mj_resetDataKeyframe(m, d, 0); in the viewer\n"
+              f"     'Load key' in the Simulation panel, or `python -m coopsim.mjcf FILE`). -->\n")
+    return header + mjcf_spec(model).to_xml()
+
+
+def launch_viewer(path: str) -> None:
+    """MuJoCo's interactive viewer on an MJCF file, started (and reloaded) at its first keyframe."""
+    import mujoco.viewer
+
+    def load():
+        m = mujoco.MjModel.from_xml_path(str(path))
+        d = mujoco.MjData(m)
+        if m.nkey:
+            mujoco.mj_resetDataKeyframe(m, d, 0)
+        mujoco.mj_forward(m, d)
+        return m, d, str(path)
+
+    mujoco.viewer.launch(loader=load)
+
+
+if __name__ == "__main__":
+    import sys
+
+    if len(sys.argv) != 2:
+        sys.exit("usage: python -m coopsim.mjcf MODEL.xml   (MuJoCo's viewer, started at the keyframe)")
+    launch_viewer(sys.argv[1])

@@ -1,17 +1,21 @@
-"""The MuJoCo twin: only what the scene needs, the same parameters as the native model, files up to date."""
-
-from pathlib import Path
+"""The MuJoCo twin: only what the scene needs, the same parameters as the native model, files up to
+date; each file in models/ opens at the consistent initial state, runs the twin of `coopsim run` bit for
+bit from its keyframe, and agrees with the native model within the scenario's thresholds."""
 
 import mujoco
 import numpy as np
 import pytest
 
-from coopsim.mjcf import build_spec, mjcf_text, qpos_address
+from coopsim.compare import orientation_error
+from coopsim.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_text, qpos_address
+from coopsim.model import TorqueFunction, torque_at
+from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario
-from coopsim.simulate import initial_state
+from coopsim.simulate import initial_state, output_times, simulate
 from conftest import ROOT, SCENARIOS
 
 SCENARIO_FILES = sorted(SCENARIOS.glob("*.yaml"))
+IDS = [p.stem for p in SCENARIO_FILES]
 
 
 @pytest.mark.parametrize("path", SCENARIO_FILES, ids=[p.stem for p in SCENARIO_FILES])
@@ -61,9 +65,199 @@ def test_welds_hold_at_the_consistent_initial_state(scenario, request):
     assert np.max(np.abs(d.efc_pos[: d.nefc])) <= 1e-12
 
 
-def test_model_file_loads_and_matches_the_spec_to_its_printed_precision(paper):
-    exact = build_spec(paper).compile()
-    loaded = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "paper_planar_2x3.xml"))
-    assert (loaded.nbody, loaded.njnt, loaded.neq, loaded.nu) == (exact.nbody, exact.njnt, exact.neq, exact.nu)
-    assert np.allclose(loaded.body_inertia, exact.body_inertia, rtol=5e-6, atol=0)  # 6 digits
-    assert np.allclose(loaded.body_pos, exact.body_pos, rtol=0, atol=1e-6)
+@pytest.fixture(scope="module")
+def twin_files():
+    """Per scenario stem: (model, the file in models/ compiled, the twin `coopsim run` compiles)."""
+    return {p.stem: (load_scenario(p), mujoco.MjModel.from_xml_path(str(ROOT / "models" / f"{p.stem}.xml")),
+                     build_spec(load_scenario(p)).compile()) for p in SCENARIO_FILES}
+
+
+# Every compiled quantity the dynamics reads (qpos0 and the inverse weights computed there set the
+# welds' regularisation, meaninertia the solver's scale).
+PHYSICS_FIELDS = ["qpos0", "body_parentid", "body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass",
+                  "body_inertia", "body_invweight0", "dof_invweight0", "dof_armature", "dof_damping",
+                  "dof_frictionloss", "jnt_type", "jnt_pos", "jnt_axis", "jnt_stiffness", "eq_type", "eq_obj1id",
+                  "eq_obj2id", "eq_data", "eq_solref", "eq_solimp", "actuator_trnid", "actuator_gear",
+                  "actuator_gainprm", "actuator_biasprm", "actuator_ctrllimited", "actuator_forcelimited"]
+OPTION_FIELDS = ["timestep", "integrator", "gravity", "tolerance", "iterations", "solver", "disableflags",
+                 "enableflags", "cone", "jacobian", "impratio"]
+
+
+@pytest.mark.parametrize("name", IDS)
+def test_model_file_compiles_to_the_twin_exactly(name, twin_files):
+    """Saved as written: no number rounded (MuJoCo's writer of compiled values keeps 6 digits)."""
+    model, m, exact = twin_files[name]
+    assert (m.nq, m.nv, m.nbody, m.njnt, m.neq, m.nu) == (exact.nq, exact.nv, exact.nbody, exact.njnt,
+                                                          exact.neq, exact.nu), f"{name}: sizes"
+    for field in PHYSICS_FIELDS:
+        a, b = getattr(m, field), getattr(exact, field)
+        assert np.array_equal(a, b), f"{name}: {field} differs by {np.max(np.abs(a - b)):.3g} from the spec"
+    for field in OPTION_FIELDS:
+        a, b = getattr(m.opt, field), getattr(exact.opt, field)
+        assert np.array_equal(a, b), f"{name}: opt.{field} is {a}, the spec's {b}"
+    assert m.stat.meaninertia == exact.stat.meaninertia, f"{name}: stat.meaninertia"
+
+
+@pytest.mark.parametrize("name", IDS)
+def test_keyframe_is_the_consistent_initial_state(name, twin_files):
+    """Key 0 is `initial`: the projected state `coopsim run` starts the twin from, τ(0) as ctrl."""
+    model, m, _ = twin_files[name]
+    init = initial_state(model)
+    assert m.nkey == 1 and m.key(0).name == KEYFRAME, f"{name}: one keyframe named {KEYFRAME!r}"
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    assert d.time == 0.0, f"{name}: keyframe time {d.time} s"
+    assert np.array_equal(d.qpos[qpos_address(m, model)], init.q), \
+        f"{name}: keyframe qpos off the consistent angles by {np.max(np.abs(d.qpos[qpos_address(m, model)] - init.q)):.3g} rad"
+    assert np.array_equal(d.qvel[dof_address(m, model)], init.qd), f"{name}: keyframe qvel ≠ consistent rates"
+    ctrl = [m.actuator(f"a{a}_m{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)]
+    assert np.array_equal(d.ctrl[ctrl], torque_at(model.torques, 0.0)), f"{name}: keyframe ctrl ≠ τ(0)"
+    mujoco.mj_forward(m, d)
+    weld = np.max(np.abs(d.efc_pos[: d.nefc]))
+    assert d.nefc == 6 * (model.r - 1) and weld <= 1e-12, f"{name}: weld violation at the keyframe {weld:.3g}"
+    assert np.all(np.isfinite(d.qacc)) and np.max(np.abs(d.qacc)) < 1e2, \
+        f"{name}: |qacc| at the keyframe {np.max(np.abs(d.qacc)):.3g} rad/s²"
+
+
+def _step_file(m, model, t_out, torque):
+    """Reset the file's model to its keyframe and step it with control callback `torque(t)`, sampled at
+    t_out as run_twin samples (mj_forward after the steps): q, qd, qacc, object pose, weld violation."""
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    qadr, dadr, obj = qpos_address(m, model), dof_address(m, model), m.body("object").id
+    ctrl = np.array([m.actuator(f"a{a}_m{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)])
+    steps = np.round(np.diff(t_out) / m.opt.timestep).astype(int)
+    out = {k: [] for k in ("q", "qd", "qdd", "pos", "quat", "weld")}
+
+    def control(_, data):
+        data.ctrl[ctrl] = torque(data.time)
+
+    mujoco.set_mjcb_control(control)
+    try:
+        for i in range(len(t_out)):
+            for _ in range(steps[i - 1] if i else 0):
+                mujoco.mj_step(m, d)
+            mujoco.mj_forward(m, d)
+            for k, v in (("q", d.qpos[qadr]), ("qd", d.qvel[dadr]), ("qdd", d.qacc[dadr]),
+                         ("pos", d.xpos[obj]), ("quat", d.xquat[obj])):
+                out[k].append(v.copy())
+            out["weld"].append(np.max(np.abs(d.efc_pos[: d.nefc])))
+    finally:
+        mujoco.set_mjcb_control(None)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _fast_torque(model):
+    """τ(t) as one piecewise-linear table on the union of the arms' breakpoints (a few µs a call instead
+    of torque_at's ~35; equal to it to rounding)."""
+    if isinstance(model.torques, TorqueFunction):
+        return lambda t: torque_at(model.torques, t)
+    T = np.unique(np.concatenate([tab.times for tab in model.torques]))
+    V = np.array([torque_at(model.torques, t) for t in T])
+    if len(T) == 1:
+        return lambda t: V[0]
+    S = np.diff(V, axis=0) / np.diff(T)[:, None]
+
+    def torque(t):
+        if t <= T[0]:
+            return V[0]
+        if t >= T[-1]:
+            return V[-1]
+        j = np.searchsorted(T, t, side="right") - 1
+        return V[j] + (t - T[j]) * S[j]
+    return torque
+
+
+@pytest.mark.parametrize("name", IDS)
+def test_file_from_its_keyframe_is_the_twin_of_coopsim_run_bit_for_bit(name, twin_files):
+    """The file (keyframe, light, floor, camera: visual additions) against the bare spec `coopsim run`
+    steps from the consistent state: the same trajectory to the last bit over the first 0.05 s."""
+    model, m, _ = twin_files[name]
+    t_out = output_times(0.05, model.integrator.output_dt)
+    init = initial_state(model)
+    twin = run_twin(model, init.q, init.qd, t_out)
+    got = _step_file(m, model, t_out, lambda t: torque_at(model.torques, t))
+    for key, ref in (("q", twin.q), ("qd", twin.qd), ("qdd", twin.qdd), ("pos", twin.object_pos),
+                     ("quat", twin.object_quat), ("weld", twin.weld_violation)):
+        assert np.array_equal(got[key], ref), \
+            f"{name}: {key} from the file's keyframe differs from run_twin by {np.max(np.abs(got[key] - ref)):.3g}"
+
+
+# The file's own run against the native model over (up to) this much of each scenario's duration.
+AGREEMENT_WINDOW = 1.0
+
+
+@pytest.mark.parametrize("name", IDS)
+def test_file_from_its_keyframe_agrees_with_the_native_model(name, twin_files):
+    """The saved XML alone, reset to its keyframe and stepped with the scenario's torques, stays finite
+    and within the scenario's validation thresholds of the native run on the same output grid."""
+    model, m, _ = twin_files[name]
+    duration = min(model.duration, AGREEMENT_WINDOW)
+    native = simulate(model, duration=duration)
+    got = _step_file(m, model, native.t, _fast_torque(model))
+    assert all(np.all(np.isfinite(v)) for v in got.values()), f"{name}: non-finite state from the file"
+    th = model.validation
+    for what, err, limit in (
+            ("joint angle error (rad)", np.abs(got["q"] - native.q), th.max_angle_error),
+            ("joint rate error (rad/s)", np.abs(got["qd"] - native.qd), th.max_rate_error),
+            ("object position error (m)", np.linalg.norm(got["pos"] - native.object_pos, axis=1),
+             th.max_object_position_error),
+            ("object orientation error (rad)", orientation_error(got["quat"], native.object_quat),
+             th.max_object_orientation_error),
+            ("weld violation", got["weld"], th.max_weld_violation)):
+        assert np.max(err) <= limit, f"{name}: max {what} {np.max(err):.3g} over {duration:g} s > {limit:g}"
+
+
+@pytest.mark.parametrize("name", IDS)
+def test_scene_is_visual_only_and_frames_the_scene(name, twin_files):
+    """One directional light along gravity, a contact-free massless floor below everything with its
+    normal against gravity, a fixed camera (and the free camera's statistic) that sees every link,
+    base and the object at the keyframe."""
+    model, m, exact = twin_files[name]
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_forward(m, d)
+    up = -model.gravity / np.linalg.norm(model.gravity)
+    assert m.nlight == 1 and m.light_type[0] == mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, f"{name}: light"
+    assert np.allclose(d.light_xdir[0], -up, atol=1e-12), f"{name}: light direction {d.light_xdir[0]}"
+    floor = m.geom("floor").id
+    assert m.geom_type[floor] == mujoco.mjtGeom.mjGEOM_PLANE and m.geom_bodyid[floor] == 0, f"{name}: floor"
+    assert m.geom_contype[floor] == 0 and m.geom_conaffinity[floor] == 0, f"{name}: floor collides"
+    assert m.ngeom == exact.ngeom + 1 and np.all(m.geom_contype == 0) and np.all(m.geom_conaffinity == 0)
+    normal = d.geom_xmat[floor].reshape(3, 3)[:, 2]
+    assert np.allclose(normal, up, atol=1e-12), f"{name}: floor normal {normal}, against gravity {up}"
+    boxes = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_BOX)
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    corners = np.vstack([d.geom_xpos[g] + (signs * m.geom_size[g]) @ d.geom_xmat[g].reshape(3, 3).T
+                         for g in boxes])
+    height = (corners - d.geom_xpos[floor]) @ up
+    assert np.min(height) > 0, f"{name}: a box corner {np.min(height):.3g} m below the floor"
+    assert np.all(np.abs((corners - d.geom_xpos[floor]) @ d.geom_xmat[floor].reshape(3, 3)[:, :2])
+                  <= m.geom_size[floor, :2]), f"{name}: the floor does not extend under every box"
+    cam = m.camera("view").id
+    R = d.cam_xmat[cam].reshape(3, 3)
+    local = (corners - d.cam_xpos[cam]) @ R             # camera frame: looks along -z, y up
+    half = np.tan(np.deg2rad(m.cam_fovy[cam]) / 2)
+    depth = -local[:, 2]
+    assert np.all(depth > 0), f"{name}: part of the scene behind the camera"
+    assert np.max(np.abs(local[:, 1]) / depth) <= half, f"{name}: the scene leaves the camera's view vertically"
+    assert np.max(np.abs(local[:, 0]) / depth) <= half * 4 / 3, \
+        f"{name}: the scene leaves a 4:3 view horizontally"
+    free = mujoco.MjvCamera()
+    mujoco.mjv_defaultFreeCamera(m, free)
+    assert np.allclose(free.lookat, m.stat.center) and free.distance == pytest.approx(
+        np.linalg.norm(d.cam_xpos[cam] - m.stat.center), rel=1e-9), f"{name}: free camera ≠ fixed camera"
+
+
+def test_viewer_launcher_starts_at_the_keyframe(monkeypatch, spatial):
+    """`python -m coopsim.mjcf FILE`: MuJoCo's viewer, loaded (and reloaded) at key 0, the loop closed."""
+    import mujoco.viewer
+
+    loaders = []
+    monkeypatch.setattr(mujoco.viewer, "launch", lambda **kw: loaders.append(kw["loader"]))
+    path = ROOT / "models" / "spatial_6r_pair.xml"
+    launch_viewer(path)
+    m, d, where = loaders[0]()
+    assert where == str(path)
+    assert np.array_equal(d.qpos[qpos_address(m, spatial)], initial_state(spatial).q), "viewer qpos ≠ keyframe"
+    assert np.max(np.abs(d.efc_pos[: d.nefc])) <= 1e-12, "weld violation in the viewer's first frame"
