@@ -138,7 +138,7 @@ def _cmd_inverse(args) -> int:
     write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
-    return 0
+    return 0 if summary.get("complete", True) else 1
 
 
 def _cmd_capacity(args) -> int:

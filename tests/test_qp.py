@@ -223,7 +223,7 @@ def test_infeasible_samples_are_reported_by_the_bounded_resolution():
 
 
 def test_cli_inverse_reports_infeasible_samples_and_writes_outputs(workdir):
-    """`coopsim inverse` on that case (a scenario file with the passive wrist and the bound): exit 0,
+    """`coopsim inverse` on that case (a scenario file with the passive wrist and the bound): exit 1,
     inverse.json, inverse.mcap and the plots written; the summary marks the run incomplete and lists
     the failed samples, the text names them, stderr carries the warning; the solved samples' peaks are
     finite, the failed ones are NaN in the log; the replay is not run and says why."""
@@ -234,7 +234,7 @@ def test_cli_inverse_reports_infeasible_samples_and_writes_outputs(workdir):
     path.write_text(yaml.safe_dump(data))
     out = run_cli("inverse", path, "--method", "bounded", "--duration", "1.5", "--no-curve", "--replay",
                   "--json", "--out", "res", cwd=workdir)
-    assert out.returncode == 0, out.stderr
+    assert out.returncode == 1, out.stderr
     s = json.loads(out.stdout)
     b = s["methods"]["bounded"]
     assert s["complete"] is False and 50 <= len(b["failed_samples"]) < 151
