@@ -117,7 +117,7 @@ def _cmd_inverse(args) -> int:
     from .atomic import write_text_atomic
     from .inverse_report import (format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names,
                                  json_safe)
-    from .log import read_mcap, run_metadata, write_mcap
+    from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
     from .render import FigureWorkers
     from .scenario import load_scenario
@@ -130,7 +130,8 @@ def _cmd_inverse(args) -> int:
         summary = inverse_summary(study)
         out = Path(args.out or Path("out") / model.name)
         log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
-            "scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)},
+            "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+            "study": {"joints": joint_names(model)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}}))
         plots = inverse_plots(read_mcap(log_path), out, workers=workers)
@@ -149,7 +150,7 @@ def _cmd_capacity(args) -> int:
     from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, joint_names, json_safe)
-    from .log import read_mcap, run_metadata, write_mcap
+    from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .render import FigureWorkers
     from .scenario import load_scenario
@@ -161,7 +162,8 @@ def _cmd_capacity(args) -> int:
                                optimise=not args.no_optimise, check=args.check)
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
-        meta = {"scenario": {"file": _display_path(args.scenario)}, "study": {"joints": joint_names(model)}}
+        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+                "study": {"joints": joint_names(model)}}
         log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
                               run_metadata(model, None, meta | capacity_metadata(summary)))
         plots = capacity_plots(read_mcap(log_path), out, workers=workers)
