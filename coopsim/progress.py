@@ -17,8 +17,9 @@ class ProgressBar:
     def __call__(self, label: str, fraction: float) -> None:
         if not self.enabled:
             return
-        filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
-        state = (label, filled)
+        fraction = min(max(fraction, 0.0), 1.0)
+        filled = int(round(self.width * fraction))
+        state = (label, filled, int(round(100 * fraction)))   # redraw when the printed percentage changes
         if state == self.last:
             return
         if self.last is not None and self.last[0] != label:
