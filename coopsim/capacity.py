@@ -3,8 +3,9 @@
 Along a fixed trajectory the net object wrench is affine in the carried mass μ:
   * 'scaled': the object scaled at constant geometry (density × μ/m_o): Y = μ Y/m_o (M_o, b_o ∝ m_o);
   * 'payload': a point payload of mass μ at a fixed point of the object: Y = Y_o + μ Y_P.
-Every resolution whose distribution is linear in the net wrench ('paper', 'nonsqueezing',
-'min_energy' — with fixed virtual bodies and weights) therefore gives torques τ(μ) = a + μ b, and the
+Every resolution whose distribution is linear in the net wrench (those the registry
+`coopsim.resolutions.RESOLUTIONS` marks linear: 'paper', 'nonsqueezing', 'min_energy' — with fixed virtual
+bodies and weights) therefore gives torques τ(μ) = a + μ b, and the
 motor lines of eq. 36,
     τ_min(θ̇) = −τ_s − (τ_s/ω_s) θ̇  <=  τ  <=  τ_max(θ̇) = τ_s − (τ_s/ω_s) θ̇,
 cut μ to an interval per joint and sample. The capacity is the upper end of their intersection, in
@@ -30,6 +31,7 @@ from .inverse import (InverseProblem, Resolution, distribute, energy, grasp_line
                       internal_operator, min_energy_setup, min_energy_solve, nan_peak, resolve, torques_of)
 from .model import Model, Motors
 from .qp import LPBatch, solve_lps
+from .resolutions import LINEAR_METHODS, resolution_method
 
 MODES = ("scaled", "payload")
 
@@ -119,22 +121,18 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
                     "" if feasible else "no mass keeps every torque within its limits", per_sample)
 
 
-LINEAR_METHODS = ("paper", "nonsqueezing", "min_energy")
-
-
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                     passive_tol: float = 1e-9) -> Capacity:
-    """DLCC of resolution `res` (closed form), for the resolutions linear in the net object wrench
-    (LINEAR_METHODS); 'bounded' is refused (ValueError): its bounds make the torques a nonlinear function
-    of the carried mass, which the two-point affine fit would silently get wrong. Passive joints must
-    carry no torque: 'min_energy' enforces it; for the others a passive torque above passive_tol N·m
-    makes it infeasible."""
-    if res.method not in LINEAR_METHODS:
-        why = ("its internal-wrench bounds make it a QP whose torques are not affine in the carried mass"
-               if res.method == "bounded" else "it is not a known linear resolution")
-        raise ValueError(f"method_capacity: resolution {res.method!r} has no closed-form capacity: {why} "
-                         f"(closed form for {', '.join(LINEAR_METHODS)}; lp_capacity with internal_bound bounds "
-                         f"every distribution within the bounds)")
+    """DLCC of resolution `res` (closed form), for the resolutions the registry marks linear in the net
+    object wrench (`coopsim.resolutions.LINEAR_METHODS`); any other ('bounded') is refused (ValueError, with
+    the registry's reason): its torques are a nonlinear function of the carried mass, which the two-point
+    affine fit would silently get wrong. Passive joints must carry no torque: 'min_energy' enforces it;
+    for the others a passive torque above passive_tol N·m makes it infeasible."""
+    method = resolution_method(res.method)
+    if not method.linear:
+        raise ValueError(f"method_capacity: resolution {res.method!r} has no closed-form capacity: "
+                         f"{method.nonlinear_why} (closed form for {', '.join(LINEAR_METHODS)}; lp_capacity with "
+                         f"internal_bound bounds every distribution within the bounds)")
     a, b = affine_torques(prob, res, mode)
     lo, hi = torque_limits(motors, prob.qd)
     passive = res.passive
@@ -198,12 +196,10 @@ def _lp_rows(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: st
     JT, ta = prob.JT, prob.tau_arms
     rows, rhs = [JT[:, act], -JT[:, act]], [hi[:, act] - ta[:, act], ta[:, act] - lo[:, act]]
     if internal_bound is not None:
-        res_b = Resolution("bounded", np.ones(len(act)), passive, np.ones(prob.r), np.zeros((prob.r, 3, 3)),
-                           internal_bound[0], internal_bound[1], definition)
-        L = internal_operator(prob, definition, Mstar)
-        C, bound, keep = internal_bound_components(grasp_line_frames(prob), L, res_b)
-        bound = np.where(keep, bound, np.inf)
-        rows, rhs = rows + [C, -C], rhs + [bound, bound]
+        comp = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, definition, Mstar),
+                                         *internal_bound)
+        bound = np.where(comp.keep, comp.bound, np.inf)
+        rows, rhs = rows + [comp.C, -comp.C], rhs + [bound, bound]
     A = np.concatenate(rows, axis=1)
     A_ub = np.concatenate([A, np.zeros(A.shape[:2] + (1,))], axis=2)
     zero = np.zeros((len(JT), int(passive.sum()), 1))

@@ -23,7 +23,7 @@ from .grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wr
                     object_mass_matrix, object_pose)
 from .kinematics import ArmPose, arm_pose, ee_jacobian
 from .model import CoopsimError, Model
-from .spatial import cross, rot_log
+from .spatial import rigid_acceleration, rot_log
 
 
 class ConstraintError(CoopsimError):
@@ -123,7 +123,7 @@ def chain_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> ChainTerms:
     J_o = Winv_T @ J[c]
     v_o = J_o @ qd[sl[c]]
     w = v_o[3:]
-    Jd_o_qd = Winv_T @ Jd_qd[c] + np.concatenate([cross(w, cross(w, s[c])), np.zeros(3)])
+    Jd_o_qd = np.concatenate([rigid_acceleration(Jd_qd[c][:3], w, Jd_qd[c][3:], s[c]), Jd_qd[c][3:]])   # at C
     M_o, b_o = object_mass_matrix(model.object, obj), object_bias_wrench(model.object, obj, w, g)
     n = model.n_total
     M = np.zeros((n, n))
@@ -149,8 +149,8 @@ def _constraints(model, J, Jd_qd, J_o, Jd_o_qd, w, s):
         rs = slice(k * row, k * (row + 1))
         Lam[rs, sl[m]] = S @ J[m]
         Lam[rs, sl[c]] = -S @ WmT @ J_o
-        centripetal = np.concatenate([cross(w, cross(w, -s[m])), np.zeros(3)])
-        Lam_dot_qd[rs] = S @ (Jd_qd[m] - WmT @ Jd_o_qd - centripetal)
+        a_grasp = rigid_acceleration(Jd_o_qd[:3], w, Jd_o_qd[3:], -s[m])     # grasp point m = C − s_m
+        Lam_dot_qd[rs] = S @ (Jd_qd[m] - np.concatenate([a_grasp, Jd_o_qd[3:]]))
     return Lam, Lam_dot_qd
 
 

@@ -6,7 +6,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .model import Model, ValidationThresholds
+from .labels import joint_labels
+from .model import ValidationThresholds
 from .mujoco_run import TwinResult
 from .simulate import SimResult
 from .spatial import quat_to_rot, rot_log
@@ -58,10 +59,6 @@ def _metric(name, unit, err, t, labels, threshold) -> Metric:
     err = np.abs(np.asarray(err, dtype=float).reshape(len(t), -1))
     i, j = np.unravel_index(int(np.argmax(err)), err.shape)
     return Metric(name, unit, float(err[i, j]), float(np.sqrt(np.mean(err ** 2))), labels[j], float(t[i]), threshold)
-
-
-def joint_labels(model: Model) -> list[str]:
-    return [f"{arm.name} joint {i + 1}" for arm in model.arms for i in range(arm.n)]
 
 
 def orientation_error(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:

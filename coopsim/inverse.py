@@ -22,9 +22,13 @@ There are k(r − 1) more unknowns than equations: each choice of f is a redunda
   * 'min_energy' — weighted minimum energy (eqs. 33–35) written in the grasp wrenches:
     min ½ τᵀQτ s.t. A f = y (and τ_j = 0 for passive joints): the KKT system
     [JQJᵀ Cᵀ; C 0][f; λ] = [−JQτ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms] — valid for arms whose
-    Jacobian is not square or singular (solved in the least-squares sense then).
+    Jacobian is not square or singular (the minimum-norm solution where the equations lose rank by the
+    forward model's rule, the scenario's rank_tol; an InverseRankWarning says where).
   * 'bounded' — minimum energy with every component of the internal wrench (grasp-line frame,
     non-squeezing definition by default) within ± a bound: a QP (`coopsim.qp`).
+
+The resolutions are registered in `coopsim.resolutions.RESOLUTIONS` (one function each, the kernels
+here); every reader (studies, capacity, plots, CLI) takes them from there.
 
 Two internal-wrench definitions are reported for every resolution, both at C, per arm (rows sum to 0):
   * paper (eq. 7 with W⁺ = (1/r)[W_m⁻¹]):   F_I^m = W_m F_e^m − F_o / r;
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, replace
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
@@ -45,15 +50,21 @@ import numpy as np
 from .grasp import grasp_matrix
 from .model import CoopsimError, Model, TorqueFunction, TorqueTable
 from .qp import solve_qps
-from .spatial import cross
+from .resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
+from .simulate import ConstraintRankWarning, describe_state
+from .spatial import cross, rigid_acceleration
 from .stress import grasp_line_axes, line_frame
 from .trajectory import JointTrajectory, trajectory_at_times
-
-METHODS = ("paper", "nonsqueezing", "min_energy", "bounded")
 
 
 class InverseError(CoopsimError):
     """The inverse dynamics cannot be resolved as asked (e.g. an infeasible bound with passive joints)."""
+
+
+class InverseRankWarning(ConstraintRankWarning):
+    """The equations of a resolution lost rank at some samples, by the forward model's rule (the
+    scenario's integrator.rank_tol on the relative eigenvalues of the Gram matrix, as for Λ𝐈⁻¹Λᵀ): the
+    minimum-norm solution is used there; the message names the first times and configurations."""
 
 
 class SampleFailureWarning(UserWarning):
@@ -82,9 +93,12 @@ class InverseProblem:
     blockdiag((S J_m)ᵀ); A (N, k, rk) = [S W_m Sᵀ]; y (N, k) = S Y (N, N·m) for the model's object;
     y_unit (N, k) = y per kg of object mass (object scaled at constant geometry: Y ∝ m_o);
     y_payload (N, k) per kg of point payload at `payload_position` (object frame), or None;
-    W (N, r, 6, 6) grasp matrices; p_C (N, 3); R_o (N, 3, 3); twist, acc (N, 6) object [v_C; ω],
-    [v̇_C; ω̇]; p_grasp (N, r, 3) grasp points; rows S (k, 6); normal (3,) plane normal or None;
-    gravity (3,); mass kg; inertia (3, 3) object frame; box (3,); grasp_pos (r, 3) object frame."""
+    W (N, r, 6, 6) grasp matrices; p_C (N, 3) (world, for output only); R_o (N, 3, 3); twist, acc
+    (N, 6) object [v_C; ω], [v̇_C; ω̇]; grasp_offset (N, r, 3) grasp points relative to C (p_grasp − p_C,
+    formed without world positions); rows S (k, 6); normal (3,) plane normal or None; gravity (3,);
+    mass kg; inertia (3, 3) object frame; box (3,); grasp_pos (r, 3) object frame; rank_tol: the
+    scenario's integrator.rank_tol, the relative eigenvalue below which a Gram matrix of the equations
+    counts as rank-deficient (as for the forward model's Λ𝐈⁻¹Λᵀ)."""
 
     t: np.ndarray
     q: np.ndarray
@@ -101,7 +115,7 @@ class InverseProblem:
     R_o: np.ndarray
     twist: np.ndarray
     acc: np.ndarray
-    p_grasp: np.ndarray
+    grasp_offset: np.ndarray
     rows: np.ndarray
     normal: np.ndarray | None
     gravity: np.ndarray
@@ -109,6 +123,7 @@ class InverseProblem:
     inertia: np.ndarray
     box: np.ndarray
     grasp_pos: np.ndarray
+    rank_tol: float = 1e-10
 
     @property
     def r(self) -> int:
@@ -121,7 +136,7 @@ class InverseProblem:
 
 @dataclass(frozen=True, eq=False)
 class Resolution:
-    """A redundancy resolution, all but the net object wrench: method (one of METHODS); weights (n,)
+    """A redundancy resolution, all but the net object wrench: method (a name in RESOLUTIONS); weights (n,)
     diagonal of Q; passive (n,) bool (τ = 0 enforced by 'min_energy' and 'bounded'); masses (r,) kg and
     inertias (r, 3, 3) kg·m² (object frame) of the non-squeezing virtual bodies; force_bound N,
     moment_bound N·m and bound_definition ('nonsqueezing' | 'paper') of 'bounded'."""
@@ -175,16 +190,15 @@ def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.nd
     obj = model.object
     y = T.Y @ S.T
     return InverseProblem(traj.t, traj.q, traj.qd, traj.qdd, T.tau_arms, JT, A, y, y / obj.mass, y_payload,
-                          W, T.p_C, T.R_o, T.twist, T.acc, T.p_C[:, None, :] - T.s, S,
+                          W, T.p_C, T.R_o, T.twist, T.acc, -T.s, S,
                           None if model.plane is None else model.plane[2], g, obj.mass, obj.inertia, obj.box,
-                          obj.grasp_pos)
+                          obj.grasp_pos, model.integrator.rank_tol)
 
 
 def payload_wrench(rho: np.ndarray, twist: np.ndarray, acc: np.ndarray, g: np.ndarray) -> np.ndarray:
     """Net wrench at C (…, 6) needed per kg of a point mass at ρ = p_P − p_C (…, 3) (world axes; twist,
     acc (…, 6)): a_P = a_C + ω̇ × ρ + ω × (ω × ρ), Y_P = [a_P − g; ρ × (a_P − g)]."""
-    w, dw = twist[..., 3:], acc[..., 3:]
-    a = acc[..., :3] + cross(dw, rho) + cross(w, cross(w, rho)) - g
+    a = rigid_acceleration(acc[..., :3], twist[..., 3:], acc[..., 3:], rho) - g
     return np.concatenate([a, cross(rho, a)], axis=-1)
 
 
@@ -266,8 +280,8 @@ class MinEnergySetup(NamedTuple):
     f = f_p + Z z. Sample axis last (vectorized over samples): ys (s, N, k) the net wrenches;
     fp (m, s, N) = C⁺b (minimum norm); Z (m, d, N) an orthonormal basis of null(C); with D = Jᵀ Z and
     u = τ_arms + Jᵀf_p (the torques of f_p), per joint j DD (n, d, d, N) = d_j d_jᵀ and
-    Du (n, d, s, N) = d_j u_j (d_j: row j of D); regular (N,) bool: C has full row rank (condition
-    number below 1e12); passive (n,) bool."""
+    Du (n, d, s, N) = d_j u_j (d_j: row j of D); regular (N,) bool: C has full row rank by the
+    forward model's rule (`has_full_rank`, the problem's rank_tol); passive (n,) bool."""
 
     ys: np.ndarray
     fp: np.ndarray
@@ -278,17 +292,32 @@ class MinEnergySetup(NamedTuple):
     passive: np.ndarray
 
 
+def gram_rank(sv: np.ndarray, rank_tol: float) -> np.ndarray:
+    """Numerical rank (…,) of matrices with singular values sv (…, p) (descending): the forward model's
+    rule for Λ𝐈⁻¹Λᵀ applied to the Gram matrix — eigenvalues σ² above rank_tol·σ_max² count."""
+    sq = np.asarray(sv, dtype=float) ** 2
+    return np.sum(sq > rank_tol * sq[..., :1], axis=-1) if sq.shape[-1] else np.zeros(sq.shape[:-1], int)
+
+
+def _constraints_of(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray, idx=slice(None)):
+    """C (N', c, m) = [A; P Jᵀ] and b (N', c, s) = [y; −P τ_arms] of the minimum-energy problem at the
+    samples idx (N' of them), for their net wrenches ys (s, N', k)."""
+    JT, ta = prob.JT[idx], prob.tau_arms[idx]
+    C = np.concatenate([prob.A[idx], JT[:, passive, :]], axis=1)
+    b = np.concatenate([np.moveaxis(ys, 0, 2),
+                        np.broadcast_to(-ta[:, passive, None], (len(C), int(np.sum(passive)), len(ys)))], axis=1)
+    return C, b
+
+
 def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) -> MinEnergySetup:
     """The parts of the minimum-energy problem that do not depend on the weights, for the net wrenches
     ys (s, N, k): the particular solutions and null spaces of C f = b (an SVD of C per sample)."""
     JT, ta = prob.JT, prob.tau_arms
-    C = np.concatenate([prob.A, JT[:, passive, :]], axis=1)
+    C, b = _constraints_of(prob, ys, passive)
     N, c, m = C.shape
-    b = np.concatenate([np.moveaxis(ys, 0, 2),
-                        np.broadcast_to(-ta[:, passive, None], (N, int(np.sum(passive)), len(ys)))], axis=1)
     U, sv, Vt = np.linalg.svd(C)
     rank = min(c, m)
-    regular = (c <= m) & (sv[:, -1] > 1e-12 * sv[:, 0])
+    regular = (c <= m) & (gram_rank(sv, prob.rank_tol) == rank)
     inv_s = np.divide(1.0, sv, out=np.zeros_like(sv), where=sv > 0)
     fp = np.swapaxes(Vt[:, :rank], 1, 2) @ (inv_s[..., None] * (np.swapaxes(U[:, :, :rank], 1, 2) @ b))
     Z = np.swapaxes(Vt[:, rank:], 1, 2)
@@ -301,16 +330,32 @@ def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) 
 
 def min_energy_solve(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray) -> np.ndarray:
     """Minimum-energy distributions f (s, N, m) of setup.ys for the weights (n,): f = f_p + Z z with
-    (DᵀQD) z = −DᵀQu (the KKT system of eqs. 33–35 reduced to null(C)). Samples where C is rank
-    deficient or DᵀQD singular (condition number 1e12 or more) — where the KKT matrix
-    [JQJᵀ, Cᵀ; C, 0] is singular — get the least-squares (minimum-norm) solution of that KKT system."""
+    (DᵀQD) z = −DᵀQu (the KKT system of eqs. 33–35 reduced to null(C)), by Cholesky where it is
+    certified well-conditioned. Where C or DᵀQD lost rank by the forward model's rule (the problem's
+    rank_tol on the Gram matrices' relative eigenvalues) the minimum-norm solution is used — least
+    squares on C's numerical range, then the minimum-norm minimiser of the energy (`_min_energy_min_norm`)
+    — and an InverseRankWarning names the first samples' times and configurations."""
     Q = np.where(setup.passive, 0.0, weights)
-    z, ok = _spd_solve(_weighted_sum(Q, setup.DD), -_weighted_sum(Q, setup.Du))
+    z, ok = _spd_solve(_weighted_sum(Q, setup.DD), -_weighted_sum(Q, setup.Du), prob.rank_tol)
     f = setup.fp + sum(setup.Z[:, a, None] * z[a] for a in range(len(z)))
     f = np.ascontiguousarray(np.moveaxis(f, 0, -1))
+    lost = []
     for i in np.flatnonzero(~(setup.regular & ok)):
-        f[:, i] = _min_energy_kkt_lstsq(prob, i, setup.ys[:, i], Q, setup.passive)
+        f[:, i], ranks = _min_energy_min_norm(prob, i, setup.ys[:, i], Q, setup.passive)
+        if ranks is not None:
+            lost.append((i, "constraints rank {} of {}, energy Hessian rank {} of {}".format(*ranks)))
+    _warn_rank_lost(prob, "minimum energy: the equations", lost)
     return f
+
+
+def _warn_rank_lost(prob: InverseProblem, what: str, lost: list[tuple[int, str]], shown: int = 3) -> None:
+    """An InverseRankWarning that `what` lost rank at the samples of `lost` ((index, ranks text) pairs),
+    naming the first `shown` times and configurations; nothing when `lost` is empty."""
+    if lost:
+        where = "; ".join(f"{describe_state(prob.t[i], prob.q[i])} ({ranks})" for i, ranks in lost[:shown])
+        warnings.warn(f"{what} lost rank (rank_tol {prob.rank_tol:.3g}) at {len(lost)} of {len(prob.t)} samples: "
+                      f"{where}{'; ...' if len(lost) > shown else ''}; using minimum-norm grasp wrenches there",
+                      InverseRankWarning, stacklevel=3)
 
 
 def _weighted_sum(Q: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -322,29 +367,39 @@ def min_energy_distribution(prob: InverseProblem, y: np.ndarray, weights: np.nda
                             passive: np.ndarray) -> np.ndarray:
     """argmin_f ½ τᵀQτ, τ = τ_arms + Jᵀf, s.t. A f = y and τ_j = 0 (passive j) — eqs. 33–35 in the grasp
     wrenches: [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms], solved in
-    the null space of C (`min_energy_solve`). Least squares (minimum norm) where the KKT matrix is
-    singular."""
+    the null space of C (`min_energy_solve`). Minimum norm where the equations lost rank."""
     return min_energy_solve(prob, min_energy_setup(prob, y[None], passive), weights)[0]
 
 
-def _min_energy_kkt_lstsq(prob: InverseProblem, i: int, ys: np.ndarray, Q: np.ndarray,
-                          passive: np.ndarray) -> np.ndarray:
-    """f (s, m) at sample i for the net wrenches ys (s, k): minimum-norm least squares of the KKT
-    system [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b]."""
+def _min_energy_min_norm(prob: InverseProblem, i: int, ys: np.ndarray, Q: np.ndarray, passive: np.ndarray):
+    """f (s, m) at sample i for the net wrenches ys (s, k) with the numerical ranks of the forward model's
+    rule (`gram_rank`, the problem's rank_tol): f_p = C⁺b on C's numerical range (least squares where
+    C f = b has no exact solution), Z the rest, z = −(DᵀQD)⁺ DᵀQu on the eigenvalues of DᵀQD above
+    rank_tol·λ_max — the minimum-norm minimiser of the energy (f_p ⊥ Z z). Second value: (rank of C, its
+    rows, rank of DᵀQD, its size) when either lost rank, else None (only ill-conditioned for Cholesky)."""
+    C, b = _constraints_of(prob, ys[:, None], passive, slice(i, i + 1))
+    C, b = C[0], b[0]
     JT, ta = prob.JT[i], prob.tau_arms[i]
-    C = np.vstack([prob.A[i], JT[passive]])
-    m, c = JT.shape[1], len(C)
-    K = np.block([[JT.T @ (Q[:, None] * JT), C.T], [C, np.zeros((c, c))]])
-    rhs = np.concatenate([np.broadcast_to(-JT.T @ (Q * ta), (len(ys), m)),
-                          ys, np.broadcast_to(-ta[passive], (len(ys), int(np.sum(passive))))], axis=1)
-    return np.linalg.lstsq(K, rhs.T, rcond=None)[0][:m].T
+    U, sv, Vt = np.linalg.svd(C)
+    rc = int(gram_rank(sv, prob.rank_tol))
+    fp = Vt[:rc].T @ ((U[:, :rc].T @ b) / sv[:rc, None])              # (m, s)
+    Z = Vt[rc:].T                                                      # (m, d)
+    D = JT @ Z
+    H = D.T @ (Q[:, None] * D)
+    g = D.T @ (Q[:, None] * (ta[:, None] + JT @ fp))
+    ev, V = np.linalg.eigh(H)
+    keep = ev > prob.rank_tol * ev[-1] if len(ev) and ev[-1] > 0 else np.zeros(len(ev), bool)
+    z = -V[:, keep] @ ((V[:, keep].T @ g) / ev[keep, None])
+    lost = rc < C.shape[0] or int(keep.sum()) < len(ev)
+    return (fp + Z @ z).T, ((rc, C.shape[0], int(keep.sum()), len(ev)) if lost else None)
 
 
-def _spd_solve(H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _spd_solve(H: np.ndarray, r: np.ndarray, rank_tol: float) -> tuple[np.ndarray, np.ndarray]:
     """z (d, s, N) with H z = r for symmetric H (d, d, N) and right-hand sides r (d, s, N), samples on
     the last axis: Cholesky, vectorized over the samples (entry by entry: d is small). ok (N,) bool: H
-    is positive definite with condition number below 1e12 (bounded above by trace(H)ᵈ/det(H);
-    eigenvalues decide where that bound is not enough)."""
+    is positive definite with every eigenvalue above rank_tol·λ_max (the forward model's rank rule),
+    certified by the bound λ_max/λ_min <= trace(H)ᵈ/det(H); eigenvalues decide where the bound is not
+    enough."""
     d, N = H.shape[0], H.shape[-1]
     L = [[None] * d for _ in range(d)]
     pivots = []
@@ -371,11 +426,11 @@ def _spd_solve(H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if d == 0:
         return np.zeros(r.shape), np.ones(N, bool)
     pd = np.all(np.array(pivots) > 0, axis=0)
-    ok = pd & (sum(H[j, j] for j in range(d)) ** d < 1e12 * np.prod(pivots, axis=0))
+    ok = pd & (rank_tol * sum(H[j, j] for j in range(d)) ** d < np.prod(pivots, axis=0))
     unsure = np.flatnonzero(pd & ~ok)
     if len(unsure):
         lam = np.linalg.eigvalsh(np.moveaxis(H[..., unsure], -1, 0))
-        ok[unsure] = lam[:, 0] > lam[:, -1] / 1e12
+        ok[unsure] = lam[:, 0] > rank_tol * lam[:, -1]
     return np.array(z), ok
 
 
@@ -392,13 +447,18 @@ def min_energy_torques_jacobian_form(prob: InverseProblem, y: np.ndarray, weight
 
 def distribution_of_torques(prob: InverseProblem, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Grasp wrenches f (N, rk) that given torques imply ([Jᵀ; A] f = [τ − τ_arms; y] in least squares)
-    and the residual (N,) of that system (zero when τ moves the chain along the trajectory)."""
+    and the residual (N,) of that system (zero when τ moves the chain along the trajectory). Where
+    [Jᵀ; A] lost column rank by the forward model's rule (`gram_rank`, the problem's rank_tol) f is the
+    minimum-norm solution and an InverseRankWarning names the first samples' times and configurations."""
     M = np.concatenate([prob.JT, prob.A], axis=1)
     rhs = np.concatenate([tau - prob.tau_arms, prob.y], axis=1)
-    U, s, Vt = np.linalg.svd(M, full_matrices=False)             # lstsq's cut-off: eps·max(M.shape)·s_max
-    inv_s = np.divide(1.0, s, out=np.zeros_like(s), where=s > np.finfo(float).eps * max(M.shape[1:]) * s[:, :1])
+    U, s, Vt = np.linalg.svd(M, full_matrices=False)
+    rank = gram_rank(s, prob.rank_tol)
+    inv_s = np.divide(1.0, s, out=np.zeros_like(s), where=np.arange(s.shape[1]) < rank[:, None])
     f = np.einsum("nij,ni,nki,nk->nj", Vt, inv_s, U, rhs)
     res = np.max(np.abs(np.einsum("nij,nj->ni", M, f) - rhs), axis=1)
+    _warn_rank_lost(prob, "grasp wrenches of given torques: [Jᵀ; A]",
+                    [(i, f"rank {rank[i]} of {M.shape[2]}") for i in np.flatnonzero(rank < M.shape[2])])
     return f, res
 
 
@@ -440,13 +500,13 @@ def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Re
     ± res.force_bound (N) | ± res.moment_bound (N·m). A sample whose QP has no solution (infeasible:
     a bound that passive joints cannot meet; or not solved) is nan, named in a SampleFailureWarning
     and appended to `failures` (SampleFailure) — the other samples are unaffected."""
-    C, bound, keep = internal_bound_components(grasp_line_frames(prob),
-                                               internal_operator(prob, res.bound_definition, Mstar), res)
-    hi = np.where(keep, bound, np.inf)
+    rows = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, res.bound_definition, Mstar),
+                                     res.force_bound, res.moment_bound)
+    hi = np.where(rows.keep, rows.bound, np.inf)
     sq = np.sqrt(np.where(res.passive, 0.0, res.weights))
     E = np.concatenate([prob.A, prob.JT[:, res.passive]], axis=1)
     e = np.concatenate([y, -prob.tau_arms[:, res.passive]], axis=1)
-    qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, C, -hi, hi)
+    qps = solve_qps(sq[None, :, None] * prob.JT, -sq * prob.tau_arms, E, e, rows.C, -hi, hi)
     bad = [SampleFailure(int(i), float(prob.t[i]), qps.messages[i]) for i in np.flatnonzero(~qps.ok)]
     if bad:
         warnings.warn(f"'bounded' (|internal| <= {res.force_bound:.4g} N, {res.moment_bound:.4g} N·m): no solution at "
@@ -457,39 +517,65 @@ def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Re
     return qps.x
 
 
-def internal_bound_components(frames: np.ndarray, L: np.ndarray, res: Resolution):
+class RowKind(IntEnum):
+    """What an internal-wrench component row bounds: a force (N) or a moment (N·m)."""
+
+    FORCE = 0
+    MOMENT = 1
+
+
+# the kind of each of an arm's six grasp-line components: axial, two shear | torsion, two bending
+ARM_ROW_KINDS = np.array([RowKind.FORCE] * 3 + [RowKind.MOMENT] * 3, dtype=np.int8)
+
+
+class BoundRows(NamedTuple):
+    """Internal-wrench component rows (`internal_bound_components`): C (N, 6r, rk) rows of f; kind (6r,)
+    RowKind values; bound (6r,) N or N·m by kind; keep (N, 6r) bool: the rows to bound."""
+
+    C: np.ndarray
+    kind: np.ndarray
+    bound: np.ndarray
+    keep: np.ndarray
+
+
+def internal_bound_components(frames: np.ndarray, L: np.ndarray, force_bound: float = np.inf,
+                              moment_bound: float = np.inf) -> BoundRows:
     """Every internal-wrench component in the grasp-line frames (N, r, 3, 3) (`grasp_line_frames`) as
     rows of f: C (N, 6r, rk) — arm m's axial, two shear, torsion and two bending components at rows
-    6m…6m+5, from L (N, 6r, rk) of `internal_operator` — their bounds (6r,) (res.force_bound N,
-    res.moment_bound N·m), and keep (N, 6r) bool: the rows that neither vanish (out-of-plane) nor
-    repeat an earlier kept row with the same bound (for r = 2 the two arms' are opposite)."""
+    6m…6m+5, from L (N, 6r, rk) of `internal_operator` — their kinds (6r,) (RowKind, explicit: the
+    kind never has to be told from a bound value), their bounds (6r,) (force_bound N, moment_bound N·m)
+    and keep (N, 6r) bool: the rows that neither vanish (out-of-plane) nor repeat an earlier kept row of
+    the same kind (parallel and of the same length: for r = 2 the two arms' are opposite)."""
     N, r = frames.shape[:2]
     C = (frames[:, :, None] @ L.reshape(N, r, 2, 3, -1)).reshape(N, 6 * r, -1)
-    bound = np.tile(np.repeat([res.force_bound, res.moment_bound], 3), r)
+    kind = np.tile(ARM_ROW_KINDS, r)
+    bound = np.where(kind == RowKind.FORCE, float(force_bound), float(moment_bound))
     norms = np.linalg.norm(C, axis=2)
-    live = norms > 1e-12 * np.maximum(norms.max(axis=1, keepdims=True), 1e-300)
+    scale = np.maximum(norms.max(axis=1, keepdims=True), 1e-300)
+    live = norms > 1e-12 * scale
     with np.errstate(divide="ignore", invalid="ignore"):
         u = C / norms[..., None]
     parallel = np.abs(np.abs(u @ np.swapaxes(u, 1, 2)) - 1) < 1e-12
-    repeats = parallel & (bound[:, None] == bound[None, :])
+    same_length = np.abs(norms[:, :, None] - norms[:, None, :]) <= 1e-12 * scale[..., None]
+    repeats = parallel & same_length & (kind[:, None] == kind[None, :])
     keep = np.zeros((N, 6 * r), bool)
     for j in range(6 * r):
         keep[:, j] = live[:, j] & ~np.any(keep[:, :j] & repeats[:, j, :j], axis=1)
-    return C, bound, keep
+    return BoundRows(C, kind, bound, keep)
 
 
 def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
     """Rows C (m, rk) of the internal-wrench components at sample i in the grasp-line frames and their
     bounds (m,) — those `internal_bound_components` keeps. L (6r, rk): sample i's internal operator."""
-    frames = line_frame(grasp_line_axes(prob.p_grasp[i:i + 1], prob.p_C[i:i + 1]), prob.normal)
-    C, bound, keep = internal_bound_components(frames, L[None], res)
-    return C[0, keep[0]], bound[keep[0]]
+    frames = line_frame(grasp_line_axes(prob.grasp_offset[i:i + 1]), prob.normal)
+    rows = internal_bound_components(frames, L[None], res.force_bound, res.moment_bound)
+    return rows.C[0, rows.keep[0]], rows.bound[rows.keep[0]]
 
 
 def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
     """Rows (N, r, 3, 3) of every arm's grasp-line frame along the problem's trajectory
-    (`coopsim.stress.line_frame` of `coopsim.stress.grasp_line_axes`)."""
-    return line_frame(grasp_line_axes(prob.p_grasp, prob.p_C), prob.normal)
+    (`coopsim.stress.line_frame` of `coopsim.stress.grasp_line_axes` of the grasp offsets from C)."""
+    return line_frame(grasp_line_axes(prob.grasp_offset), prob.normal)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -499,9 +585,9 @@ def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
 def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                    force_bound: float = np.inf, moment_bound: float = np.inf,
                    bound_definition: str = "nonsqueezing") -> Resolution:
-    """The resolution `method` with the scenario's weights, passive flags and virtual masses."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    """The resolution `method` (a name in `coopsim.resolutions.RESOLUTIONS`) with the scenario's weights,
+    passive flags and virtual masses."""
+    resolution_method(method)
     obj = model.object
     masses, _ = virtual_masses(obj.grasp_pos, obj.mass, model.inverse.nonsqueezing_masses)
     w = model.motors.energy_weight if weights is None else np.asarray(weights, dtype=float)
@@ -510,18 +596,12 @@ def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
 
 
 def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None) -> np.ndarray:
-    """Grasp wrenches f (N, rk) of resolution `res` for the net object wrenches y (N, k); nan at the
-    samples it cannot solve ('bounded' only), which are appended to `failures`."""
-    if res.method == "paper":
-        return paper_distribution(prob, y)
-    Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
-    if res.method == "nonsqueezing":
-        return nonsqueezing_distribution(prob, y, Mstar)
-    if res.method == "min_energy":
-        return min_energy_distribution(prob, y, res.weights, res.passive)
-    if res.method == "bounded":
-        return bounded_min_energy_distribution(prob, y, res, Mstar, failures)
-    raise ValueError(f"unknown method {res.method!r}")
+    """Grasp wrenches f (N, rk) of resolution `res` (its registered function) for the net object wrenches
+    y (N, k); nan at the samples it cannot solve ('bounded' only), which are appended to `failures`."""
+    f, bad = resolution_method(res.method).distribute(prob, y, res)
+    if failures is not None:
+        failures.extend(bad)
+    return f
 
 
 def cost_of(tau: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -551,12 +631,10 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
     res.bound_definition) of the minimum-energy distribution — a bound that halves its peak stress."""
     f = min_energy_distribution(prob, prob.y, res.weights, res.passive)
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
-    L = internal_operator(prob, res.bound_definition, Mstar)
-    unit = replace(res, force_bound=1.0, moment_bound=2.0)                 # tells force rows from moment rows
-    C, bound, keep = internal_bound_components(grasp_line_frames(prob), L, unit)
-    v = np.abs(np.einsum("nij,nj->ni", C, f))
-    peak_f = float(np.max(v[keep & (bound == 1.0)], initial=0.0))
-    peak_m = float(np.max(v[keep & (bound == 2.0)], initial=0.0))
+    rows = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, res.bound_definition, Mstar))
+    v = np.abs(np.einsum("nij,nj->ni", rows.C, f))
+    peak_f = float(np.max(v[rows.keep & (rows.kind == RowKind.FORCE)], initial=0.0))
+    peak_m = float(np.max(v[rows.keep & (rows.kind == RowKind.MOMENT)], initial=0.0))
     return fraction * peak_f, fraction * peak_m
 
 

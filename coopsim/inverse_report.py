@@ -2,7 +2,7 @@
 plain-data summaries for the text and JSON outputs, and the MCAP series (no I/O here).
 
     scenario → trajectory (forward run or object-motion IK) → InverseProblem
-      → resolutions (paper, nonsqueezing, min_energy, bounded; plus the forward input torques)
+      → resolutions (the registry `coopsim.resolutions.RESOLUTIONS`; plus the forward input torques)
       → object stress (grasp-line components, box section loads) → [replay]
       → capacity (closed form per resolution, LP bound, optimised weights, [brute-force check])
 """
@@ -14,11 +14,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import capacity as cap
-from .inverse import (METHODS, InverseResult, default_bounds, distribution_of_torques, energy, failure_text,
-                      grasp_line_frames, inverse_problem, nan_peak, replay, resolution_for, resolve, result_of,
-                      virtual_masses)
+from .inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
+                      inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
+from .labels import joint_labels
 from .log import Series, nonfinite_name
 from .model import Model
+from .resolutions import LINEAR_METHODS, METHODS
 from .stress import SectionLoads, decompose_internal, section_loads
 from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
@@ -34,10 +35,6 @@ def trajectory_of(model: Model, duration: float | None = None):
 
     res = simulate(model, duration=duration)
     return from_simulation(res), res
-
-
-def joint_names(model: Model) -> list[str]:
-    return [f"{a.name} joint {i + 1}" for a in model.arms for i in range(a.n)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,7 +150,7 @@ def inverse_summary(study: InverseStudy) -> dict:
     complete = not any(e["failed_samples"] or e.get("replay", {}).get("failed_stage_times") for e in methods.values())
     return {
         "scenario": m.name,
-        "joints": joint_names(m),
+        "joints": joint_labels(m),
         "trajectory": _trajectory_summary(m, study.traj),
         "complete": complete,
         "energy_definition": "integral of 0.5 tau^T Q tau dt (trapezoidal), Q = diag(energy_weights)",
@@ -230,9 +227,10 @@ class CapacityStudy:
 
 
 def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
-                   optimise: bool = True, check: bool = False, methods=("paper", "nonsqueezing", "min_energy")) -> CapacityStudy:
-    """DLCC of every linear resolution along the scenario's trajectory (object scaled at constant
-    geometry; with a payload position also as a point payload), the LP bound, the optimised weights."""
+                   optimise: bool = True, check: bool = False, methods=LINEAR_METHODS) -> CapacityStudy:
+    """DLCC of every linear resolution (`coopsim.resolutions.LINEAR_METHODS`) along the scenario's trajectory
+    (object scaled at constant geometry; with a payload position also as a point payload), the LP bound,
+    the optimised weights."""
     traj, _ = trajectory_of(model, duration)
     payload = payload_position if payload_position is not None else model.inverse.payload_position
     prob = inverse_problem(model, traj, payload)
@@ -262,7 +260,7 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
 
 
 def _capacity_entry(model: Model, c: cap.Capacity) -> dict:
-    names = joint_names(model)
+    names = joint_labels(model)
     return {"mass_kg": c.mass, "lower_kg": c.lower, "feasible": bool(c.feasible),
             "saturating_motor": None if c.joint is None else names[c.joint],
             "stacked_joint": c.joint, "time_s": c.time, "line": None if c.side is None else
@@ -274,7 +272,7 @@ def capacity_summary(study: CapacityStudy) -> dict:
     m = study.model
     out = {
         "scenario": m.name,
-        "joints": joint_names(m),
+        "joints": joint_labels(m),
         "trajectory": _trajectory_summary(m, study.traj),
         "assumptions": {
             "scaled": "the whole object scaled at constant geometry (density), mass_kg is the object's mass; "

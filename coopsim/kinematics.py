@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .model import ArmModel
-from .spatial import axis_angle_to_rot, cross
+from .spatial import axis_angle_to_rot, cross, rigid_acceleration
 
 
 class ArmPose(NamedTuple):
@@ -81,8 +81,7 @@ def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarr
     w = np.cumsum(z * qd[:, None], axis=0)
     w_prev = np.vstack([np.zeros(3), w[:-1]])
     dw = np.cumsum(z * qdd[:, None] + cross(w_prev, z) * qd[:, None], axis=0)
-    r = p[1:] - p[:-1]
-    da = cross(dw[:-1], r) + cross(w[:-1], cross(w[:-1], r))
+    da = rigid_acceleration(0.0, w[:-1], dw[:-1], p[1:] - p[:-1])
     a = a_base + np.vstack([np.zeros(3), np.cumsum(da, axis=0)])
     return LinkMotion(w, dw, a)
 
@@ -90,15 +89,12 @@ def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarr
 def point_acceleration(motion: LinkMotion, pose: ArmPose, i: int, point: np.ndarray) -> np.ndarray:
     """Acceleration (3,) of a point fixed in link i, `point` given relative to the arm's base point
     (pose.origin): a_i + ω̇_i × r + ω_i × (ω_i × r), r = point − p_i."""
-    r = point - pose.p_rel[i]
-    w = motion.w[i]
-    return motion.a[i] + cross(motion.dw[i], r) + cross(w, cross(w, r))
+    return rigid_acceleration(motion.a[i], motion.w[i], motion.dw[i], point - pose.p_rel[i])
 
 
 def link_com_accelerations(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
     """Centre-of-mass accelerations a_ci (n, 3) of every link (paper eq. 9)."""
-    r = pose.c_rel - pose.p_rel
-    return motion.a + cross(motion.dw, r) + cross(motion.w, cross(motion.w, r))
+    return rigid_acceleration(motion.a, motion.w, motion.dw, pose.c_rel - pose.p_rel)
 
 
 def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
@@ -126,3 +122,25 @@ def ee_bias_acceleration(pose: ArmPose, qd: np.ndarray) -> np.ndarray:
 def ee_twist(pose: ArmPose, qd: np.ndarray) -> np.ndarray:
     """End-effector twist [v_EE; ω] (6,) = J_m θ̇."""
     return ee_jacobian(pose) @ qd
+
+
+REACH_SLACK = 1e-9      # relative: a point at full stretch passes despite the rounding of its position
+
+
+class Reach(NamedTuple):
+    """`reach_check`: dist m of the point from the arm's first joint, reach m (the sum of the arm's
+    link lengths), ok: dist <= reach (1 + REACH_SLACK)."""
+
+    dist: float
+    reach: float
+    ok: bool
+
+
+def reach_check(arm: ArmModel, point: np.ndarray) -> Reach:
+    """Whether `point` (3,), given relative to the arm's base point, is within the arm's reach: its
+    distance from the first joint's origin (base_rot · joint_pos[0]) at most the sum of the distances
+    between successive joint origins and from the last to the end-effector. The one reach test (scenario
+    grasps, object-motion targets); a point relative to the base, so no world position is rounded."""
+    reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
+    dist = float(np.linalg.norm(np.asarray(point, dtype=float) - arm.base_rot @ arm.joint_pos[0]))
+    return Reach(dist, reach, dist <= reach * (1 + REACH_SLACK))

@@ -48,6 +48,7 @@ from mcap.writer import CompressionType, Writer
 
 from .atomic import atomic_path
 from .closed_chain import arm_poses
+from .labels import joint_labels
 from .model import Model
 from .spatial import rot_to_quat
 
@@ -630,7 +631,7 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
         "versions": {"coopsim": _version("coopsim"), "mujoco": _version("mujoco"), "numpy": np.__version__,
                      "mcap": _version("mcap"), "python": platform.python_version()},
         "model": _record({"arms": [a.name for a in model.arms], "dofs": [a.n for a in model.arms],
-                          "joint_names": [f"{a.name}/q{i}" for a in model.arms for i in range(a.n)],
+                          "joint_names": joint_labels(model),
                           "carrier": model.object.carrier, "duration": model.duration,
                           "gravity": model.gravity}),
         "native.integrator": _record(asdict(model.integrator)),

@@ -10,12 +10,12 @@ them); when the twin is sampled at other times it is interpolated linearly onto 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .labels import arm_label, metadata_arms, metadata_joint_labels
 from .log import LogData
 from .render import FigureWorkers, render_figures
 
@@ -28,16 +28,13 @@ _AXES = ("x", "y", "z")
 
 
 def _arm_groups(log: LogData, n: int) -> list[tuple[str, slice]]:
-    """(arm name, joint slice) per arm from the "model" metadata record; one group without it."""
-    rec = log.metadata.get("model", {})
-    try:
-        names, dofs = json.loads(rec["arms"]), json.loads(rec["dofs"])
-    except (KeyError, ValueError):
+    """(arm label, joint slice) per arm from the "model" metadata record; one group without it."""
+    arms = metadata_arms(log.metadata)
+    if arms is None or sum(arms[1]) != n:
         return [("joints", slice(0, n))]
-    if sum(dofs) != n:
-        return [("joints", slice(0, n))]
-    ends = np.cumsum([0] + list(dofs))
-    return [(str(a), slice(int(s), int(e))) for a, s, e in zip(names, ends[:-1], ends[1:])]
+    names, dofs = arms
+    ends = np.cumsum([0] + dofs)
+    return [(arm_label(a, m), slice(int(s), int(e))) for m, (a, s, e) in enumerate(zip(names, ends[:-1], ends[1:]))]
 
 
 def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[str]:
@@ -45,13 +42,7 @@ def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[s
         if len(joint_names) != n:
             raise ValueError(f"joint_names: expected {n} names, got {len(joint_names)}")
         return list(joint_names)
-    try:
-        names = json.loads(log.metadata["model"]["joint_names"])
-        if len(names) == n:
-            return [str(s) for s in names]
-    except (KeyError, ValueError):
-        pass
-    return [f"q{i}" for i in range(n)]
+    return metadata_joint_labels(log.metadata, n)
 
 
 def _aligned(t: np.ndarray, t_other: np.ndarray, x_other: np.ndarray) -> np.ndarray:
@@ -166,8 +157,8 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
                      workers: FigureWorkers | None = None) -> list[Path]:
     """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png into
     out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
-    (n,) labels the joints (default: the log's model metadata, else q0, q1, …); workers: where to draw
-    (`coopsim.render`; default: processes started for this call)."""
+    (n,) labels the joints (default: `coopsim.labels` of the log's model metadata, else joint 1, joint 2,
+    …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]

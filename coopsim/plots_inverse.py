@@ -4,7 +4,8 @@ Every function takes a :class:`coopsim.log.LogData` read back from the MCAP file
 fresh study and a stored log are drawn by the same code. Topics: /inverse/trajectory,
 /inverse/<method>/{torque,internal,stress} (`coopsim inverse`), /capacity/limits,
 /capacity/<method>/<mode>, /capacity/lp/<mode> and the capacity.<method>.<mode> metadata records
-(`coopsim capacity`). Joint names come from the "joints" entry of the "study" metadata record.
+(`coopsim capacity`). Joint labels come from the log's "model" metadata record (`coopsim.labels`); the
+resolutions' labels, colours and order from the registry `coopsim.resolutions.RESOLUTIONS`.
 """
 
 from __future__ import annotations
@@ -16,25 +17,26 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .labels import metadata_joint_labels
 from .log import LogData
 from .render import FigureWorkers, render_figures
+from .resolutions import RESOLUTIONS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-STYLE = {"forward": dict(color="black", ls="--", lw=1.2), "paper": dict(color="tab:blue"),
-         "nonsqueezing": dict(color="tab:green"), "min_energy": dict(color="tab:red"),
-         "bounded": dict(color="tab:purple"), "optimised": dict(color="tab:orange"),
-         "lp": dict(color="tab:gray", ls=":", lw=1.5)}
-LABEL = {"forward": "forward-dynamics input", "paper": "zero internal (paper W⁺)",
-         "nonsqueezing": "zero internal (non-squeezing)", "min_energy": "minimum energy",
-         "bounded": "min. energy, bounded internal", "optimised": "minimum energy, optimised Q",
-         "lp": "LP bound (any distribution)"}
+# the series that are not resolutions: the forward run's input torques (first), the capacity study's
+# optimised weights and LP bound (last); between them every registered resolution, in registry order
+_OTHERS_FIRST = {"forward": (dict(color="black", ls="--", lw=1.2), "forward-dynamics input")}
+_OTHERS_LAST = {"optimised": (dict(color="tab:orange"), "minimum energy, optimised Q"),
+                "lp": (dict(color="tab:gray", ls=":", lw=1.5), "LP bound (any distribution)")}
+_SERIES = (_OTHERS_FIRST | {k: (dict(color=m.color), m.label) for k, m in RESOLUTIONS.items()} | _OTHERS_LAST)
+STYLE = {k: style for k, (style, _) in _SERIES.items()}
+LABEL = {k: label for k, (_, label) in _SERIES.items()}
 
 
 def _joints(log: LogData, n: int) -> list[str]:
-    names = json.loads(log.metadata.get("study", {}).get("joints", "null") or "null")
-    return names if names and len(names) == n else [f"joint {i + 1}" for i in range(n)]
+    return metadata_joint_labels(log.metadata, n)
 
 
 def _methods(log: LogData, prefix: str, suffix: str) -> list[str]:

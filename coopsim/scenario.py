@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .kinematics import arm_pose
+from .kinematics import arm_pose, reach_check
 from .model import (ArmModel, CoopsimError, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
                     ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
-from .spatial import quat_to_rot, rpy_to_rot
+from .spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
 
@@ -158,12 +158,6 @@ def _unit(sec: _Section, key: str, default) -> np.ndarray:
     return a / norm
 
 
-def _box_inertia(mass: float, size: np.ndarray) -> np.ndarray:
-    """Inertia (3, 3) of a solid box about its centre, box axes: m/12 (b² + c²), ..."""
-    a2 = size ** 2
-    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
-
-
 def _inertia_tensor(sec: _Section, key: str) -> np.ndarray:
     """3×3 symmetric matrix or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]; must be positive definite and satisfy
     the triangle inequalities of principal moments."""
@@ -201,7 +195,7 @@ def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=Non
         box.done()
         mass = density * float(np.prod(size))
         com = np.zeros(3) if com_default is None else np.array([size[0] / 2, 0.0, 0.0])
-        return mass, com, _box_inertia(mass, size), size
+        return mass, com, box_inertia(mass, size), size
     inertial = sec.section(key_inertial)
     mass = inertial.number("mass", positive=True)
     com = inertial.array("com", (3,), default=[0.0, 0.0, 0.0])
@@ -498,13 +492,12 @@ def _resolve_grasps(arms, q0, order, grasp, pose, where):
     gr = np.array([grasp[m][1] for m in range(r)])
     c = order[0]
     R_o = poses[c].R_ee @ gr[c].T
-    p_C = poses[c].p_ee - R_o @ gp[c]
     for m in order[1:]:
-        arm = arms[m]
-        reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
-        dist = float(np.linalg.norm(p_C + R_o @ gp[m] - poses[m].p[0]))
-        if dist > reach * (1 + 1e-9):
-            raise ScenarioError(f"{where}: {grasp[m][2]}: arm {arm.name!r} cannot reach its grasp: "
+        # grasp point m relative to arm m's base: (o_c − o_m) + p_EE,c (relative to o_c) + R_o (g_m − g_c)
+        dist, reach, ok = reach_check(arms[m], (poses[c].origin - poses[m].origin) + poses[c].p_ee_rel
+                                      + R_o @ (gp[m] - gp[c]))
+        if not ok:
+            raise ScenarioError(f"{where}: {grasp[m][2]}: arm {arms[m].name!r} cannot reach its grasp: "
                                 f"the grasp point is {dist:.4g} m from its first joint, its reach is {reach:.4g} m")
     return gp, gr
 

@@ -71,7 +71,8 @@ def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tup
     return terms, forward_dynamics(model, terms, tau, stab)
 
 
-def _describe(t: float, q: np.ndarray) -> str:
+def describe_state(t: float, q: np.ndarray) -> str:
+    """'t=0.35 s, q=[0.1, …] rad': the time and configuration every failure and rank warning names."""
     return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
 
 
@@ -111,17 +112,17 @@ def _rhs(model: Model, progress=None):
             with np.errstate(invalid="ignore", over="ignore"):
                 _, acc = forward(model, q, qd, tau)
         except ConstraintError as exc:
-            raise SimulationError(f"simulation failed at {_describe(t, q)}: {exc}") from None
+            raise SimulationError(f"simulation failed at {describe_state(t, q)}: {exc}") from None
         if not np.all(np.isfinite(acc.qdd)):
-            raise SimulationError(f"simulation failed at {_describe(t, q)}: non-finite joint accelerations "
+            raise SimulationError(f"simulation failed at {describe_state(t, q)}: non-finite joint accelerations "
                                   f"(torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to {np.max(np.abs(qd)):.3g} rad/s)")
         if acc.rank < model.rows.shape[0] * (model.r - 1):
             reason = f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {acc.rank}, cond {acc.cond:.3g})"
             if model.integrator.on_rank_deficiency == "error":
-                raise SimulationError(f"simulation failed at {_describe(t, q)}: {reason}")
+                raise SimulationError(f"simulation failed at {describe_state(t, q)}: {reason}")
             if not warned:
                 warned.append(t)
-                warnings.warn(f"at {_describe(t, q)}: {reason}; using minimum-norm grasp wrenches",
+                warnings.warn(f"at {describe_state(t, q)}: {reason}; using minimum-norm grasp wrenches",
                               ConstraintRankWarning, stacklevel=2)
         return np.concatenate([qd, acc.qdd])
 
@@ -135,7 +136,7 @@ def _projector(model: Model):
         try:
             q, _ = project_positions(model, y[:n], tol)
         except ConstraintError as exc:
-            raise SimulationError(f"simulation failed at {_describe(t, y[:n])}: projection: {exc}") from None
+            raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
         return np.concatenate([q, project_velocities(model, q, y[n:])])
 
     return project
@@ -192,10 +193,10 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
     n = model.n_total
     if run.rank_warning is not None:
         t, y, rank, cond = run.rank_warning
-        warnings.warn(f"at {_describe(t, y[:n])}: constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, "
+        warnings.warn(f"at {describe_state(t, y[:n])}: constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, "
                       f"cond {cond:.3g}); using minimum-norm grasp wrenches", ConstraintRankWarning, stacklevel=3)
     if run.status:
-        raise SimulationError(f"simulation failed at {_describe(run.fail_t, run.fail_y[:n])}: "
+        raise SimulationError(f"simulation failed at {describe_state(run.fail_t, run.fail_y[:n])}: "
                               f"{_compiled_reason(model, run)}")
     smp = api.sample_states(model, t_out, run.Y)
     stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
@@ -233,7 +234,7 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
                              rtol=s.rtol, atol=s.atol, step=step, project=project)
     except IntegrationError as exc:
         n = model.n_total
-        raise SimulationError(f"simulation failed at {_describe(exc.t, exc.y[:n])}: {exc.reason}") from None
+        raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
     return _sample(model, t_out, Y, init, stats, time.perf_counter() - start)
 
 

@@ -1,4 +1,4 @@
-"""Rotation and 3-vector helpers shared by every stage (pure NumPy, no I/O).
+"""Rotation, 3-vector and rigid-body helpers shared by every stage (pure NumPy, no I/O).
 
 Conventions: rotation matrices R map body-frame coordinates to world coordinates; quaternions are
 [w, x, y, z] with w >= 0 when canonicalised; roll-pitch-yaw angles (rad) give
@@ -84,3 +84,17 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b over the last axis (…, 3), broadcasting; a lean replacement of np.cross for tiny arrays."""
     a, b = np.asarray(a), np.asarray(b)
     return a.take(_I1, -1) * b.take(_I2, -1) - a.take(_I2, -1) * b.take(_I1, -1)
+
+
+def rigid_acceleration(a_O: np.ndarray, w: np.ndarray, dw: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Acceleration (…, 3) of a point P of a rigid body: a_P = a_O + ω̇ × r + ω × (ω × r), for the
+    acceleration a_O of a body point O, the body's angular velocity ω and acceleration ω̇, and
+    r = p_P − p_O (all (…, 3), broadcasting; a_O may be 0). The one place this formula is written."""
+    return a_O + cross(dw, r) + cross(w, cross(w, r))
+
+
+def box_inertia(mass: float, size: np.ndarray) -> np.ndarray:
+    """Inertia (3, 3) of a solid box of `mass` kg and edges `size` (3,) m about its centre, box axes:
+    m/12 diag(b² + c², a² + c², a² + b²)."""
+    a2 = np.asarray(size, dtype=float) ** 2
+    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .spatial import cross
+from .spatial import box_inertia, cross, rigid_acceleration
 
 
 class SectionLoads(NamedTuple):
@@ -40,18 +40,18 @@ class SectionLoads(NamedTuple):
     peak_shear: np.ndarray
 
 
-def grasp_line_axes(p_grasp: np.ndarray, p_C: np.ndarray) -> np.ndarray:
+def grasp_line_axes(rho: np.ndarray) -> np.ndarray:
     """Unit axis e_m (…, r, 3) of each arm's grasp line, pointing from the object's inside towards grasp
-    m, for grasp points p_grasp (…, r, 3) and centres p_C (…, 3): for r = 2 the line through both grasp
-    points (e₂ = −e₁ = (p₂ − p₁)/|p₂ − p₁|); for r > 2 the line from C to the grasp point. A force of the
-    arm along +e_m stretches the object."""
-    p_grasp, p_C = np.asarray(p_grasp, dtype=float), np.asarray(p_C, dtype=float)
-    if p_grasp.shape[-2] == 2:
-        d = p_grasp[..., 1, :] - p_grasp[..., 0, :]
+    m, for the grasp points relative to the centre of mass, ρ_m = p_grasp,m − p_C (…, r, 3): for r = 2
+    the line through both grasp points (e₂ = −e₁ = (ρ₂ − ρ₁)/|ρ₂ − ρ₁|); for r > 2 the line from C to
+    the grasp point (e_m = ρ_m/|ρ_m|). A force of the arm along +e_m stretches the object. Relative
+    positions: no world position (rounded far from the origin) enters the axes."""
+    rho = np.asarray(rho, dtype=float)
+    if rho.shape[-2] == 2:
+        d = rho[..., 1, :] - rho[..., 0, :]
         e = d / np.linalg.norm(d, axis=-1, keepdims=True)
         return np.stack([-e, e], axis=-2)
-    d = p_grasp - p_C[..., None, :]
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return rho / np.linalg.norm(rho, axis=-1, keepdims=True)
 
 
 def line_frame(e: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
@@ -81,12 +81,6 @@ def grasp_axis(box: np.ndarray, grasp_pos: np.ndarray) -> int:
     """Index of the box axis (object frame) along which the grasp points lie farthest apart."""
     spread = grasp_pos.max(axis=0) - grasp_pos.min(axis=0)
     return int(np.argmax(spread / np.maximum(box, 1e-300)))
-
-
-def piece_inertia(mass: float, size: np.ndarray) -> np.ndarray:
-    """Inertia (3, 3) of a solid box of `mass` and `size` (3,) about its centre, box axes."""
-    a2 = size ** 2
-    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
 
 
 def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.ndarray, twist: np.ndarray,
@@ -122,8 +116,8 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
         c, ps = np.zeros(3), np.zeros(3)
         c[a], ps[a] = (x - L / 2) / 2, x
         rho, p_s = R_o @ c, R_o @ ps                    # (N, 3)
-        a_c = acc[:, :3] + cross(dw, rho) + cross(w, cross(w, rho))
-        Kp = R_o @ piece_inertia(mass * frac, size) @ Rt
+        a_c = rigid_acceleration(acc[:, :3], w, dw, rho)
+        Kp = R_o @ box_inertia(mass * frac, size) @ Rt
         inert_f = mass * frac * (a_c - gravity)
         force = inert_f.copy()
         moment = (np.einsum("nij,nj->ni", Kp, dw) + cross(w, np.einsum("nij,nj->ni", Kp, w))

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .closed_chain import ConstraintError, arm_poses
-from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian
+from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
 from .model import ArmModel, CoopsimError, Model, ObjectMotion
-from .spatial import axis_angle_to_rot, cross, rot_log
+from .spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 
 class TrajectoryError(CoopsimError):
@@ -102,9 +102,10 @@ def time_law(kind: str, u: float) -> tuple[float, float, float]:
     raise ValueError(f"unknown time law {kind!r}")
 
 
-def object_motion_at(motion: ObjectMotion, t: float):
-    """Object state at time t (clamped to the waypoint span): p_C (3,), R_o (3, 3), twist [v_C; ω] (6,)
-    and acceleration [a_C; ω̇] (6,). On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a:
+def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None = None):
+    """Object state at time t (clamped to the waypoint span): p_C (3,) (relative to `origin`, world, when
+    given: (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded), R_o (3, 3), twist [v_C; ω]
+    (6,) and acceleration [a_C; ω̇] (6,). On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a:
     p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ) with φ = log(R_aᵀ R_b) (one fixed axis), so
     v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ, a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ."""
     ts = motion.times
@@ -120,32 +121,39 @@ def object_motion_at(motion: ObjectMotion, t: float):
     w_axis = Ra @ phi
     twist = np.concatenate([ds / T * dp, ds / T * w_axis])
     acc = np.concatenate([dds / T**2 * dp, dds / T**2 * w_axis])
-    return motion.positions[i] + s * dp, R, twist, acc
+    p_a = motion.positions[i] if origin is None else motion.positions[i] - origin
+    return p_a + s * dp, R, twist, acc
 
 
-def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndarray, acc: np.ndarray):
-    """End-effector targets of every arm for an object state: lists of p_EE (3,), R_EE (3, 3), twist
-    [v_EE; ω] (6,) and acceleration [a_EE; ω̇] (6,), with ρ = p_EE − p_C:
+def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndarray, acc: np.ndarray,
+                  origin: np.ndarray | None = None):
+    """End-effector targets of every arm for an object state (p_C relative to `origin`, world, default the
+    world origin): lists of p_EE (3,) relative to the arm's base point, ((origin − o_m) + p_C) + ρ,
+    R_EE (3, 3), twist [v_EE; ω] (6,) and acceleration [a_EE; ω̇] (6,), with ρ = p_EE − p_C:
     v_EE = v_C + ω × ρ, a_EE = a_C + ω̇ × ρ + ω × (ω × ρ) (eq. 3 and its derivative)."""
     obj, w, dw = model.object, twist[3:], acc[3:]
+    o = np.zeros(3) if origin is None else np.asarray(origin, dtype=float)
     out = []
-    for m in range(model.r):
+    for m, arm in enumerate(model.arms):
         rho = R_o @ obj.grasp_pos[m]
         v = twist[:3] + cross(w, rho)
-        a = acc[:3] + cross(dw, rho) + cross(w, cross(w, rho))
-        out.append((p_C + rho, R_o @ obj.grasp_rot[m], np.concatenate([v, w]), np.concatenate([a, dw])))
+        a = rigid_acceleration(acc[:3], w, dw, rho)
+        out.append((((o - arm.base_pos) + p_C) + rho, R_o @ obj.grasp_rot[m], np.concatenate([v, w]),
+                    np.concatenate([a, dw])))
     return out
 
 
 def pose_error(arm: ArmModel, q: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """[p_EE(θ) − p; log(R_EE(θ) Rᵀ)] (6,), m and rad, world axes."""
+    """[p_EE(θ) − p; log(R_EE(θ) Rᵀ)] (6,), m and rad, world axes, with the target p (3,) and p_EE both
+    relative to the arm's base point (ArmPose.p_ee_rel): no world position enters the error."""
     pose = arm_pose(arm, q)
-    return np.concatenate([pose.p_ee - p, rot_log(pose.R_ee @ R.T)])
+    return np.concatenate([pose.p_ee_rel - p, rot_log(pose.R_ee @ R.T)])
 
 
 def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
            tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7) -> np.ndarray:
-    """Joint angles (n,) putting the end-effector frame at (p, R) in the rows S (k × 6, k = n): Newton
+    """Joint angles (n,) putting the end-effector frame at (p, R) (p relative to the arm's base point)
+    in the rows S (k × 6, k = n): Newton
     steps Δθ = −(S J)⁻¹ S e(θ) from `guess` (which picks the branch) until max |S e| <= tol.
     Raises ConstraintError when S J is singular (σ_min/σ_max < sing_tol) or Newton does not converge."""
     q = guess.astype(float).copy()
@@ -187,14 +195,15 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     N, n = len(t_out), model.n_total
     q, qd, qdd = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, n))
     dets = np.zeros((N, model.r))
+    origin = motion.positions[0]           # targets relative to the arm bases through it: no world position rounded
     for i, t in enumerate(t_out):
-        p_C, R_o, tw, ac = object_motion_at(motion, t)
+        p_C, R_o, tw, ac = object_motion_at(motion, t, origin)
         if i:
             h = t - t_out[i - 1]
             guess = q[i - 1] + h * qd[i - 1] + 0.5 * h * h * qdd[i - 1]
         for m, (arm, sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.arms, model.dof_slices,
-                                                             grasp_targets(model, p_C, R_o, tw, ac))):
-            sol = _solve_arm(model, m, p, R, tw_m, ac_m, guess, t, p_C)
+                                                             grasp_targets(model, p_C, R_o, tw, ac, origin))):
+            sol = _solve_arm(model, m, p, R, tw_m, ac_m, guess, t, origin + p_C)
             if sol.full_error > plane_tol:
                 raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
                                       f"leaves the plane of motion by {sol.full_error:.3g} (m or rad)")
@@ -214,15 +223,15 @@ def _check_square(model: Model, S: np.ndarray):
 
 
 def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
-    """Arm m at the targets (compiled Newton and differential kinematics, `coopsim.compiled.api.solve_arm`,
-    the same steps as `arm_ik` and `arm_rates`), with one-line errors naming the arm and the time."""
+    """Arm m at the targets (p relative to its base point; compiled Newton and differential kinematics,
+    `coopsim.compiled.api.solve_arm`, the same steps as `arm_ik` and `arm_rates`), with one-line errors
+    naming the arm and the time (p_C: the object's world position, for the message)."""
     from .compiled import api, ik
 
     arm = model.arms[m]
-    reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
-    dist = float(np.linalg.norm(p - (arm.base_pos + arm.base_rot @ arm.joint_pos[0])))
+    dist, reach, ok = reach_check(arm, p)
     where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
-    if dist > reach * (1 + 1e-12):
+    if not ok:
         raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
                               f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
     sol = api.solve_arm(model, m, p, R, twist, acc, guess)

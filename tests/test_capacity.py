@@ -191,7 +191,7 @@ def test_energy_stress_curve():
 
 
 _SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist",
-            "acc", "p_grasp")
+            "acc", "grasp_offset")
 
 
 def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
@@ -221,5 +221,6 @@ def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
         assert str(exc.value) == msg
     with pytest.raises(ValueError, match="resolution 'bounded' has no closed-form capacity"):
         cap.method_capacity(P, inv.resolution_for(m, "bounded"), m.motors)     # even with infinite bounds
-    with pytest.raises(ValueError, match="resolution 'nope' has no closed-form capacity: it is not a known linear"):
+    with pytest.raises(ValueError, match="unknown method 'nope'; expected one of paper, nonsqueezing, min_energy, "
+                                         "bounded"):
         cap.method_capacity(P, replace(R, method="nope"), m.motors)

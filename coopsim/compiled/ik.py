@@ -1,6 +1,9 @@
 """Compiled inverse kinematics of one arm (as `coopsim.trajectory.arm_ik` and `arm_rates`): Newton
 steps Δθ = −(S J)⁻¹ S e(θ) on the end-effector pose error e = [p_EE(θ) − p; log(R_EE(θ) Rᵀ)] in the rows
 S (k × 6, k = n_m), then the differential kinematics S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇).
+The target position p is given relative to the arm's base point and compared with the end-effector's
+position relative to it (W.p_ee_rel), as every lever arm of the dynamics is: no world position enters
+the error (a scene moved 100 km from the origin solves to the same angles, bit for bit).
 """
 
 from __future__ import annotations
@@ -18,10 +21,11 @@ SOLVED, SINGULAR, NOT_CONVERGED = 0, 1, 2
 
 @kernel
 def pose_error(P, W, m, p, R, e):
-    """e (6,) ← [p_EE − p; log(R_EE Rᵀ)] of arm m from the current kinematics."""
+    """e (6,) ← [p_EE − p; log(R_EE Rᵀ)] of arm m from the current kinematics, p_EE and the target p
+    both relative to the arm's base point (W.p_ee_rel)."""
     E = W.m3[3]
     for a in range(3):
-        e[a] = W.p_ee[m, a] - p[a]
+        e[a] = W.p_ee_rel[m, a] - p[a]
     matmul3_T(W.R_ee[m], R, E)
     rot_log(E, W.v3)
     e[3], e[4], e[5] = W.v3[0], W.v3[1], W.v3[2]
@@ -54,7 +58,8 @@ def rows_of(S, v, out):
 @entry
 def arm_solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info):
     """Joint angles of arm m (written into its rows of the stacked q (N,), which hold the guess) putting
-    the end-effector frame at (p, R) in the rows S, then θ̇ and θ̈ (its rows of qd, qdd) for the EE twist
+    the end-effector frame at (p, R) in the rows S (p (3,) relative to the arm's base point, R (3, 3)
+    world axes), then θ̇ and θ̈ (its rows of qd, qdd) for the EE twist
     and acceleration [v; ω], [a; ω̇] (6,). info (3,) ← [σ_min/σ_max of S J at the failure, det S J,
     max |full pose error| (all six rows)]. Returns SOLVED, SINGULAR or NOT_CONVERGED."""
     o, n = P.dof[m], P.dof[m + 1] - P.dof[m]
