@@ -314,8 +314,9 @@ class ArmSolution(NamedTuple):
 
 def solve_arm(model: Model, m: int, p, R, twist, acc, guess: np.ndarray, tol: float = 1e-13,
               max_iter: int = 50, sing_tol: float = 1e-7) -> ArmSolution:
-    """Arm m's joint angles putting its end-effector frame at (p (3,), R (3, 3)) in the model's rows S
-    (Newton from the stacked `guess` (N,)), and its rates for the EE twist and acceleration (6,)."""
+    """Arm m's joint angles putting its end-effector frame at (p (3,) m, relative to the arm's base
+    position, world axes; R (3, 3) world) in the model's rows S (Newton from the stacked `guess` (N,)),
+    and its rates for the EE twist and acceleration (6,)."""
     P, W, Ps, Ws = compiled(model)
     q = _f(guess).copy()
     qd, qdd, info = np.zeros_like(q), np.zeros_like(q), np.zeros(3)
