@@ -9,7 +9,6 @@ import warnings
 
 from . import __version__
 from .model import CoopsimError
-from .resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
@@ -116,14 +115,15 @@ def _cmd_inverse(args) -> int:
     from pathlib import Path
 
     from .atomic import write_text_atomic
-    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
+    from .inverse_report import (format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names,
+                                 json_safe)
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
     from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario)
-    methods = METHODS if args.method == "all" else (args.method,)
+    methods = ("paper", "nonsqueezing", "min_energy", "bounded") if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
         study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
                               bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
@@ -131,6 +131,7 @@ def _cmd_inverse(args) -> int:
         out = Path(args.out or Path("out") / model.name)
         log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+            "study": {"joints": joint_names(model)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}}))
         plots = inverse_plots(read_mcap(log_path), out, workers=workers)
@@ -148,7 +149,7 @@ def _cmd_capacity(args) -> int:
 
     from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
-                                 format_capacity_summary, json_safe)
+                                 format_capacity_summary, joint_names, json_safe)
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .render import FigureWorkers
@@ -161,7 +162,8 @@ def _cmd_capacity(args) -> int:
                                optimise=not args.no_optimise, check=args.check)
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
-        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
+        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+                "study": {"joints": joint_names(model)}}
         log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
                               run_metadata(model, None, meta | capacity_metadata(summary)))
         plots = capacity_plots(read_mcap(log_path), out, workers=workers)
@@ -185,6 +187,66 @@ def _cmd_bench(args) -> int:
     report = run_bench(_scenario_paths(args.scenarios), QUICK if args.quick else FULL, log=log)
     paths = write_outputs(report, args.out)
     print(json_text(report) if args.json else markdown_report(report) + f"\nwrote {len(paths)} files in {args.out}")
+    return 0
+
+
+def _cmd_animate(args) -> int:
+    import time
+    from pathlib import Path
+
+    from .animate import check_output
+
+    source = Path(args.source)
+    if args.out is not None:
+        check_output(args.out)              # a wrong suffix or a missing ffmpeg fails before any work
+    if not source.is_file():
+        raise CoopsimError(f"{source}: file not found")
+    for name in ("fps", "speed"):
+        if not getattr(args, name) > 0:
+            raise CoopsimError(f"--{name}: must be positive, got {getattr(args, name):g}")
+    if args.duration is not None and not args.duration > 0:
+        raise CoopsimError(f"--duration: must be positive, got {args.duration:g}")
+    from .animate import animate, motion_from_log, probe_renderer, scenario_motion
+    from .progress import ProgressBar
+
+    start = time.perf_counter()
+    probe_renderer()                        # no OpenGL: one line now, not after running the models
+    bar = ProgressBar()
+    if source.suffix.lower() == ".mcap":
+        motion = motion_from_log(source, scenario=args.scenario)
+        out = Path(args.out or source.parent / f"{motion.model.name}.gif")
+    else:
+        if args.scenario is not None:
+            raise CoopsimError("--scenario: only with a LOG.mcap source (the source is already a scenario)")
+
+        def before_run():
+            _announce_compile()
+            if not args.json:
+                print(f"coopsim: no log of {source} in out/ (coopsim run): running both models", file=sys.stderr)
+
+        motion = scenario_motion(source, duration=args.duration, progress=bar, before_run=before_run)
+        out = Path(args.out or Path("out") / motion.model.name / f"{motion.model.name}.gif")
+    check_output(out)
+    result = animate(motion, out, fps=args.fps, speed=args.speed, duration=args.duration, width=args.width,
+                     height=args.height, progress=lambda f: bar("render", f))
+    bar.close()
+    if args.json:
+        print(json.dumps(result.as_dict() | {"wall_time_s": time.perf_counter() - start}, indent=2))
+    else:
+        dq = "" if result.max_angle_difference is None else \
+            f"; max |q_native - q_MuJoCo| {result.max_angle_difference:.1e} rad"
+        print(f"wrote {result.path}: {result.frames} frames {result.width}x{result.height} at {result.fps:g} fps "
+              f"({result.span:.2f} s of the run, from the {result.source}); rendered in {result.render_time:.1f} s, "
+              f"written in {result.write_time:.1f} s{dq}")
+    return 0
+
+
+def _cmd_view(args) -> int:
+    from .animate import view
+
+    if not args.source.lower().endswith(".xml"):
+        _announce_compile()                 # the scenario's initial state comes from the native model
+    view(args.source, label=_display_path(args.source))
     return 0
 
 
@@ -259,8 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "energy, internal wrench and object stress; write DIR/inverse.mcap, plots and "
                                     "inverse.json."))
     p.add_argument("scenario", help="scenario YAML file")
-    p.add_argument("--method", default="all", choices=("all",) + METHODS,
-                   help=f"resolution (default: all): {methods_help()}")
+    p.add_argument("--method", default="all", choices=("all", "paper", "nonsqueezing", "min_energy", "bounded"),
+                   help="resolution (default: all): paper W+ (eq. 30), Erhart-Hirche non-squeezing, weighted "
+                        "minimum energy (eqs. 33-35), minimum energy with a bounded internal wrench")
     p.add_argument("--bound-force", type=float, default=None,
                    help="internal-force bound of 'bounded', N (default: scenario, else half the minimum-energy peak)")
     p.add_argument("--bound-moment", type=float, default=None,
@@ -302,6 +365,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="short runs and ladders, no start-up timing (tests, CI)")
     p.add_argument("--json", action="store_true", help="print bench.json to stdout")
     p.set_defaults(func=_cmd_bench, native=True)
+
+    p = sub.add_parser("animate", help="render a run (both models overlaid) into a GIF or MP4",
+                       description=("Render SOURCE with MuJoCo's offscreen renderer: the native model (blue, with "
+                                    "the object and grasp frames) and the MuJoCo twin over it (a translucent "
+                                    "sleeve), a time stamp and the two models' joint-angle difference. SOURCE is "
+                                    "a `coopsim run` log (LOG.mcap; the geometry comes from the scenario file it "
+                                    "names) or a scenario (its log out/NAME/NAME.mcap when written from the same "
+                                    "file, else both models are run). Headless: MUJOCO_GL=egl (package libegl1) "
+                                    "or osmesa (libosmesa6); EGL is used by default without a display."))
+    p.add_argument("source", help="scenario YAML file or LOG.mcap")
+    p.add_argument("--out", default=None,
+                   help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH); default: NAME.gif in out/NAME/ "
+                        "(scenario) or beside the log")
+    p.add_argument("--scenario", default=None, help="with a LOG.mcap: the scenario file to draw it with")
+    p.add_argument("--fps", type=float, default=20.0, help="frames per second of the video (default: 20)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="simulated seconds per second of video (default: 1, real time)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds to show from t = 0 (default: the whole run; frames: "
+                        "floor(duration x fps / speed) + 1)")
+    p.add_argument("--width", type=int, default=480, help="frame width in pixels (default: 480)")
+    p.add_argument("--height", type=int, default=360, help="frame height in pixels (default: 360)")
+    p.add_argument("--json", action="store_true", help="print what was written as JSON")
+    p.set_defaults(func=_cmd_animate)
+
+    p = sub.add_parser("view", help="open MuJoCo's interactive viewer at the consistent initial state",
+                       description=("Open MuJoCo's interactive viewer on SOURCE (a scenario YAML file or a twin "
+                                    "models/NAME.xml) at the consistent initial state of `coopsim run` (the "
+                                    "keyframe); needs a display."))
+    p.add_argument("source", help="scenario YAML file or MJCF file")
+    p.set_defaults(func=_cmd_view)
     return parser
 
 
