@@ -9,6 +9,7 @@ import warnings
 
 from . import __version__
 from .model import CoopsimError
+from .resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
@@ -115,15 +116,14 @@ def _cmd_inverse(args) -> int:
     from pathlib import Path
 
     from .atomic import write_text_atomic
-    from .inverse_report import (format_inverse_summary, inverse_series, inverse_study, inverse_summary, joint_names,
-                                 json_safe)
+    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
     from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario)
-    methods = ("paper", "nonsqueezing", "min_energy", "bounded") if args.method == "all" else (args.method,)
+    methods = METHODS if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
         study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
                               bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
@@ -131,7 +131,6 @@ def _cmd_inverse(args) -> int:
         out = Path(args.out or Path("out") / model.name)
         log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
-            "study": {"joints": joint_names(model)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}}))
         plots = inverse_plots(read_mcap(log_path), out, workers=workers)
@@ -149,7 +148,7 @@ def _cmd_capacity(args) -> int:
 
     from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
-                                 format_capacity_summary, joint_names, json_safe)
+                                 format_capacity_summary, json_safe)
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .render import FigureWorkers
@@ -162,8 +161,7 @@ def _cmd_capacity(args) -> int:
                                optimise=not args.no_optimise, check=args.check)
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
-        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
-                "study": {"joints": joint_names(model)}}
+        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
         log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
                               run_metadata(model, None, meta | capacity_metadata(summary)))
         plots = capacity_plots(read_mcap(log_path), out, workers=workers)
@@ -321,9 +319,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "energy, internal wrench and object stress; write DIR/inverse.mcap, plots and "
                                     "inverse.json."))
     p.add_argument("scenario", help="scenario YAML file")
-    p.add_argument("--method", default="all", choices=("all", "paper", "nonsqueezing", "min_energy", "bounded"),
-                   help="resolution (default: all): paper W+ (eq. 30), Erhart-Hirche non-squeezing, weighted "
-                        "minimum energy (eqs. 33-35), minimum energy with a bounded internal wrench")
+    p.add_argument("--method", default="all", choices=("all",) + METHODS,
+                   help=f"resolution (default: all): {methods_help()}")
     p.add_argument("--bound-force", type=float, default=None,
                    help="internal-force bound of 'bounded', N (default: scenario, else half the minimum-energy peak)")
     p.add_argument("--bound-moment", type=float, default=None,
