@@ -17,7 +17,7 @@ def _cmd_simulate(args) -> int:
     from .simulate import simulate
     from .summary import format_simulation_summary, simulation_summary
 
-    model = load_scenario(args.scenario)
+    model = load_scenario(args.scenario, duration=args.duration)
     summary = simulation_summary(simulate(model, duration=args.duration))
     print(json.dumps(summary, indent=2) if args.json else format_simulation_summary(summary))
     return 0
@@ -50,9 +50,8 @@ def _cmd_run(args) -> int:
     from .scenario import load_scenario
     from .summary import run_summary
 
-    model = load_scenario(args.scenario)
-    out = Path(args.out or Path("out") / model.name)
-    out.mkdir(parents=True, exist_ok=True)
+    model = load_scenario(args.scenario, duration=args.duration)
+    out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
     with FigureWorkers() as workers:
         bar = ProgressBar()
         cv = cross_validate(model, duration=args.duration, progress=bar)
@@ -77,13 +76,13 @@ def _cmd_run(args) -> int:
 def _cmd_plot(args) -> int:
     from pathlib import Path
 
-    from .log import read_mcap
+    from .log import read_run_log
     from .plots import comparison_plots
 
     log_path = Path(args.log)
     if not log_path.is_file():
         raise CoopsimError(f"{log_path}: log file not found")
-    for path in comparison_plots(read_mcap(log_path), Path(args.out or log_path.parent)):
+    for path in comparison_plots(read_run_log(log_path), Path(args.out or log_path.parent)):
         print(path)
     return 0
 
@@ -97,7 +96,7 @@ def _cmd_validate(args) -> int:
     results = []
     for scenario in _scenario_paths(args.scenarios):
         bar = ProgressBar()
-        cv = cross_validate(load_scenario(scenario), duration=args.duration, progress=bar)
+        cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
         bar.close()
         results.append(cv.comparison)
         if not args.json:
@@ -122,7 +121,7 @@ def _cmd_inverse(args) -> int:
     from .render import FigureWorkers
     from .scenario import load_scenario
 
-    model = load_scenario(args.scenario)
+    model = load_scenario(args.scenario, duration=args.duration)
     methods = METHODS if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
         study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
@@ -152,9 +151,10 @@ def _cmd_capacity(args) -> int:
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .render import FigureWorkers
-    from .scenario import load_scenario
+    from .scenario import load_scenario, require_motor_limits
 
-    model = load_scenario(args.scenario)
+    model = load_scenario(args.scenario, duration=args.duration)
+    require_motor_limits(model, args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
     with FigureWorkers() as workers:
         study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
@@ -432,7 +432,8 @@ def main(argv: list[str] | None = None) -> int:
         except (CoopsimError, OSError) as exc:
             if isinstance(exc, BrokenPipeError):
                 return _closed_pipe()
-            print(f"coopsim: error: {exc}", file=sys.stderr)
+            one_line = " ".join(part.strip() for part in str(exc).splitlines())
+            print(f"coopsim: error: {one_line}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("coopsim: interrupted", file=sys.stderr)

@@ -43,13 +43,12 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from .atomic import atomic_path
 from .closed_chain import arm_poses
 from .labels import joint_labels
-from .model import Model
+from .model import CoopsimError, Model
 from .spatial import rot_to_quat
 
 LIBRARY = "coopsim.log"
@@ -63,6 +62,11 @@ _DTYPE = {"number": np.float64, "integer": np.int64, "boolean": np.bool_}
 
 class LogError(ValueError):
     """A series or a log file is malformed; the message names the topic and field."""
+
+
+class UnreadableLogError(CoopsimError):
+    """A file that is not a complete, intact log (empty, cut short, corrupted, not MCAP, not the log
+    asked for); the one-line message names the file."""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -241,7 +245,7 @@ def _register(writer: Writer, streams: Sequence[Series | JsonTopic]) -> list[tup
 
 
 def _write_all(f, streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str, str]]) -> None:
-    writer = Writer(f, compression=CompressionType.ZSTD)
+    writer = Writer(f, compression=CompressionType.ZSTD, enable_data_crcs=True)   # every byte under a CRC
     writer.start(profile="", library=LIBRARY)
     parts = _register(writer, streams)
     ns = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
@@ -320,17 +324,64 @@ def _decode_series(schema: dict, msgs: list[dict]) -> dict[str, np.ndarray]:
 
 def read_mcap(path: str | Path) -> LogData:
     """Read a log written by :func:`write_mcap`: series topics as arrays (bit-identical), other JSON
-    topics as decoded messages, metadata records and schema names."""
-    with open(path, "rb") as f:
-        reader = make_reader(f, validate_crcs=True)
-        summary = reader.get_summary()
-        schemas = {s.id: (s.name, json.loads(s.data)) for s in summary.schemas.values()} if summary else {}
-        topic_schema = {c.topic: schemas[c.schema_id] for c in summary.channels.values()} if summary else {}
-        data: dict[str, list[bytes]] = {t: [] for t in topic_schema}
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            data[channel.topic].append(message.data)
-        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    raw = {t: json.loads(b"[" + b",".join(msgs) + b"]") for t, msgs in data.items()}   # one parse per topic
+    topics as decoded messages, metadata records and schema names. A file that is not a whole, intact
+    MCAP log of JSON messages raises UnreadableLogError naming the file: the whole file is read in
+    order, checking the magic at both ends, every record's length, the data section's CRC (logs since
+    issue #9 carry one), each chunk's, the summary's, and that nothing follows the end."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise UnreadableLogError(f"{path}: cannot read the log: {exc.strerror or exc}") from None
+    try:
+        return _parse_log(data)
+    except Exception as exc:  # noqa: BLE001 - a broken file can fail anywhere in the parser: one line
+        reason = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise UnreadableLogError(f"{path}: not a readable MCAP log ({reason})") from None
+
+
+_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _parse_log(data: bytes) -> LogData:
+    """`read_mcap` on the file's bytes; any exception means a broken file."""
+    import io
+    import zlib
+
+    from mcap.records import Channel, DataEnd, Footer, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+
+    if len(data) < 2 * len(_MAGIC) or data[:len(_MAGIC)] != _MAGIC or data[-len(_MAGIC):] != _MAGIC:
+        raise LogError("no MCAP magic at its start and end: not an MCAP file, or cut short")
+    # first pass, chunks left compressed: structure, the data section's CRC, the summary's, the end
+    stream = io.BytesIO(data)
+    footer = data_end = None
+    for record in StreamReader(stream, emit_chunks=True, validate_crcs=True, record_size_limit=len(data)).records:
+        if isinstance(record, Footer):
+            footer = record
+        elif isinstance(record, DataEnd):
+            data_end = record
+    if data_end is None:   # (its opcode damaged: the reader skips it as an unknown record, CRC unchecked)
+        raise LogError("no data-end record")
+    if stream.tell() != len(data):
+        raise LogError(f"{len(data) - stream.tell()} bytes after the end of the log")
+    if footer.summary_start and footer.summary_crc and \
+            zlib.crc32(data[footer.summary_start:len(data) - len(_MAGIC) - 4]) != footer.summary_crc:
+        raise LogError("the summary section's CRC does not match")
+    schemas, channels, data_by_channel, meta = {}, {}, {}, {}
+    for record in StreamReader(io.BytesIO(data), validate_crcs=True, record_size_limit=len(data)).records:
+        if isinstance(record, Schema):
+            schemas[record.id] = (record.name, record.data)
+        elif isinstance(record, Channel):
+            channels[record.id] = (record.topic, record.schema_id)
+        elif isinstance(record, Message):
+            data_by_channel.setdefault(record.channel_id, []).append(record.data)
+        elif isinstance(record, Metadata):
+            meta[record.name] = dict(record.metadata)
+    decoded = {sid: (name, json.loads(text)) for sid, (name, text) in schemas.items()}
+    topic_schema = {topic: decoded[sid] for topic, sid in channels.values()}
+    messages_of = {topic: data_by_channel.get(cid, []) for cid, (topic, _) in channels.items()}
+    raw = {t: json.loads(b"[" + b",".join(msgs) + b"]") for t, msgs in messages_of.items()}   # one parse per topic
     topics, messages = {}, {}
     for topic, (_, schema) in topic_schema.items():
         if schema.get("$comment") == SERIES_COMMENT:
@@ -339,6 +390,46 @@ def read_mcap(path: str | Path) -> LogData:
             messages[topic] = raw[topic]
     return LogData(metadata=meta, topics=topics, schemas={t: s[0] for t, s in topic_schema.items()},
                    messages=messages)
+
+
+# what the comparison plots draw: topic -> {field: trailing shape, "n": the joint count}
+_RUN_LOG_SERIES = {"joint_state": {"angle": ("n",), "rate": ("n",)}, "object": {"position": (3,), "twist": (6,)},
+                   "constraint": {}}
+_RUN_LOG_CONSTRAINT = {"/native": "residual_pos", "/mujoco": "weld_violation"}
+
+
+def read_run_log(path: str | Path) -> LogData:
+    """A `coopsim run` log (`read_mcap`), checked to hold what its comparison plots draw: the native
+    model's joint_state (angle, rate (N, n)), object (position (N, 3), twist (N, 6)) and constraint
+    (residual_pos (N,)) series, N >= 1 finite sample times, and the twin's (weld_violation) if any of
+    its series is there; UnreadableLogError naming the file otherwise."""
+    log = read_mcap(path)
+
+    def fail(reason: str):
+        raise UnreadableLogError(f"{path}: not a coopsim run log: {reason}")
+
+    n = None
+    for prefix, constraint in _RUN_LOG_CONSTRAINT.items():
+        if prefix == "/mujoco" and not any(t.startswith(prefix + "/") for t in log.topics):
+            continue
+        for name, fields in _RUN_LOG_SERIES.items():
+            topic = f"{prefix}/{name}"
+            d = log.topics.get(topic)
+            if d is None:
+                fail(f"no {topic} series")
+            t = d["t"]
+            if t.ndim != 1 or len(t) == 0 or not np.all(np.isfinite(t)):
+                fail(f"{topic}: no samples, or sample times that are not finite")
+            for key, shape in (fields | ({constraint: ()} if name == "constraint" else {})).items():
+                x = d.get(key)
+                if x is None:
+                    fail(f"{topic}: no field {key!r}")
+                if shape == ("n",):
+                    n = x.shape[1] if n is None and x.ndim == 2 else n
+                    shape = (n,)
+                if x.shape != (len(t),) + tuple(shape) or x.dtype.kind != "f":
+                    fail(f"{topic}.{key}: shape {list(x.shape)}, expected {[len(t), *shape]} numbers")
+    return log
 
 
 # ------------------------------------------------------------------------------------------------

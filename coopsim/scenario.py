@@ -3,11 +3,21 @@
 This is an I/O edge: kernels never import it. Every rejected input raises `ScenarioError` with one
 line "FILE: FIELD: reason", FIELD a dotted path such as `arms[0].links[1].box.density`.
 Angles are in radians unless the key ends in `_deg`; every other quantity is SI.
+
+Files are read defensively (README, "Scenario files"): UTF-8 text of at most MAX_FILE_BYTES; YAML
+without duplicate keys, nested at most MAX_DEPTH levels and at most MAX_NODES values with every alias
+expanded; numbers are real numbers (not booleans or quoted text), finite and at most MAX_MAGNITUDE in
+size; `name` is a safe file stem; a run may ask for at most MAX_OUTPUT_SAMPLES output samples and
+MAX_STEPS fixed steps (rk4, max_step, MuJoCo).
 """
 
 from __future__ import annotations
 
+import codecs
 import csv
+import io
+import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,9 +30,55 @@ from .spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
 
+MAX_MAGNITUDE = 1e9             # |x| of any number in a scenario or a torque CSV
+MAX_FILE_BYTES = 64 << 20       # a scenario or a torque CSV
+MAX_DEPTH = 32                  # YAML nesting (the bundled scenarios use 8)
+MAX_NODES = 1_000_000           # YAML values with every alias expanded
+MAX_OUTPUT_SAMPLES = 200_000    # duration / integrator.output_dt (and an object motion's samples)
+MAX_STEPS = 10_000_000          # duration / step of rk4, of max_step, of the MuJoCo twin
+MAX_ITERATIONS = 10_000         # mujoco.iterations
+MAX_NAME = 100                  # characters of `name`
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
+
 
 class ScenarioError(CoopsimError):
     """A scenario that cannot be turned into a model; the message names the field."""
+
+
+def _show(v, limit: int = 60) -> str:
+    """repr(v), cut to about `limit` characters (a value in an error line may be a whole list)."""
+    if isinstance(v, (list, dict)) and len(v) > limit:   # never build the repr of a huge value
+        v = v[:limit] if isinstance(v, list) else dict(list(v.items())[:limit])
+    text = repr(v)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+_ALL_NUMBERS = object()
+
+
+def _first_non_number(v):
+    """The first leaf of v (a number or nested lists) that is not a real number (a bool, a string,
+    None, a mapping, a date, ...); _ALL_NUMBERS when there is none."""
+    stack = [v]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, list):
+            stack.extend(reversed(x))
+        elif isinstance(x, bool) or not isinstance(x, (int, float)):
+            return x
+    return _ALL_NUMBERS
+
+
+def _first_big_int(v):
+    """The first int in v (nested lists of numbers) larger than MAX_MAGNITUDE in size, else None."""
+    stack = [v]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, list):
+            stack.extend(reversed(x))
+        elif isinstance(x, int) and abs(x) > MAX_MAGNITUDE:
+            return x
+    return None
 
 
 class _Section:
@@ -51,50 +107,71 @@ class _Section:
         return self.data[key]
 
     def number(self, key, default=_REQUIRED, positive=False, nonneg=False) -> float | None:
+        """A real number (an int or a float: not a boolean, not quoted text), finite and at most
+        MAX_MAGNITUDE in size."""
         v = self.raw(key, default)
         if v is None and default is None:   # optional key, absent
             return None
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(key, f"expected a number, got {v!r}")
+            self.fail(key, f"expected a number, got {_show(v)}")
+        if isinstance(v, int) and abs(v) > MAX_MAGNITUDE:   # before float(): 10**400 overflows it
+            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {_show(v, 24)}")
         v = float(v)
         if not np.isfinite(v):
             self.fail(key, f"must be finite, got {v}")
+        if abs(v) > MAX_MAGNITUDE:
+            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {v:g}")
         if positive and not v > 0:
             self.fail(key, f"must be positive, got {v}")
         if nonneg and v < 0:
             self.fail(key, f"must be non-negative, got {v}")
         return v
 
-    def whole(self, key, default=_REQUIRED, positive=False, nonneg=False) -> int | None:
+    def whole(self, key, default=_REQUIRED, positive=False, nonneg=False, maximum=None) -> int | None:
         """A whole number: an integer, or a float without a fractional part (10.0); 10.5 is refused,
-        never truncated."""
+        never truncated; at most `maximum` when given."""
         v = self.number(key, default, positive=positive, nonneg=nonneg)
         if v is None:
             return None
         if not v.is_integer():
             self.fail(key, f"must be a whole number, got {self.data.get(key, v)!r}")
+        if maximum is not None and v > maximum:
+            self.fail(key, f"must be at most {maximum:,}, got {v:g}")
         return int(v)
 
     def string(self, key, choices=None, default=_REQUIRED) -> str:
         v = self.raw(key, default)
         if not isinstance(v, str):
-            self.fail(key, f"expected a string, got {v!r}")
+            self.fail(key, f"expected a string, got {_show(v)}")
         if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {', '.join(choices)}; got {v!r}")
+            self.fail(key, f"must be one of {', '.join(choices)}; got {_show(v)}")
         return v
 
     def array(self, key, shape=None, default=_REQUIRED, positive=False, nonneg=False, allow_inf=False) -> np.ndarray:
+        """Numbers (nested lists) of `shape` (None: any length); every value a real number as in
+        `number` (allow_inf: +-inf allowed, e.g. "no limit")."""
         v = self.raw(key, default)
+        if self.data.get(key) is not None:   # from the file (defaults are trusted)
+            bad = _first_non_number(v)
+            if bad is not _ALL_NUMBERS:
+                self.fail(key, f"expected numbers, got {_show(bad)}" + ("" if bad is v else f" in {_show(v)}"))
+            big = _first_big_int(v)
+            if big is not None:   # before float(): 10**400 overflows it
+                self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {_show(big, 24)}")
         try:
             a = np.array(v, dtype=float)
         except (TypeError, ValueError):
-            self.fail(key, f"expected numbers, got {v!r}")
+            want = "×".join("n" if s is None else str(s) for s in shape) if shape is not None else "n"
+            self.fail(key, f"expected shape {want}, got rows of different lengths")
         if a.dtype == object or (shape is not None and (a.ndim != len(shape) or any(
                 s is not None and s != d for s, d in zip(shape, a.shape)))):
             want = "×".join("n" if s is None else str(s) for s in shape)
             self.fail(key, f"expected shape {want}, got {list(a.shape)}")
         if np.any(np.isnan(a)) or (not allow_inf and not np.all(np.isfinite(a))):
             self.fail(key, "must be finite")
+        finite = np.abs(a[np.isfinite(a)])
+        if finite.size and finite.max() > MAX_MAGNITUDE:
+            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {finite.max():g}")
         if positive and not np.all(a > 0):
             self.fail(key, f"must be positive, got {a.tolist()}")
         if nonneg and not np.all(a >= 0):
@@ -132,9 +209,10 @@ class _Section:
         return [_Section(x, f"{self.field(key)}[{i}]", self.where) for i, x in enumerate(v)]
 
     def done(self):
-        extra = sorted(set(self.data) - self.used)
+        extra = sorted(set(self.data) - self.used, key=str)   # keys need not be strings (7:, null:)
         if extra:
-            self.fail(extra[0], f"unknown field (known here: {', '.join(sorted(self.used))})")
+            self.fail(_show(extra[0]) if not isinstance(extra[0], str) else extra[0],
+                      f"unknown field (known here: {', '.join(sorted(self.used))})")
 
 
 def _rotation(sec: _Section, key_prefix: str = "") -> np.ndarray:
@@ -188,6 +266,8 @@ def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=Non
         if box.has("size"):
             size = box.array("size", (3,), positive=True)
         else:
+            if not box.has("length") and not box.has("cross_section"):
+                box.fail("size", "missing required field (or length and cross_section)")
             length = box.number("length", positive=True)
             cross = box.array("cross_section", (2,), positive=True)
             size = np.array([length, cross[0], cross[1]])
@@ -268,20 +348,71 @@ def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarra
 
 
 def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
-    """CSV with a header row; first column time (s), then one column per joint (N·m)."""
+    """CSV (UTF-8) with a header row; first column time (s), then one column per joint (N·m); every
+    value a finite number of at most MAX_MAGNITUDE; rows starting with # are skipped."""
     rel = sec.string("csv")
+    if "\0" in rel:
+        sec.fail("csv", f"a file name cannot hold a NUL character, got {_show(rel)}")
     path = (where_dir / rel).resolve()
     if not path.is_file():
         sec.fail("csv", f"file not found: {path}")
-    with open(path, newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+
+    def bad(reason: str, line: int | None = None):
+        sec.fail("csv", f"{path.name}: " + ("" if line is None else f"line {line}: ") + reason)
+
+    text = _read_text(path, bad)
+    if "\0" in text:
+        bad("holds a NUL character: not a text file", text.count("\n", 0, text.index("\0")) + 1)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    rows = []
     try:
-        data = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float)
-    except ValueError as exc:
-        sec.fail("csv", f"{path.name}: non-numeric value ({exc})")
-    if data.ndim != 2 or data.shape[1] != n + 1:
-        sec.fail("csv", f"{path.name}: expected a header and rows of 1 + {n} columns (time, torques)")
+        for r in reader:
+            if r and not r[0].lstrip().startswith("#"):
+                rows.append((reader.line_num, r))
+    except csv.Error as exc:
+        bad(str(exc), reader.line_num)
+    want = f"time, then {n} torque{'s' if n > 1 else ''}"
+    if len(rows) < 2:
+        bad(f"expected a header row, then rows of {want}; got {len(rows)} row{'s' * (len(rows) != 1)}")
+    if all(_csv_number(x) is not None for x in rows[0][1]):
+        bad(f"the first row must be a header ({want}), got numbers", rows[0][0])
+    data = np.empty((len(rows) - 1, n + 1))
+    for i, (line, r) in enumerate(rows[1:]):
+        if len(r) != n + 1:
+            bad(f"expected 1 + {n} columns ({want}), got {len(r)}", line)
+        for j, x in enumerate(r):
+            v = _csv_number(x)
+            if v is None:
+                bad(f"column {j + 1}: expected a number, got {_show(x)}", line)
+            if not math.isfinite(v):
+                bad(f"column {j + 1}: must be finite, got {x.strip()}", line)
+            if abs(v) > MAX_MAGNITUDE:
+                bad(f"column {j + 1}: must be at most {MAX_MAGNITUDE:g} in magnitude, got {v:g}", line)
+            data[i, j] = v
     return _checked_table(sec, "csv", data[:, 0], data[:, 1:])
+
+
+def _csv_number(x: str) -> float | None:
+    try:
+        return float(x)
+    except ValueError:
+        return None
+
+
+def _read_text(path: Path, fail) -> str:
+    """The text of a UTF-8 file (a byte-order mark is skipped) of at most MAX_FILE_BYTES; otherwise
+    fail(reason) with one line naming the first byte that is not UTF-8 and its line."""
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        fail(f"{size / 2 ** 20:.0f} MiB: larger than the {MAX_FILE_BYTES >> 20} MiB a file may hold")
+    raw = path.read_bytes()
+    if raw.startswith(codecs.BOM_UTF8):
+        raw = raw[len(codecs.BOM_UTF8):]
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        fail(f"not UTF-8 text: byte 0x{raw[exc.start]:02x} on line {line} is not UTF-8 (save the file as UTF-8)")
 
 
 def _motors(sec: _Section, n: int):
@@ -331,7 +462,7 @@ def _mujoco(sec: _Section | None) -> MujocoSettings:
         weld_solref=None if solref is None else (float(solref[0]), float(solref[1])),
         weld_solimp=tuple(float(x) for x in sec.array("weld_solimp", (5,), default=d.weld_solimp)),
         tolerance=sec.number("tolerance", d.tolerance, positive=True),
-        iterations=sec.whole("iterations", d.iterations, positive=True),
+        iterations=sec.whole("iterations", d.iterations, positive=True, maximum=MAX_ITERATIONS),
         object_mass_scale=sec.number("object_mass_scale", d.object_mass_scale, positive=True),
     )
     sec.done()
@@ -421,27 +552,195 @@ def _object(sec: _Section, arms: list[ArmModel]):
     return mass, inertia, box, order, grasp, pose_data
 
 
-def load_scenario(path: str | Path) -> Model:
-    """Read and validate a scenario YAML file (see scenarios/*.yaml for the format)."""
+def _check_work(where: str, duration: float, field: str, s: IntegratorSettings, mj: MujocoSettings,
+                inverse: InverseSettings) -> None:
+    """Refuse, up front, a run that asks for more than MAX_OUTPUT_SAMPLES output samples or MAX_STEPS
+    fixed steps (rk4 steps, the steps max_step forces on an adaptive method, MuJoCo steps): it could
+    not fit in memory, or would run for hours without a word. `field` names where the duration came
+    from (`duration` or `--duration`)."""
+    def fail(count: float, what: str, limit: int, other: str, value: float, unit: str = "s"):
+        if count > limit:
+            raise ScenarioError(f"{where}: {field}: {duration:g} s at {other} = {value:g} {unit} is {count:.3g} "
+                                f"{what}, more than the {limit:,} a run may ask for")
+
+    fail(duration / s.output_dt + 1, "output samples", MAX_OUTPUT_SAMPLES, "integrator.output_dt", s.output_dt)
+    if s.method == "rk4":
+        fail(duration / s.step, "rk4 steps", MAX_STEPS, "integrator.step", s.step)
+    elif s.max_step is not None:
+        fail(duration / s.max_step, "steps at least", MAX_STEPS, "integrator.max_step", s.max_step)
+    fail(duration / mj.timestep, "MuJoCo steps", MAX_STEPS, "mujoco.timestep", mj.timestep)
+    om = inverse.object_motion
+    if om is not None:
+        samples = (om.times[-1] - om.times[0]) / om.output_dt + 1
+        if samples > MAX_OUTPUT_SAMPLES:
+            raise ScenarioError(f"{where}: inverse.object_motion.output_dt: waypoints over {om.times[-1] - om.times[0]:g} "
+                                f"s every {om.output_dt:g} s are {samples:.3g} samples, more than the "
+                                f"{MAX_OUTPUT_SAMPLES:,} a run may ask for")
+
+
+def require_motor_limits(model: Model, where: str) -> None:
+    """The load capacity needs a limit to reach: a finite `motors.stall_torque` on some joint that is
+    not passive (without one every capacity is unbounded); ScenarioError otherwise."""
+    m = model.motors
+    if not np.any(np.isfinite(m.stall_torque) & ~m.passive):
+        raise ScenarioError(f"{where}: arms[].motors: the load capacity needs motor limits (stall_torque, "
+                            f"no_load_speed), and no joint has one")
+
+
+_YAML_LOADER = yaml.CSafeLoader if getattr(yaml, "__with_libyaml__", False) else yaml.SafeLoader
+_MERGE = "tag:yaml.org,2002:merge"
+
+
+def load_yaml(path: Path):
+    """The data of a YAML file, read defensively: UTF-8 text of at most MAX_FILE_BYTES, one document,
+    no key twice in a mapping, nested at most MAX_DEPTH levels and holding at most MAX_NODES values with
+    every alias expanded (a "billion laughs" document is refused before anything is built). A first
+    pass over the parser's events checks all that (iteratively: no recursion to overflow); then the
+    document is composed and constructed (libyaml's parser and composer when present, PyYAML's safe
+    constructor). ScenarioError with one line naming the file (and the line, and the key) otherwise."""
+    def fail(reason: str):
+        raise ScenarioError(f"{path}: {reason}")
+
+    text = _read_text(path, fail)
+    try:
+        _check_events(text, fail)
+        loader = _YAML_LOADER(text)
+        try:
+            node = loader.get_single_node()
+            return None if node is None else loader.construct_document(node)
+        finally:
+            loader.dispose()
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        fail(f"malformed YAML{at}: " + " ".join((problem + (f" ({context})" if context else "")).split()))
+
+
+class _Open:
+    """A collection being read in `_check_events`: its path, expanded size and height so far; for a
+    mapping the keys seen (key -> line) and whether a key comes next."""
+
+    __slots__ = ("path", "size", "height", "anchor", "keys", "key_next", "label", "index")
+
+    def __init__(self, path: str, anchor, mapping: bool):
+        self.path, self.size, self.height, self.anchor = path, 1, 1, anchor
+        self.keys, self.key_next, self.label, self.index = ({} if mapping else None), True, "?", 0
+
+    def child_path(self) -> str:
+        if self.keys is None:
+            return f"{self.path}[{self.index}]"
+        return "?" if self.key_next else (f"{self.path}.{self.label}" if self.path else self.label)
+
+
+def _check_events(text: str, fail) -> None:
+    """Depth, expanded size and duplicate keys of a YAML document, from its parse events."""
+    from yaml.events import (AliasEvent, CollectionEndEvent, MappingStartEvent, ScalarEvent, SequenceStartEvent,
+                             StreamEndEvent)
+
+    loader = _YAML_LOADER(text)
+    try:
+        stack: list[_Open] = []
+        anchors: dict = {}          # anchor -> (expanded size, height)
+        while True:
+            ev = loader.get_event()
+            line = ev.start_mark.line + 1 if ev.start_mark is not None else 0
+            if isinstance(ev, (MappingStartEvent, SequenceStartEvent)):
+                if len(stack) >= MAX_DEPTH:
+                    fail(f"line {line}: nested more than {MAX_DEPTH} levels deep")
+                path = stack[-1].child_path() if stack else ""
+                stack.append(_Open(path, ev.anchor, isinstance(ev, MappingStartEvent)))
+                continue
+            if isinstance(ev, CollectionEndEvent):
+                done = stack.pop()
+                size, height = done.size, done.height
+                if done.anchor is not None:
+                    anchors[done.anchor] = (size, height)
+            elif isinstance(ev, ScalarEvent):
+                size, height = 1, 1
+                if ev.anchor is not None:
+                    anchors[ev.anchor] = (1, 1)
+            elif isinstance(ev, AliasEvent):
+                size, height = anchors.get(ev.anchor, (1, 1))   # undefined: the composer says so
+                if len(stack) + height > MAX_DEPTH + 1:   # collections nested, the alias's own included
+                    fail(f"line {line}: this alias nests its value more than {MAX_DEPTH} levels deep")
+            elif isinstance(ev, StreamEndEvent):
+                return
+            else:               # stream and document start, document end
+                continue
+            if not stack:
+                continue
+            parent = stack[-1]
+            parent.size += size
+            parent.height = max(parent.height, height + 1)
+            if parent.size > MAX_NODES:
+                fail(f"line {line}: aliases expand {parent.path or 'the document'} to more than "
+                     f"{MAX_NODES:,} values (at most {MAX_NODES:,})")
+            if parent.keys is None:
+                parent.index += 1
+            elif parent.key_next:
+                parent.key_next, parent.label = False, "?"
+                if isinstance(ev, ScalarEvent):
+                    parent.label = ev.value
+                    tag = ev.tag if ev.tag not in (None, "!") else loader.resolve(yaml.ScalarNode, ev.value, ev.implicit)
+                    if tag != _MERGE:
+                        key = (tag, ev.value)
+                        if key in parent.keys:
+                            field = f"{parent.path}.{ev.value}" if parent.path else ev.value
+                            fail(f"{field}: duplicate key (lines {parent.keys[key]} and {line}: the second would "
+                                 f"silently replace the first)")
+                        parent.keys[key] = line
+            else:
+                parent.key_next = True
+    finally:
+        loader.dispose()
+
+
+def load_scenario(path: str | Path, duration: float | None = None) -> Model:
+    """Read and validate a scenario YAML file (see scenarios/*.yaml for the format). duration: the
+    command line's --duration (s), in place of the file's; checked as the file's is, and the work
+    limits apply to it."""
+    if duration is not None:
+        check_duration(duration)
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: scenario file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise ScenarioError(f"{path}: malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
-    return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem)
+    data = load_yaml(path)
+    return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem, duration=duration)
 
 
-def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."), default_name="scenario") -> Model:
-    """Build the frozen model from parsed YAML data (a dict)."""
+def check_duration(duration, option: str = "--duration") -> float:
+    """A duration given on the command line: a positive, finite number of seconds of at most
+    MAX_MAGNITUDE (the rule of the file's `duration`); ScenarioError naming the option otherwise."""
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
+            or not 0 < duration <= MAX_MAGNITUDE:
+        raise ScenarioError(f"{option}: must be a positive, finite number of seconds of at most "
+                            f"{MAX_MAGNITUDE:g}, got {duration!r}")
+    return float(duration)
+
+
+def safe_name(stem: str) -> str:
+    """A file stem made a valid `name` (for a scenario without one): characters other than letters,
+    digits, '_', '-' and '.' become '_', leading dots go, at most MAX_NAME characters."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip(".")[:MAX_NAME]
+    return name or "scenario"
+
+
+def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."), default_name="scenario",
+                    duration: float | None = None) -> Model:
+    """Build the frozen model from parsed YAML data (a dict); duration: the command line's
+    --duration in place of the file's (see `load_scenario`)."""
     root = _Section(data, "", where)
-    name = root.string("name", default=default_name)
+    name = root.string("name", default=safe_name(default_name))
+    if not (_NAME.match(name) and len(name) <= MAX_NAME):
+        root.fail("name", f"must be a file name of 1 to {MAX_NAME} letters, digits, '_', '-' or '.', not "
+                          f"starting with '.' (outputs are written as NAME.mcap, out/NAME/), got {_show(name)}")
     root.string("description", default="")
     gravity = root.array("gravity", (3,), default=[0.0, 0.0, -9.81])
-    duration = root.number("duration", positive=True)
+    file_duration = root.number("duration", positive=True)
+    duration, duration_field = (file_duration, "duration") if duration is None else \
+        (check_duration(duration), "--duration")
     arm_secs = root.items("arms", min_len=2)
     arms, q0, qd0, torques, motor_parts = [], [], [], [], []
     for i, sec in enumerate(arm_secs):
@@ -460,6 +759,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     validation = _validation(root.section("validation", default=None))
     inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms))
     root.done()
+    _check_work(where, duration, duration_field, integrator, mujoco_settings, inverse)
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
     grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
     obj = ObjectModel(mass, inertia, box, grasp_pos, grasp_rot, carrier=order[0])
