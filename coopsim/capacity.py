@@ -30,7 +30,7 @@ import numpy as np
 from .inverse import (InverseProblem, Resolution, distribute, energy, grasp_line_frames, internal_bound_components,
                       internal_operator, min_energy_setup, min_energy_solve, nan_peak, resolve, torques_of)
 from .model import Model, Motors
-from .qp import LPBatch, solve_lps
+from .qp import LPBatch, QPError, solve_lps
 from .resolutions import LINEAR_METHODS, resolution_method
 
 MODES = ("scaled", "payload")
@@ -166,7 +166,8 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
     top = solve_lps(c, A_ub, b_ub, A_eq, b_eq, bounds)
     failed = np.flatnonzero(~np.isin(top.status, (0, 2, 3)))
     if len(failed):
-        raise RuntimeError(f"LP failed at t={prob.t[failed[0]]:.6g} s: {top.messages[failed[0]]}")
+        raise QPError(f"capacity LP bound: HiGHS failed at t={prob.t[failed[0]]:.6g} s: "
+                      f"{' '.join(str(top.messages[failed[0]]).split())}")
     upper = np.select([top.status == 0, top.status == 3], [top.x[:, -1], np.inf], -np.inf)
     lower = np.zeros(N)
     solved = np.flatnonzero(top.status == 0)

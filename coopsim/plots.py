@@ -76,8 +76,9 @@ def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
 
     ax.set_ylabel(ylabel)
     ax.set_xlabel("time (s)")
-    ax.yaxis.set_major_locator(LogLocator(numticks=8))
-    ax.yaxis.set_minor_locator(NullLocator())
+    if ax.get_yscale() == "log":   # not when nothing was drawn (a zero difference): the axis stays linear
+        ax.yaxis.set_major_locator(LogLocator(numticks=8))
+        ax.yaxis.set_minor_locator(NullLocator())
     ax.grid(True, alpha=0.3)
     if drawn:
         ax.legend(fontsize="small", ncol=2)

@@ -9,6 +9,7 @@ import pytest
 from coopsim import capacity as cap
 from coopsim import inverse as inv
 from coopsim.model import Motors
+from coopsim.qp import QPError
 from conftest import MujocoReference, mujoco_kkt_acceleration
 from inverse_cases import BUNDLED, PAYLOAD, problem, run
 
@@ -224,3 +225,21 @@ def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
     with pytest.raises(ValueError, match="unknown method 'nope'; expected one of paper, nonsqueezing, min_energy, "
                                          "bounded"):
         cap.method_capacity(P, replace(R, method="nope"), m.motors)
+
+
+def test_a_failed_lp_is_a_one_line_coopsim_error(monkeypatch):
+    """HiGHS failing on one sample's LP (status other than optimal, infeasible or unbounded) is a
+    QPError (a CoopsimError: the CLI prints one line, exit 2) naming the time, not a RuntimeError."""
+    m, res, traj = run("paper_planar_2x3")
+    P = problem("paper_planar_2x3")
+    real = cap.solve_lps
+
+    def failing(*args, **kw):
+        out = real(*args, **kw)
+        out.status[3] = 4
+        out.messages[3] = "Solve error\n(numerical)"
+        return out
+
+    monkeypatch.setattr(cap, "solve_lps", failing)
+    with pytest.raises(QPError, match=rf"^capacity LP bound: HiGHS failed at t={P.t[3]:.6g} s: Solve error \(numerical\)$"):
+        cap.lp_capacity(P, m.motors, m.motors.passive, "scaled")

@@ -58,3 +58,17 @@ def test_plots_replace_existing_files_and_check_joint_names(logs, tmp_path):
     assert paths[0].read_bytes()[:8] == PNG_SIGNATURE
     with pytest.raises(ValueError, match="joint_names: expected 6 names, got 2"):
         comparison_plots(both, tmp_path, joint_names=["a", "b"])
+
+
+def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
+    """Differences exactly zero (a scene at rest): the difference panels stay linear and say so
+    (a log locator on them raised 'Data cannot be log-scaled')."""
+    both, _ = logs
+    topics = dict(both.topics)
+    for key in list(topics):
+        if key.startswith("/mujoco/") and ("/native/" + key[len("/mujoco/"):]) in topics:
+            native = topics["/native/" + key[len("/mujoco/"):]]
+            topics[key] = {k: (native[k] if k in native else v) for k, v in topics[key].items()}
+    same = dataclasses.replace(both, topics=topics)
+    out = tmp_path / "same"
+    _check_pngs(comparison_plots(same, out), out)
