@@ -486,6 +486,11 @@ def specs_malformed():
     return [(b, how) for b in DATA for how in MALFORMED]
 
 
+# malformed cases that replace the whole file
+WHOLE_DOCUMENTS = {"top-level list": "- 1\n- 2\n", "top-level number": "42\n", "top-level string": "just some words\n",
+                   "empty file": "", "null document": "~\n", "comment only": "# nothing here\n"}
+
+
 def build_malformed(spec):
     b, how = spec
     text = BASES[b]
@@ -502,18 +507,8 @@ def build_malformed(spec):
         text += '\nextra: "no end\n'
     elif how == "second document":
         text += "\n---\nname: again\n"
-    elif how == "top-level list":
-        text = "- 1\n- 2\n"
-    elif how == "top-level number":
-        text = "42\n"
-    elif how == "top-level string":
-        text = "just some words\n"
-    elif how == "empty file":
-        text = ""
-    elif how == "null document":
-        text = "~\n"
-    elif how == "comment only":
-        text = "# nothing here\n"
+    elif how in WHOLE_DOCUMENTS:
+        text = WHOLE_DOCUMENTS[how]
     elif how == "python tag":
         text = text.replace("description:", "description: !!python/object/apply:os.system ['echo hi']\nignored:", 1)
     elif how == "unknown tag":
