@@ -401,7 +401,7 @@ def _announce_compile() -> None:
     from .compiled.api import set_compile_notice
 
     def notice():
-        print("coopsim: compiling the native model for this machine (first run only; about half a minute)...",
+        print("coopsim: compiling the native model for this machine (first run only; under a minute)...",
               file=sys.stderr, flush=True)
         from .compiled.warmup import warm_up
 
