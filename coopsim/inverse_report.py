@@ -172,16 +172,14 @@ def format_inverse_summary(s: dict) -> str:
              f"bounded         |internal| <= {s['bounded']['force_bound_N']:.4g} N, {s['bounded']['moment_bound_Nm']:.4g} N·m "
              f"(grasp-line components, non-squeezing definition)",
              "",
-             f"{'method':<14}{'energy':>11}{'ratio':>8}{'max|tau|':>10}{'F_I paper':>11}{'F_I E&H':>10}"
-             f"{'sigma max':>11}{'replay':>10}",
-             f"{'':<14}{'N²m²s':>11}{'':>8}{'N·m':>10}{'N, N·m':>11}{'N, N·m':>10}{'Pa':>11}{'rad':>10}"]
+             _row("method", *METHOD_COLUMNS), _row("", *METHOD_UNITS)]
     for k, e in s["methods"].items():
-        ratio = e["energy_ratio_to_min_energy"]
-        lines.append(
-            f"{k:<14}{e['energy']:>11.4g}{'' if ratio is None else f'{ratio:.3f}':>8}{e['max_torque_norm_Nm']:>10.4g}"
-            f"{e['internal']['paper']['max_abs_component']:>11.3g}{e['internal']['nonsqueezing']['max_abs_component']:>10.3g}"
-            f"{e['stress']['peak_normal_Pa'] if 'stress' in e else float('nan'):>11.4g}"
-            f"{e['replay']['max_angle_error_rad'] if 'replay' in e else float('nan'):>10.2g}")
+        lines.append(_row(k, _cell(e["energy"], ".4g"), _cell(e["energy_ratio_to_min_energy"], ".3f"),
+                          _cell(e["max_torque_norm_Nm"], ".4g"),
+                          _cell(e["internal"]["paper"]["max_abs_component"], ".3g"),
+                          _cell(e["internal"]["nonsqueezing"]["max_abs_component"], ".3g"),
+                          _cell(e.get("stress", {}).get("peak_normal_Pa"), ".4g"),
+                          _cell(e.get("replay", {}).get("max_angle_error_rad"), ".2g")))
     for k, e in s["methods"].items():
         if e["failed_samples"]:
             lines.append(f"{k}: NO SOLUTION at {len(e['failed_samples'])} of {tr['samples']} samples, left out (nan): "
@@ -196,6 +194,22 @@ def format_inverse_summary(s: dict) -> str:
                          f"  energy {c['energy']:.5g}"
                          + (f"  (no solution at {c['failed_samples']} samples)" if c["failed_samples"] else ""))
     return "\n".join(lines)
+
+
+METHOD_COLUMNS = ("energy", "ratio", "max|tau|", "F_I paper", "F_I E&H", "sigma max", "replay")
+METHOD_UNITS = ("N²m²s", "", "N·m", "N, N·m", "N, N·m", "Pa", "rad")
+COLUMN_WIDTH = 10   # fits any .4g number ("-1.234e+05"); columns are also separated by two spaces
+
+
+def _cell(x, spec: str) -> str:
+    """x formatted with `spec`; "—" when it was not computed (None: e.g. the replay not asked for)."""
+    return "—" if x is None else format(x, spec)
+
+
+def _row(first: str, *cells: str) -> str:
+    """One line of the method table: the name left-aligned in 14 columns, then right-aligned cells of
+    at least COLUMN_WIDTH characters, two spaces apart (long values never run into each other)."""
+    return f"{first:<14}" + "".join(f"  {c:>{COLUMN_WIDTH}}" for c in cells)
 
 
 def _failure_list(failures: list[dict]) -> str:
