@@ -53,7 +53,7 @@ def _cmd_run(args) -> int:
     model = load_scenario(args.scenario, duration=args.duration)
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
     with FigureWorkers() as workers:
-        bar = ProgressBar()
+        bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
         log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
@@ -95,7 +95,7 @@ def _cmd_validate(args) -> int:
 
     results = []
     for scenario in _scenario_paths(args.scenarios):
-        bar = ProgressBar()
+        bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
         bar.close()
         results.append(cv.comparison)
@@ -118,14 +118,17 @@ def _cmd_inverse(args) -> int:
     from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
+    from .progress import ProgressBar
     from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration)
     methods = METHODS if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
+        bar = ProgressBar(enabled=not args.json)
         study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
-                              bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve)
+                              bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve, progress=bar)
+        bar.close()
         summary = inverse_summary(study)
         out = Path(args.out or Path("out") / model.name)
         log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
@@ -150,6 +153,7 @@ def _cmd_capacity(args) -> int:
                                  format_capacity_summary, json_safe)
     from .log import file_sha256, read_mcap, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
+    from .progress import ProgressBar
     from .render import FigureWorkers
     from .scenario import load_scenario, require_motor_limits
 
@@ -157,8 +161,10 @@ def _cmd_capacity(args) -> int:
     require_motor_limits(model, args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
     with FigureWorkers() as workers:
+        bar = ProgressBar(enabled=not args.json)
         study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
-                               optimise=not args.no_optimise, check=args.check)
+                               optimise=not args.no_optimise, check=args.check, progress=bar)
+        bar.close()
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
@@ -209,7 +215,7 @@ def _cmd_animate(args) -> int:
 
     start = time.perf_counter()
     probe_renderer()                        # no OpenGL: one line now, not after running the models
-    bar = ProgressBar()
+    bar = ProgressBar(enabled=not args.json)
     if source.suffix.lower() == ".mcap":
         motion = motion_from_log(source, scenario=args.scenario)
         out = Path(args.out or source.parent / f"{motion.model.name}.gif")

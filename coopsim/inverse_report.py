@@ -10,6 +10,7 @@ plain-data summaries for the text and JSON outputs, and the MCAP series (no I/O 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -24,17 +25,28 @@ from .stress import SectionLoads, decompose_internal, section_loads
 from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
 DEFINITIONS = ("paper", "nonsqueezing")
+Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.progress.ProgressBar`
 
 
-def trajectory_of(model: Model, duration: float | None = None):
+def _report(progress: Progress | None, stage: str, fraction: float) -> None:
+    if progress is not None:
+        progress(stage, fraction)
+
+
+def trajectory_of(model: Model, duration: float | None = None, progress: Progress | None = None):
     """(JointTrajectory, SimResult or None): the scenario's trajectory to invert — its forward run
-    (`duration` overrides the scenario's) or the IK of its prescribed object motion."""
+    (`duration` overrides the scenario's) or the IK of its prescribed object motion; `progress` (module
+    `Progress`) hears the stage "forward" or "ik"."""
     if model.inverse.trajectory == "object_motion":
-        return object_motion_trajectory(model, model.inverse.object_motion), None
+        _report(progress, "ik", 0.0)
+        traj = object_motion_trajectory(model, model.inverse.object_motion)
+        _report(progress, "ik", 1.0)
+        return traj, None
     from .simulate import simulate
 
-    res = simulate(model, duration=duration)
+    res = simulate(model, duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,9 +72,11 @@ class InverseStudy:
 
 
 def inverse_study(model: Model, methods=METHODS, duration: float | None = None, with_replay: bool = False,
-                  bounds: tuple[float | None, float | None] = (None, None), curve: bool = True) -> InverseStudy:
-    """Run the inverse dynamics of the scenario with every method in `methods`."""
-    traj, sim = trajectory_of(model, duration)
+                  bounds: tuple[float | None, float | None] = (None, None), curve: bool = True,
+                  progress: Progress | None = None) -> InverseStudy:
+    """Run the inverse dynamics of the scenario with every method in `methods`; `progress` hears the
+    stages forward (or ik), inverse, replay and curve."""
+    traj, sim = trajectory_of(model, duration, progress)
     prob = inverse_problem(model, traj)
     base = resolution_for(model, "min_energy")
     f_b = bounds[0] if bounds[0] is not None else model.inverse.internal_force_bound
@@ -75,8 +89,10 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
     if sim is not None:
         f, _ = distribution_of_torques(prob, sim.tau)
         results["forward"] = result_of(prob, "forward", f, base)
-    for k, res in resolutions.items():
+    for i, (k, res) in enumerate(resolutions.items()):
+        _report(progress, "inverse", i / len(resolutions))
         results[k] = resolve(prob, res)
+    _report(progress, "inverse", 1.0)
     components, stress = {}, {}
     axes = grasp_line_frames(prob)[:, :, 0]
     box = np.any(model.object.box > 0)
@@ -85,11 +101,18 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
         if box:
             stress[k] = section_loads(model.object.mass, model.object.box, model.object.grasp_pos, prob.R_o,
                                       prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows)
-    replays = {k: replay(model, traj, res) for k, res in resolutions.items()} if with_replay else {}
+    replays = {}
+    for i, (k, res) in enumerate(resolutions.items() if with_replay else ()):
+        _report(progress, "replay", i / len(resolutions))
+        replays[k] = replay(model, traj, res)
+    if with_replay:
+        _report(progress, "replay", 1.0)
     trade = []
     if curve:
+        _report(progress, "curve", 0.0)
         peak = default_bounds(prob, base, fraction=1.0)
         trade = cap.energy_stress_curve(prob, base, peak)
+        _report(progress, "curve", 1.0)
     return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
                         cap.torque_limits(model.motors, traj.qd), replays, trade, (f_b, m_b))
 
@@ -241,16 +264,18 @@ class CapacityStudy:
 
 
 def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
-                   optimise: bool = True, check: bool = False, methods=LINEAR_METHODS) -> CapacityStudy:
+                   optimise: bool = True, check: bool = False, methods=LINEAR_METHODS,
+                   progress: Progress | None = None) -> CapacityStudy:
     """DLCC of every linear resolution (`coopsim.resolutions.LINEAR_METHODS`) along the scenario's trajectory
     (object scaled at constant geometry; with a payload position also as a point payload), the LP bound,
-    the optimised weights."""
-    traj, _ = trajectory_of(model, duration)
+    the optimised weights; `progress` hears the stages forward (or ik), capacity, lp and weights."""
+    traj, _ = trajectory_of(model, duration, progress)
     payload = payload_position if payload_position is not None else model.inverse.payload_position
     prob = inverse_problem(model, traj, payload)
     modes = ("scaled",) if payload is None else cap.MODES
     caps, tau_at, checks, energies = {}, {}, {}, {}
-    for k in methods:
+    for i, k in enumerate(methods):
+        _report(progress, "capacity", i / len(methods))
         res = resolution_for(model, k)
         energies[k] = energy(resolve(prob, res))
         for mode in modes:
@@ -260,15 +285,22 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
             tau_at[k, mode] = a + (c.mass if np.isfinite(c.mass) else 0.0) * b
             if check and c.feasible and np.isfinite(c.mass):
                 checks[k, mode] = cap.brute_force_check(model, traj, res, mode, c, payload)
+    _report(progress, "capacity", 1.0)
     zero_ok = all(caps[k, m].feasible and caps[k, m].lower == 0.0 for k in methods for m in modes)
-    lp = {mode: cap.lp_capacity(prob, model.motors, model.motors.passive, mode, zero_feasible=zero_ok)
-          for mode in modes} if with_lp else {}
+    lp = {}
+    for i, mode in enumerate(modes if with_lp else ()):
+        _report(progress, "lp", i / len(modes))
+        lp[mode] = cap.lp_capacity(prob, model.motors, model.motors.passive, mode, zero_feasible=zero_ok)
+    if with_lp:
+        _report(progress, "lp", 1.0)
     optimised = None
     if optimise:
+        _report(progress, "weights", 0.0)
         base = resolution_for(model, "min_energy")
         w, c = cap.optimise_weights(prob, base, model.motors)
         a, b = cap.affine_torques(prob, replace(base, weights=w), "scaled")
         optimised = (w, c, a + c.mass * b)
+        _report(progress, "weights", 1.0)
     return CapacityStudy(model, traj, prob, modes, caps, tau_at, lp, optimised, energies, checks,
                          cap.torque_limits(model.motors, traj.qd), payload)
 

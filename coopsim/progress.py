@@ -8,10 +8,11 @@ import sys
 class ProgressBar:
     """`bar(label, fraction)` redraws `label [#####.....]  50%`; `bar.close()` ends the line."""
 
-    def __init__(self, stream=None, width: int = 30):
+    def __init__(self, stream=None, width: int = 30, enabled: bool = True):
+        """Drawn on `stream` (default stderr) when it is a terminal and `enabled` (e.g. not with --json)."""
         self.stream = stream or sys.stderr
         self.width = width
-        self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.enabled = enabled and hasattr(self.stream, "isatty") and self.stream.isatty()
         self.last = None
 
     def __call__(self, label: str, fraction: float) -> None:

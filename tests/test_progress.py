@@ -34,3 +34,27 @@ def test_bar_is_silent_when_not_a_terminal():
     bar("native", 0.5)
     bar.close()
     assert out.getvalue() == ""
+
+
+def test_inverse_and_capacity_report_their_stages_on_a_terminal(workdir, monkeypatch, capsys):
+    """`coopsim inverse --replay` and `coopsim capacity` draw one bar per stage on a terminal, each
+    ending at 100 %; with --json nothing."""
+    from coopsim.cli import main
+
+    monkeypatch.chdir(workdir)
+    err = _Tty()
+    monkeypatch.setattr("sys.stderr", err)
+    scenario = "scenarios/paper_planar_2x3.yaml"
+    assert main(["inverse", scenario, "--duration", "0.3", "--replay", "--no-curve", "--out", "a"]) == 0
+    assert main(["capacity", scenario, "--duration", "0.3", "--out", "b"]) == 0
+    frames = err.getvalue().replace("\n", "\r").split("\r")
+    last = {}
+    for f in frames:
+        if f.strip():
+            last[f.split()[0]] = f
+    assert list(last) == ["forward", "inverse", "replay", "capacity", "lp", "weights"], list(last)
+    assert all(f.endswith("100%") for f in last.values()), last
+    quiet = _Tty()
+    monkeypatch.setattr("sys.stderr", quiet)
+    assert main(["capacity", scenario, "--duration", "0.3", "--out", "c", "--json"]) == 0
+    assert quiet.getvalue() == "", quiet.getvalue()[:200]
