@@ -45,6 +45,23 @@ def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[s
     return metadata_joint_labels(log.metadata, n)
 
 
+def run_title(log: LogData, what: str, twin: bool = False) -> str:
+    """A figure title naming the scenario and its settings, as the log's metadata records them:
+    'paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12; MuJoCo RK4 0.001 s)'. `twin`: name the
+    MuJoCo settings too."""
+    meta = log.metadata
+    name = meta.get("scenario", {}).get("name")
+    nat, mj = meta.get("native.integrator", {}), meta.get("mujoco", {})
+    settings = []
+    if "method" in nat:
+        settings.append(f"native {nat['method']}" + (f" rtol {nat['rtol']}" if nat["method"] != "rk4" else
+                                                     f" step {nat.get('step')} s"))
+    if twin and "integrator" in mj:
+        settings.append(f"MuJoCo {mj['integrator']} {mj.get('timestep')} s")
+    text = what if name is None else f"{name} — {what}"
+    return text + (f" ({'; '.join(settings)})" if settings else "")
+
+
 def _aligned(t: np.ndarray, t_other: np.ndarray, x_other: np.ndarray) -> np.ndarray:
     """x_other (M, ...) sampled at t_other, at the times t (N,) (exact when the times agree)."""
     if np.array_equal(t, t_other):
@@ -117,7 +134,8 @@ def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list
         cols = range(sl.start, sl.stop)
         _compare_columns(axes[:, col], t, x, y, cols, [labels[j] for j in cols], quantity, unit,
                          f"{arm}: joint {quantity}", f"{arm}: |native − mujoco|")
-    fig.suptitle(f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"))
+    fig.suptitle(run_title(log, f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"),
+                           twin=y is not None))
     return fig
 
 
@@ -135,7 +153,8 @@ def _object_figure(log: LogData) -> Figure:
     for col, (name, sym, unit, x, y) in enumerate(parts):
         _compare_columns(axes[:, col], t, x, y, range(3), [f"{sym}{c}" for c in _AXES], name, unit,
                          f"Object centre-of-mass {name}", f"Object {name}: |native − mujoco|")
-    fig.suptitle("Object motion" + ("" if rows == 1 else ": native model vs MuJoCo twin"))
+    fig.suptitle(run_title(log, "Object motion" + ("" if rows == 1 else ": native model vs MuJoCo twin"),
+                           twin=rows > 1))
     return fig
 
 
@@ -149,7 +168,7 @@ def _constraint_figure(log: LogData) -> Figure:
     twin = log.topics.get(TWIN + "/constraint")
     if twin is not None:
         drawn.append(_log_plot(ax, twin["t"], np.abs(twin["weld_violation"]), "MuJoCo weld violation", ls="--"))
-    ax.set_title("Constraint violation")
+    ax.set_title(run_title(log, "Constraint violation", twin=twin is not None), fontsize=9)
     _finish_log_axis(ax, any(drawn), "violation (m or rad)")
     return fig
 

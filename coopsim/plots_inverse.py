@@ -19,6 +19,7 @@ import numpy as np
 
 from .labels import metadata_joint_labels
 from .log import LogData
+from .plots import run_title
 from .render import FigureWorkers, render_figures
 from .resolutions import RESOLUTIONS
 
@@ -71,6 +72,7 @@ def inverse_torques_figure(log: LogData) -> Figure:
         ax.set_ylabel("τ (N·m)")
         ax.grid(alpha=0.3)
     fig.axes[0].legend(fontsize=7)
+    fig.suptitle(run_title(log, "Joint torques of each resolution (Fig. 6)"))
     return fig
 
 
@@ -90,6 +92,7 @@ def inverse_norms_figure(log: LogData) -> Figure:
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
     ax1.legend(fontsize=8)
+    fig.suptitle(run_title(log, "Torque norm and cost (Fig. 7)"))
     return fig
 
 
@@ -119,6 +122,7 @@ def inverse_internal_figure(log: LogData) -> Figure:
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    fig.suptitle(run_title(log, "Internal wrench and object stress"))
     return fig
 
 
@@ -163,6 +167,7 @@ def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
         ax.set_ylabel("τ (N·m)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
+    fig.suptitle(run_title(log, f"Capacity: the motor that saturates first ({mode})"))
     return fig
 
 
@@ -182,6 +187,7 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
     ax.set_ylabel("largest mass this sample allows (kg)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
+    fig.suptitle(run_title(log, f"Largest mass each sample allows ({mode})"))
     return fig
 
 
