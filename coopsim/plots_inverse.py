@@ -46,6 +46,9 @@ def _methods(log: LogData, prefix: str, suffix: str) -> list[str]:
     return sorted(found, key=lambda k: order.index(k) if k in order else len(order))
 
 
+MOTOR_LINES = "motor lines τ_max, τ_min (eq. 36)"
+
+
 def inverse_torques_figure(log: LogData) -> Figure:
     """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint,
     with the motor lines of eq. 36 (grey)."""
@@ -65,13 +68,17 @@ def inverse_torques_figure(log: LogData) -> Figure:
         if np.all(np.isfinite(hi)):
             span = max(np.max(np.abs([ln.get_ydata() for ln in ax.lines])), 1e-9)
             if np.min(hi) < 3 * span:
-                ax.plot(t, hi, color="0.6", lw=0.8)
+                ax.plot(t, hi, color="0.6", lw=0.8, label=MOTOR_LINES)
                 ax.plot(t, lo, color="0.6", lw=0.8)
         ax.set_title(names[j], fontsize=9)
         ax.set_xlabel("t (s)")
         ax.set_ylabel("τ (N·m)")
         ax.grid(alpha=0.3)
-    fig.axes[0].legend(fontsize=7)
+    legend = {}   # label → handle over every panel: the motor lines may be drawn on other panels only
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, handle)
+    fig.axes[0].legend(list(legend.values()), list(legend), fontsize=7)
     fig.suptitle(run_title(log, "Joint torques of each resolution (Fig. 6)"))
     return fig
 

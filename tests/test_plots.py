@@ -87,3 +87,16 @@ def test_every_figure_names_its_scenario_and_settings(logs):
         assert "MuJoCo RK4 0.001 s" in title, title
     alone = plots._joint_figure(native, "angle", "angle", "rad", labels).get_suptitle()
     assert alone == "paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12)", alone
+
+
+def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
+    """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
+    from coopsim.cli import main
+    from coopsim.plots_inverse import MOTOR_LINES, inverse_torques_figure
+    from conftest import SCENARIOS
+
+    assert main(["inverse", str(SCENARIOS / "paper_planar_2x3.yaml"), "--duration", "0.3", "--no-curve",
+                 "--out", str(tmp_path), "--json"]) == 0
+    fig = inverse_torques_figure(read_mcap(tmp_path / "inverse.mcap"))
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts.count(MOTOR_LINES) == 1 and len(texts) == 6, texts
