@@ -45,14 +45,19 @@ def fixed_layout(fig: Figure) -> None:
                         wspace=MARGIN["wgap"] / width, hspace=MARGIN["hgap"] / height)
 
 
-def save_figure(fig: Figure, path: Path) -> Path:
-    """Lay out (`fixed_layout`) and write `fig` as PNG (DPI dots per inch) atomically; returns the path."""
+def _draw_png(fig: Figure, target) -> None:
+    """Lay out (`fixed_layout`) and draw `fig` as PNG (DPI dots per inch) into `target` (a path or a file)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
     fixed_layout(fig)
+    fig.savefig(target, format="png", dpi=DPI)
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Write `fig` as PNG atomically (`_draw_png`); returns the path."""
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=DPI)
+        _draw_png(fig, tmp)
     return path
 
 
@@ -61,7 +66,6 @@ def _warm_up() -> None:
     axis and a legend into memory (what a worker would otherwise do on its first job)."""
     import io
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     os.nice(WORKER_NICENESS)
@@ -70,9 +74,7 @@ def _warm_up() -> None:
     ax.semilogy([0.0, 1.0], [1e-9, 1e-3], label="x")
     ax.set(title="t", xlabel="x", ylabel="y")
     ax.legend()
-    FigureCanvasAgg(fig)
-    fixed_layout(fig)
-    fig.savefig(io.BytesIO(), format="png", dpi=DPI)
+    _draw_png(fig, io.BytesIO())
 
 
 def _render(job) -> str:
