@@ -43,10 +43,10 @@ def _cmd_run(args) -> int:
     from .atomic import write_text_atomic
     from .compare import format_comparison
     from .harness import cross_validate
-    from .log import file_sha256, read_mcap, write_run_log
+    from .log import file_sha256, log_data, run_log, write_mcap
     from .plots import comparison_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers
+    from .render import FigureWorkers, render_while
     from .scenario import load_scenario
     from .summary import run_summary
 
@@ -56,10 +56,11 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
+        streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-        plots = comparison_plots(read_mcap(log_path), out, workers=workers)
+        plots, log_path = render_while(lambda: comparison_plots(log_data(streams, meta), out, workers=workers),
+                                       lambda: write_mcap(out / f"{model.name}.mcap", streams, meta))
     summary = run_summary(cv, log_path, plots)
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     if args.json:
@@ -116,10 +117,10 @@ def _cmd_inverse(args) -> int:
 
     from .atomic import write_text_atomic
     from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
-    from .log import file_sha256, read_mcap, run_metadata, write_mcap
+    from .log import file_sha256, log_data, run_metadata, write_mcap
     from .plots_inverse import inverse_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers
+    from .render import FigureWorkers, render_while
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration)
@@ -131,11 +132,12 @@ def _cmd_inverse(args) -> int:
         bar.close()
         summary = inverse_summary(study)
         out = Path(args.out or Path("out") / model.name)
-        log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
+        streams, meta = inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
-                        "moment_bound_Nm": study.bounds[1]}}))
-        plots = inverse_plots(read_mcap(log_path), out, workers=workers)
+                        "moment_bound_Nm": study.bounds[1]}})
+        plots, log_path = render_while(lambda: inverse_plots(log_data(streams, meta), out, workers=workers),
+                                       lambda: write_mcap(out / "inverse.mcap", streams, meta))
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
     write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
     print(json.dumps(json_safe(summary), indent=2) if args.json else
@@ -151,10 +153,10 @@ def _cmd_capacity(args) -> int:
     from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
-    from .log import file_sha256, read_mcap, run_metadata, write_mcap
+    from .log import file_sha256, log_data, run_metadata, write_mcap
     from .plots_inverse import capacity_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers
+    from .render import FigureWorkers, render_while
     from .scenario import load_scenario, require_motor_limits
 
     model = load_scenario(args.scenario, duration=args.duration)
@@ -168,9 +170,9 @@ def _cmd_capacity(args) -> int:
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
-        log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
-                              run_metadata(model, None, meta | capacity_metadata(summary)))
-        plots = capacity_plots(read_mcap(log_path), out, workers=workers)
+        streams, meta = capacity_series(study), run_metadata(model, None, meta | capacity_metadata(summary))
+        plots, log_path = render_while(lambda: capacity_plots(log_data(streams, meta), out, workers=workers),
+                                       lambda: write_mcap(out / "capacity.mcap", streams, meta))
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
     write_text_atomic(out / "capacity.json", json.dumps(json_safe(summary), indent=2) + "\n")
     print(json.dumps(json_safe(summary), indent=2) if args.json else

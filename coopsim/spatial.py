@@ -93,8 +93,9 @@ def rigid_acceleration(a_O: np.ndarray, w: np.ndarray, dw: np.ndarray, r: np.nda
     return a_O + cross(dw, r) + cross(w, cross(w, r))
 
 
-def box_inertia(mass: float, size: np.ndarray) -> np.ndarray:
-    """Inertia (3, 3) of a solid box of `mass` kg and edges `size` (3,) m about its centre, box axes:
-    m/12 diag(b² + c², a² + c², a² + b²)."""
+def box_inertia(mass, size: np.ndarray) -> np.ndarray:
+    """Inertia (…, 3, 3) of a solid box of `mass` (…) kg and edges `size` (…, 3) m about its centre,
+    box axes: m/12 diag(b² + c², a² + c², a² + b²) (broadcasting over the leading axes)."""
     a2 = np.asarray(size, dtype=float) ** 2
-    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
+    d = np.stack([a2[..., 1] + a2[..., 2], a2[..., 0] + a2[..., 2], a2[..., 0] + a2[..., 1]], axis=-1)
+    return np.asarray(mass, dtype=float)[..., None, None] / 12.0 * (d[..., :, None] * np.eye(3))
