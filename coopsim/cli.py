@@ -18,9 +18,27 @@ def _cmd_simulate(args) -> int:
     from .summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration)
-    summary = simulation_summary(simulate(model, duration=args.duration))
+    res = simulate(model, duration=args.duration)
+    summary = simulation_summary(res)
     print(json.dumps(summary, indent=2) if args.json else format_simulation_summary(summary))
+    _print_warnings(res)
     return 0
+
+
+def _print_warnings(res) -> None:
+    """Each warning of a native run (`coopsim.diagnostics`) as one line on stderr."""
+    for w in res.warnings:
+        print(f"coopsim: warning: {w.message()}", file=sys.stderr)
+
+
+def _previous_run_set(out) -> set[str]:
+    """Names of the files of the run whose summary.json is in folder `out` (what a new run replaces)."""
+    try:
+        files = json.loads((out / "summary.json").read_text(encoding="utf-8"))["files"]
+        names = [files["log"], *files["plots"]]
+        return {"summary.json"} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in names}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {"summary.json"}
 
 
 def _cmd_mjcf(args) -> int:
@@ -40,7 +58,7 @@ def _cmd_mjcf(args) -> int:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
+    from .atomic import staged_folder, write_text_atomic
     from .compare import format_comparison
     from .harness import cross_validate
     from .log import file_sha256, read_mcap, write_run_log
@@ -56,12 +74,15 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
-            "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
-            "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-        plots = comparison_plots(read_mcap(log_path), out, workers=workers)
-    summary = run_summary(cv, log_path, plots)
-    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        with staged_folder(out, replaces=_previous_run_set) as stage:   # the whole set, or nothing
+            log_path = write_run_log(stage / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
+                "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+                "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
+            plots = comparison_plots(read_mcap(log_path), stage, workers=workers)
+            log_path, plots = out / log_path.name, [out / p.name for p in plots]
+            summary = run_summary(cv, log_path, plots)
+            write_text_atomic(stage / "summary.json", json.dumps(summary, indent=2) + "\n")
+    _print_warnings(cv.native)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -277,8 +298,15 @@ def _display_path(path: str) -> str:
         return p.as_posix()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (`coopsim: error: …`, naming the option), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"coopsim: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="coopsim", description=(
+    parser = _Parser(prog="coopsim", description=(
         "Cooperative manipulators: recursive Gibbs-Appell closed-chain dynamics, validated against MuJoCo."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command")

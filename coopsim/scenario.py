@@ -446,6 +446,11 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
         constraint_rows=sec.string("constraint_rows", ("auto", "spatial"), d.constraint_rows),
         rank_tol=sec.number("rank_tol", d.rank_tol, positive=True),
         on_rank_deficiency=sec.string("on_rank_deficiency", ("warn", "error"), d.on_rank_deficiency),
+        condition_limit=sec.number("condition_limit", d.condition_limit, positive=True),
+        on_ill_conditioning=sec.string("on_ill_conditioning", ("warn", "error"), d.on_ill_conditioning),
+        initial_correction_warning=sec.number("initial_correction_warning", d.initial_correction_warning,
+                                              positive=True),
+        singularity_limit=sec.number("singularity_limit", d.singularity_limit, positive=True),
     )
     sec.done()
     return s
