@@ -115,7 +115,7 @@ def _cmd_validate(args) -> int:
     from .scenario import load_scenario
 
     results = []
-    for scenario in _scenario_paths(args.scenarios):
+    for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
         bar.close()
@@ -275,13 +275,20 @@ def _cmd_view(args) -> int:
     return 0
 
 
-def _scenario_paths(given: list[str]) -> list[str]:
-    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given."""
+def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
+    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given (with `hard`,
+    also the hard cases `scenarios/hard/*.yaml` that set `validation` thresholds: those with a
+    meaningful MuJoCo twin)."""
     from pathlib import Path
+
+    from .scenario import load_yaml
 
     if given:
         return given
     found = sorted(str(p) for p in Path("scenarios").glob("*.yaml"))
+    if hard:
+        found += sorted(str(p) for p in Path("scenarios/hard").glob("*.yaml")
+                        if isinstance(data := load_yaml(p), dict) and "validation" in data)
     if not found:
         raise CoopsimError("no scenario given and no scenarios/*.yaml in the current folder")
     return found
@@ -335,7 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="cross-validate scenarios against their MuJoCo twins",
                        description=("Run the native model and the MuJoCo twin of each SCENARIO (default: "
-                                    "scenarios/*.yaml) and compare them; exit 0 only if all agree."))
+                                    "scenarios/*.yaml and the hard cases in scenarios/hard/ that set validation "
+                                    "thresholds) and compare them; exit 0 only if all agree."))
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")
