@@ -18,9 +18,27 @@ def _cmd_simulate(args) -> int:
     from .summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration)
-    summary = simulation_summary(simulate(model, duration=args.duration))
+    res = simulate(model, duration=args.duration)
+    summary = simulation_summary(res)
     print(json.dumps(summary, indent=2) if args.json else format_simulation_summary(summary))
+    _print_warnings(res)
     return 0
+
+
+def _print_warnings(res) -> None:
+    """Each warning of a native run (`coopsim.diagnostics`) as one line on stderr."""
+    for w in res.warnings:
+        print(f"coopsim: warning: {w.message()}", file=sys.stderr)
+
+
+def _previous_run_set(out) -> set[str]:
+    """Names of the files of the run whose summary.json is in folder `out` (what a new run replaces)."""
+    try:
+        files = json.loads((out / "summary.json").read_text(encoding="utf-8"))["files"]
+        names = [files["log"], *files["plots"]]
+        return {"summary.json"} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in names}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {"summary.json"}
 
 
 def _cmd_mjcf(args) -> int:
@@ -40,7 +58,7 @@ def _cmd_mjcf(args) -> int:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
+    from .atomic import staged_folder, write_text_atomic
     from .compare import format_comparison
     from .harness import cross_validate
     from .log import file_sha256, log_data, run_log, write_mcap
@@ -59,10 +77,13 @@ def _cmd_run(args) -> int:
         streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-        plots, log_path = render_while(lambda: comparison_plots(log_data(streams, meta), out, workers=workers),
-                                       lambda: write_mcap(out / f"{model.name}.mcap", streams, meta))
-    summary = run_summary(cv, log_path, plots)
-    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        with staged_folder(out, replaces=_previous_run_set) as stage:   # the whole set, or nothing
+            plots, log_path = render_while(lambda: comparison_plots(log_data(streams, meta), stage, workers=workers),
+                                           lambda: write_mcap(stage / f"{model.name}.mcap", streams, meta))
+            log_path, plots = out / log_path.name, [out / p.name for p in plots]
+            summary = run_summary(cv, log_path, plots)
+            write_text_atomic(stage / "summary.json", json.dumps(summary, indent=2) + "\n")
+    _print_warnings(cv.native)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -95,7 +116,7 @@ def _cmd_validate(args) -> int:
     from .scenario import load_scenario
 
     results = []
-    for scenario in _scenario_paths(args.scenarios):
+    for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
         bar.close()
@@ -256,13 +277,20 @@ def _cmd_view(args) -> int:
     return 0
 
 
-def _scenario_paths(given: list[str]) -> list[str]:
-    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given."""
+def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
+    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given (with `hard`,
+    also the hard cases `scenarios/hard/*.yaml` that set `validation` thresholds: those with a
+    meaningful MuJoCo twin)."""
     from pathlib import Path
+
+    from .scenario import load_yaml
 
     if given:
         return given
     found = sorted(str(p) for p in Path("scenarios").glob("*.yaml"))
+    if hard:
+        found += sorted(str(p) for p in Path("scenarios/hard").glob("*.yaml")
+                        if isinstance(data := load_yaml(p), dict) and "validation" in data)
     if not found:
         raise CoopsimError("no scenario given and no scenarios/*.yaml in the current folder")
     return found
@@ -279,8 +307,15 @@ def _display_path(path: str) -> str:
         return p.as_posix()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (`coopsim: error: …`, naming the option), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"coopsim: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="coopsim", description=(
+    parser = _Parser(prog="coopsim", description=(
         "Cooperative manipulators: recursive Gibbs-Appell closed-chain dynamics, validated against MuJoCo."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command")
@@ -309,7 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="cross-validate scenarios against their MuJoCo twins",
                        description=("Run the native model and the MuJoCo twin of each SCENARIO (default: "
-                                    "scenarios/*.yaml) and compare them; exit 0 only if all agree."))
+                                    "scenarios/*.yaml and the hard cases in scenarios/hard/ that set validation "
+                                    "thresholds) and compare them; exit 0 only if all agree."))
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")

@@ -604,7 +604,8 @@ def simulation_series(res, prefix: str = "/native") -> list[Series]:
     """Series of a native SimResult: {prefix}/joint_state (angle, rate, acceleration, torque (N, n)
     rad, rad/s, rad/s², N·m); {prefix}/object (position (N, 3) m, quaternion (N, 4) [w, x, y, z],
     twist (N, 6) [v_C; ω] world axes); {prefix}/grasp_wrench and {prefix}/internal_wrench (wrench
-    (N, r, 6) [f; n]); {prefix}/constraint (residual_pos, residual_vel, cond (N,))."""
+    (N, r, 6) [f; n]); {prefix}/constraint (residual_pos, residual_vel, cond (N,) and manipulability
+    (N, r): each arm's √det(A Aᵀ), A its end-effector Jacobian in the scene's rows)."""
     t = res.t
     return [
         _joint_state(prefix, t, res.q, res.qd, res.qdd, res.tau),
@@ -612,7 +613,8 @@ def simulation_series(res, prefix: str = "/native") -> list[Series]:
         Series(f"{prefix}/grasp_wrench", "coopsim.Wrenches", t, {"wrench": res.grasp_wrench}),
         Series(f"{prefix}/internal_wrench", "coopsim.Wrenches", t, {"wrench": res.internal_wrench}),
         Series(f"{prefix}/constraint", "coopsim.NativeConstraint", t,
-               {"residual_pos": res.residual_pos, "residual_vel": res.residual_vel, "cond": res.cond}),
+               {"residual_pos": res.residual_pos, "residual_vel": res.residual_vel, "cond": res.cond,
+                "manipulability": res.manipulability}),
     ]
 
 
@@ -743,7 +745,8 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
     """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact):
     scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model (arm names,
     joints per arm, joint names), native.integrator, mujoco, validation, and for a native result
-    native.initial_projection (dq, dqd, residual before/after, iterations) and native.integrator_stats.
+    native.initial_projection (dq, dqd, residual before/after, iterations), native.integrator_stats and
+    native.warnings (count; "1", "2", …: each warning as JSON, `coopsim.diagnostics.RunWarning.as_dict`).
     Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
     {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
     extra = dict(extra or {})
@@ -769,6 +772,8 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
             "dq": p.dq, "dqd": p.dqd, "residual_before": p.residual_before, "residual_after": p.residual_after,
             "iterations": p.iterations})
         meta["native.integrator_stats"] = _record(asdict(res.stats))
+        meta["native.warnings"] = _record({"count": len(res.warnings)}
+                                          | {str(i + 1): w.as_dict() for i, w in enumerate(res.warnings)})
     rest = {}
     for k, v in extra.items():
         if isinstance(v, dict):

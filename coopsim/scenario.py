@@ -341,6 +341,15 @@ def _torque(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     return table
 
 
+def _check_passive_torque(sec: _Section, table: TorqueTable, passive: np.ndarray) -> None:
+    """A passive joint has no motor: its torque must be zero throughout (ScenarioError naming it)."""
+    loaded = passive & np.any(table.values != 0, axis=0)
+    if np.any(loaded):
+        j = int(np.flatnonzero(loaded)[0])
+        sec.fail("torque", f"joint {j + 1} is passive ({sec.field('passive')}) but its torque is not zero "
+                           f"(up to {np.max(np.abs(table.values[:, j])):g} N·m)")
+
+
 def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarray) -> TorqueTable:
     if len(times) < 1 or np.any(np.diff(times) <= 0):
         sec.fail(key, "times must be strictly increasing")
@@ -446,6 +455,11 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
         constraint_rows=sec.string("constraint_rows", ("auto", "spatial"), d.constraint_rows),
         rank_tol=sec.number("rank_tol", d.rank_tol, positive=True),
         on_rank_deficiency=sec.string("on_rank_deficiency", ("warn", "error"), d.on_rank_deficiency),
+        condition_limit=sec.number("condition_limit", d.condition_limit, positive=True),
+        on_ill_conditioning=sec.string("on_ill_conditioning", ("warn", "error"), d.on_ill_conditioning),
+        initial_correction_warning=sec.number("initial_correction_warning", d.initial_correction_warning,
+                                              positive=True),
+        singularity_limit=sec.number("singularity_limit", d.singularity_limit, positive=True),
     )
     sec.done()
     return s
@@ -748,6 +762,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
         q, qd = _arm_state(sec, info["n"])
         torques.append(_torque(sec, info["n"], base_dir))
         motor_parts.append(_motors(sec, info["n"]))
+        _check_passive_torque(sec, torques[-1], motor_parts[-1][3])
         sec.done()
         arms.append(arm), q0.append(q), qd0.append(qd)
     names = [a.name for a in arms]
