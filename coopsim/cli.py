@@ -31,14 +31,35 @@ def _print_warnings(res) -> None:
         print(f"coopsim: warning: {w.message()}", file=sys.stderr)
 
 
-def _previous_run_set(out) -> set[str]:
-    """Names of the files of the run whose summary.json is in folder `out` (what a new run replaces)."""
-    try:
-        files = json.loads((out / "summary.json").read_text(encoding="utf-8"))["files"]
-        names = [files["log"], *files["plots"]]
-        return {"summary.json"} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in names}
-    except (OSError, ValueError, KeyError, TypeError):
-        return {"summary.json"}
+def _previous_set(index: str):
+    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
+    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
+    def names(out) -> set[str]:
+        try:
+            files = json.loads((out / index).read_text(encoding="utf-8"))["files"]
+            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
+            return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
+        except (OSError, ValueError, KeyError, TypeError):
+            return {index}
+    return names
+
+
+def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize):
+    """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
+    previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
+    draw(log, folder, workers=workers) drawn from the in-memory log meanwhile (`render_while`), and
+    the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. Returns
+    (log path, plot paths)."""
+    from .atomic import staged_folder, write_text_atomic
+    from .log import log_data, write_mcap
+    from .render import render_while
+
+    with staged_folder(out, replaces=_previous_set(index)) as stage:
+        plots, log_path = render_while(lambda: draw(log_data(streams, meta), stage, workers=workers),
+                                       lambda: write_mcap(stage / log_name, streams, meta))
+        log_path, plots = out / log_path.name, [out / p.name for p in plots]
+        write_text_atomic(stage / index, summarize(log_path, plots))
+    return log_path, plots
 
 
 def _cmd_mjcf(args) -> int:
@@ -58,13 +79,12 @@ def _cmd_mjcf(args) -> int:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .atomic import staged_folder, write_text_atomic
     from .compare import format_comparison
     from .harness import cross_validate
-    from .log import file_sha256, log_data, run_log, write_mcap
+    from .log import file_sha256, run_log
     from .plots import comparison_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers, render_while
+    from .render import FigureWorkers
     from .scenario import load_scenario
     from .summary import run_summary
 
@@ -77,12 +97,14 @@ def _cmd_run(args) -> int:
         streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-        with staged_folder(out, replaces=_previous_run_set) as stage:   # the whole set, or nothing
-            plots, log_path = render_while(lambda: comparison_plots(log_data(streams, meta), stage, workers=workers),
-                                           lambda: write_mcap(stage / f"{model.name}.mcap", streams, meta))
-            log_path, plots = out / log_path.name, [out / p.name for p in plots]
-            summary = run_summary(cv, log_path, plots)
-            write_text_atomic(stage / "summary.json", json.dumps(summary, indent=2) + "\n")
+        summary: dict = {}
+
+        def summarize(log_path, plots) -> str:
+            summary.update(run_summary(cv, log_path, plots))
+            return json.dumps(summary, indent=2) + "\n"
+
+        log_path, plots = _write_set(out, "summary.json", f"{model.name}.mcap", streams, meta, comparison_plots,
+                                     workers, summarize)
     _print_warnings(cv.native)
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -136,12 +158,11 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
     from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
-    from .log import file_sha256, log_data, run_metadata, write_mcap
+    from .log import file_sha256, run_metadata
     from .plots_inverse import inverse_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers, render_while
+    from .render import FigureWorkers
     from .scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration)
@@ -157,13 +178,19 @@ def _cmd_inverse(args) -> int:
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}})
-        plots, log_path = render_while(lambda: inverse_plots(log_data(streams, meta), out, workers=workers),
-                                       lambda: write_mcap(out / "inverse.mcap", streams, meta))
-    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
-    write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
+        log_path, plots = _write_set(out, "inverse.json", "inverse.mcap", streams, meta, inverse_plots, workers,
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     return 0 if summary.get("complete", True) else 1
+
+
+def _summary_text(summary: dict, log_path, plots, index) -> str:
+    """The JSON text of an inverse or capacity summary, its "files" (log, plots, the summary) set first."""
+    from .inverse_report import json_safe
+
+    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(index)]
+    return json.dumps(json_safe(summary), indent=2) + "\n"
 
 
 def _cmd_capacity(args) -> int:
@@ -171,13 +198,12 @@ def _cmd_capacity(args) -> int:
 
     import numpy as np
 
-    from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
-    from .log import file_sha256, log_data, run_metadata, write_mcap
+    from .log import file_sha256, run_metadata
     from .plots_inverse import capacity_plots
     from .progress import ProgressBar
-    from .render import FigureWorkers, render_while
+    from .render import FigureWorkers
     from .scenario import load_scenario, require_motor_limits
 
     model = load_scenario(args.scenario, duration=args.duration)
@@ -192,10 +218,8 @@ def _cmd_capacity(args) -> int:
         out = Path(args.out or Path("out") / model.name)
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
         streams, meta = capacity_series(study), run_metadata(model, None, meta | capacity_metadata(summary))
-        plots, log_path = render_while(lambda: capacity_plots(log_data(streams, meta), out, workers=workers),
-                                       lambda: write_mcap(out / "capacity.mcap", streams, meta))
-    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
-    write_text_atomic(out / "capacity.json", json.dumps(json_safe(summary), indent=2) + "\n")
+        log_path, plots = _write_set(out, "capacity.json", "capacity.mcap", streams, meta, capacity_plots, workers,
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "capacity.json"))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())

@@ -277,6 +277,32 @@ def test_a_failed_run_leaves_the_previous_set_and_a_new_one_replaces_it(tmp_path
     assert after["notes.txt"] == b"mine" and sorted(os.listdir(tmp_path)) == ["out"]
 
 
+def test_inverse_writes_its_set_beside_a_run(tmp_path, monkeypatch, capsys):
+    """`coopsim inverse` (and capacity: the same `cli._write_set`) writes its log, figures and JSON summary as one set too: a failure while
+    drawing leaves the folder as it was (the run's set and the previous inverse set), a success
+    replaces only the inverse set."""
+    out = tmp_path / "out"
+    assert _run(monkeypatch, SCENARIOS / "paper_planar_2x3.yaml", out) == 0
+    draw = {"fail": False}
+
+    def plots(log, folder, workers=None):
+        assert "/inverse/min_energy/torque" in log.topics     # the in-memory log of this study
+        if draw["fail"]:
+            raise OSError(28, "No space left on device")
+        (Path(folder) / "inverse_torques.png").write_bytes(b"png")
+        return [Path(folder) / "inverse_torques.png"]
+
+    monkeypatch.setattr("coopsim.plots_inverse.inverse_plots", plots)
+    args = ["inverse", str(SCENARIOS / "paper_planar_2x3.yaml"), "--duration", "0.05", "--method", "min_energy",
+            "--no-curve", "--out", str(out), "--json"]
+    assert cli.main(args) == 0
+    before = _tree(out)
+    assert {"inverse.mcap", "inverse.json", "inverse_torques.png", "summary.json"} <= set(before)
+    draw["fail"] = True
+    assert cli.main(args) == 2 and "No space left on device" in capsys.readouterr().err
+    assert _tree(out) == before and sorted(os.listdir(tmp_path)) == ["out"]
+
+
 _KILLED_WRITER = """
 import sys, time
 from pathlib import Path
