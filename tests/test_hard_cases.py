@@ -278,9 +278,9 @@ def test_a_failed_run_leaves_the_previous_set_and_a_new_one_replaces_it(tmp_path
 
 
 def test_inverse_writes_its_set_beside_a_run(tmp_path, monkeypatch, capsys):
-    """`coopsim inverse` (and capacity: the same `cli._write_set`) writes its log, figures and JSON summary as one set too: a failure while
-    drawing leaves the folder as it was (the run's set and the previous inverse set), a success
-    replaces only the inverse set."""
+    """`coopsim inverse` (and capacity: the same `cli._write_set`) writes its log, figures and JSON
+    summary as one set too: a failure while drawing leaves the folder as it was (the run's set and the
+    previous inverse set)."""
     out = tmp_path / "out"
     assert _run(monkeypatch, SCENARIOS / "paper_planar_2x3.yaml", out) == 0
     draw = {"fail": False}
