@@ -37,7 +37,7 @@ that a scenario may ask for by name (`robot: ur5`), with their chain and locked 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -62,35 +62,30 @@ class RobotFileError(CoopsimError):
 
 @dataclass(frozen=True)
 class Robot:
-    """A bundled robot: `file` relative to example-robot-data's `robots/` folder, the default chain
-    (`base` and `tip` link names) and the joints locked by default (a gripper's fingers)."""
+    """A bundled robot (README, "Real robots"): `file` relative to example-robot-data's `robots/`
+    folder, the default chain (`base` and `tip` link names) and the joints locked by default (a
+    gripper's fingers)."""
 
     file: str
     base: str
     tip: str
     lock: tuple[str, ...] = ()
-    description: str = ""
 
 
 ROBOTS: dict[str, Robot] = {
-    "ur3": Robot("ur_description/urdf/ur3_robot.urdf", "base_link", "tool0", (), "Universal Robots UR3, 6R"),
-    "ur5": Robot("ur_description/urdf/ur5_robot.urdf", "base_link", "tool0", (), "Universal Robots UR5, 6R"),
-    "ur10": Robot("ur_description/urdf/ur10_robot.urdf", "base_link", "tool0", (), "Universal Robots UR10, 6R"),
+    "ur3": Robot("ur_description/urdf/ur3_robot.urdf", "base_link", "tool0"),
+    "ur5": Robot("ur_description/urdf/ur5_robot.urdf", "base_link", "tool0"),
+    "ur10": Robot("ur_description/urdf/ur10_robot.urdf", "base_link", "tool0"),
     "panda": Robot("panda_description/urdf/panda.urdf", "panda_link0", "panda_hand_tcp",
-                   ("panda_finger_joint1", "panda_finger_joint2"), "Franka Emika Panda with its hand, 7R"),
-    "kinova": Robot("kinova_description/robots/kinova.urdf", "j2s6s200_link_base", "j2s6s200_end_effector", (),
-                    "Kinova Jaco 2 (j2s6s200), 6R"),
-    "xarm7": Robot("xarm_description/urdf/xarm7.urdf", "link_base", "link_eef", (), "UFactory xArm7, 7R"),
+                   ("panda_finger_joint1", "panda_finger_joint2")),
+    "kinova": Robot("kinova_description/robots/kinova.urdf", "j2s6s200_link_base", "j2s6s200_end_effector"),
+    "xarm7": Robot("xarm_description/urdf/xarm7.urdf", "link_base", "link_eef"),
     "baxter_left": Robot("baxter_description/urdf/baxter.urdf", "base", "left_gripper",
-                         ("l_gripper_l_finger_joint", "l_gripper_r_finger_joint"),
-                         "Rethink Baxter, left arm with its gripper, 7R (base: the robot's base)"),
+                         ("l_gripper_l_finger_joint", "l_gripper_r_finger_joint")),
     "baxter_right": Robot("baxter_description/urdf/baxter.urdf", "base", "right_gripper",
-                          ("r_gripper_l_finger_joint", "r_gripper_r_finger_joint"),
-                          "Rethink Baxter, right arm with its gripper, 7R (base: the robot's base)"),
-    "so100": Robot("so_arm_description/urdf/so100.urdf", "base", "jaw", ("gripper",),
-                   "SO-100 (LeRobot), 5R, jaw locked"),
-    "so101": Robot("so_arm_description/urdf/so101.urdf", "base_link", "gripper_frame_link", ("gripper",),
-                   "SO-101 (LeRobot), 5R, jaw locked"),
+                          ("r_gripper_l_finger_joint", "r_gripper_r_finger_joint")),
+    "so100": Robot("so_arm_description/urdf/so100.urdf", "base", "gripper", ("gripper",)),
+    "so101": Robot("so_arm_description/urdf/so101.urdf", "base_link", "gripper_frame_link", ("gripper",)),
 }
 
 
@@ -122,28 +117,20 @@ def robot_file(name: str) -> Path:
 
 @dataclass(frozen=True, eq=False)
 class Chain:
-    """One serial chain of a robot file, in coopsim's link convention (`model.ArmModel`): per joint
-    (n of them) joint_names, joint_pos (n, 3) and joint_rot (n, 3, 3) of link frame i in frame i−1 (the
-    base link's frame for i = 0), joint_axis (n, 3) unit in frame i, link_mass (n,) kg, link_com (n, 3)
-    frame i, link_inertia (n, 3, 3) kg·m² about the centre of mass in frame-i axes (fixed bodies merged),
-    joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s limits (inf: none);
-    tip_pos (3,) and tip_rot (3, 3): the tip body's frame in the last link frame."""
+    """One serial chain of a robot file: `links`, the arm in coopsim's link convention
+    (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes) with its base
+    link's frame at the world origin and its end-effector at the tip body's frame; per joint (n of
+    them) joint_names, joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s
+    limits (inf: none)."""
 
     file: Path
     base: str
     tip: str
     joint_names: tuple[str, ...]
-    joint_pos: np.ndarray
-    joint_rot: np.ndarray
-    joint_axis: np.ndarray
-    link_mass: np.ndarray
-    link_com: np.ndarray
-    link_inertia: np.ndarray
+    links: ArmModel
     joint_range: np.ndarray
     effort: np.ndarray
     velocity: np.ndarray
-    tip_pos: np.ndarray
-    tip_rot: np.ndarray
 
     @property
     def n(self) -> int:
@@ -153,9 +140,9 @@ class Chain:
             ee_rot: np.ndarray) -> ArmModel:
         """The arm with its base link's frame at (base_pos, base_rot) in the world and its end-effector
         at (ee_pos, ee_rot) in the tip body's frame."""
-        return ArmModel(name, np.asarray(base_pos, float), np.asarray(base_rot, float), self.joint_pos,
-                        self.joint_rot, self.joint_axis, self.link_mass, self.link_com, self.link_inertia,
-                        np.zeros((self.n, 3)), self.tip_pos + self.tip_rot @ ee_pos, self.tip_rot @ ee_rot)
+        tip_pos, tip_rot = self.links.ee_pos, self.links.ee_rot
+        return replace(self.links, name=name, base_pos=np.asarray(base_pos, float),
+                       base_rot=np.asarray(base_rot, float), ee_pos=tip_pos + tip_rot @ ee_pos, ee_rot=tip_rot @ ee_rot)
 
 
 # ------------------------------------------------------------------------------------- the file
@@ -404,11 +391,13 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
                                  f"has no mass or a singular inertia (mass {mass:g} kg): give it an <inertial>")
     names = tuple(_name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
     velocity = _urdf_velocity(path)
-    return Chain(path, base, tip, names, np.array([P.p for P in placements]), np.array([P.R for P in placements]),
-                 np.array([m.jnt_axis[j] / np.linalg.norm(m.jnt_axis[j]) for j in joints]),
-                 np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), np.array([p[2] for p in parts]),
-                 np.array([_range(m, j) for j in joints]), np.array([_effort(m, j) for j in joints]),
-                 np.array([velocity.get(name, np.inf) for name in names]), X.p.copy(), X.R.copy())
+    links = ArmModel("", np.zeros(3), np.eye(3), np.array([P.p for P in placements]),
+                     np.array([P.R for P in placements]),
+                     np.array([m.jnt_axis[j] / np.linalg.norm(m.jnt_axis[j]) for j in joints]),
+                     np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), np.array([p[2] for p in parts]),
+                     np.zeros((len(joints), 3)), X.p.copy(), X.R.copy())
+    return Chain(path, base, tip, names, links, np.array([_range(m, j) for j in joints]),
+                 np.array([_effort(m, j) for j in joints]), np.array([velocity.get(name, np.inf) for name in names]))
 
 
 def _range(m: mujoco.MjModel, j: int) -> tuple[float, float]:

@@ -81,7 +81,7 @@ def test_every_listed_robot_reads(name):
     chain = read_chain(*bundled(name))
     assert chain.n == {"panda": 7, "xarm7": 7, "baxter_left": 7, "baxter_right": 7, "so100": 5,
                        "so101": 5}.get(name, 6)
-    assert np.all(chain.link_mass > 0) and np.all(np.isfinite(chain.effort)) and np.all(np.isfinite(chain.velocity))
+    assert np.all(chain.links.link_mass > 0) and np.all(np.isfinite(chain.effort)) and np.all(np.isfinite(chain.velocity))
 
 
 @needs_robots
@@ -169,8 +169,8 @@ def test_mjcf_joint_anchors_read_as_the_urdf():
     """anchor.xml (hinges at `pos` off their bodies, a turned body, a motor with forcerange × gear) and
     anchor.urdf (the same arm, link frames at the joints) give the same chain."""
     a, b = read_chain(DATA / "anchor.xml", "base", "tip"), read_chain(DATA / "anchor.urdf", "base", "tip")
-    for key in ("joint_pos", "joint_rot", "joint_axis", "link_mass", "link_com", "link_inertia", "tip_pos", "tip_rot"):
-        assert np.max(np.abs(getattr(a, key) - getattr(b, key))) <= 1e-15, key
+    for key in ("joint_pos", "joint_rot", "joint_axis", "link_mass", "link_com", "link_inertia", "ee_pos", "ee_rot"):
+        assert np.max(np.abs(getattr(a.links, key) - getattr(b.links, key))) <= 1e-15, key
     assert a.joint_range.tolist() == b.joint_range.tolist() == [[-1.0, 1.0], [-np.inf, np.inf]]
     assert a.effort.tolist() == b.effort.tolist() == [20.0, np.inf]
     assert a.velocity.tolist() == [np.inf, np.inf] and b.velocity.tolist() == [1.0, np.inf]
