@@ -214,7 +214,9 @@ class Model:
     """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
     a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
     spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
-    state as given (not yet consistent); duration s."""
+    state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
+    limit of each stacked joint, rad (±inf: none; None: no joint has one), from a robot file or a
+    joint's `range`: checked at the initial state, not enforced by the dynamics."""
 
     name: str
     arms: tuple[ArmModel, ...]
@@ -231,6 +233,7 @@ class Model:
     mujoco: MujocoSettings = MujocoSettings()
     validation: ValidationThresholds = ValidationThresholds()
     inverse: InverseSettings = InverseSettings()
+    joint_range: np.ndarray | None = None
 
     @property
     def r(self) -> int:
