@@ -44,19 +44,23 @@ def _previous_set(index: str):
     return names
 
 
-def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize):
+def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None):
     """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
     previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
     draw(log, folder, workers=workers) drawn from the in-memory log meanwhile (`render_while`), and
-    the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. Returns
-    (log path, plot paths)."""
+    the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
+    runs here while the figures are drawn, before the log is written (work that the log does not
+    hold). Returns (log path, plot paths)."""
     from .atomic import staged_folder, write_text_atomic
     from .log import log_data, write_mcap
     from .render import render_while
 
+    def work():
+        during()
+        return write_mcap(stage / log_name, streams, meta)
+
     with staged_folder(out, replaces=_previous_set(index)) as stage:
-        plots, log_path = render_while(lambda: draw(log_data(streams, meta), stage, workers=workers),
-                                       lambda: write_mcap(stage / log_name, streams, meta))
+        plots, log_path = render_while(lambda: draw(log_data(streams, meta), stage, workers=workers), work)
         log_path, plots = out / log_path.name, [out / p.name for p in plots]
         write_text_atomic(stage / index, summarize(log_path, plots))
     return log_path, plots
@@ -158,7 +162,7 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
+    from .inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
     from .log import file_sha256, run_metadata
     from .plots_inverse import inverse_plots
     from .progress import ProgressBar
@@ -169,17 +173,22 @@ def _cmd_inverse(args) -> int:
     methods = METHODS if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
-        study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
-                              bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve, progress=bar)
-        bar.close()
-        summary = inverse_summary(study)
+        study = solve_study(model, methods, duration=args.duration, bounds=(args.bound_force, args.bound_moment),
+                            progress=bar)
         out = Path(args.out or Path("out") / model.name)
         streams, meta = inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}})
+        summary: dict = {}
+
+        def checks():   # replays and trade-off curve (not in the log): computed while the figures are drawn
+            summary.update(inverse_summary(add_checks(study, args.replay, not args.no_curve, bar)))
+            bar.close()
+
         log_path, plots = _write_set(out, "inverse.json", "inverse.mcap", streams, meta, inverse_plots, workers,
-                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"))
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"),
+                                     during=checks)
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     return 0 if summary.get("complete", True) else 1
