@@ -81,10 +81,10 @@ def legend_overlaps(fig) -> list[str]:
     return found
 
 
-def _check_jobs(jobs):
+def _check_jobs(jobs, scene: str = "planar_7r_pair"):
     """Build every (builder, args, path) job's figure, lay it out and draw it as `coopsim.render` saves
-    it (Agg canvas, `fixed_layout`; without rasterising and encoding the PNG, half the time); no
-    legend over a line."""
+    it (Agg canvas, `fixed_layout`; without rasterising and encoding the PNG, half the time); its title
+    names the scene; no legend over a line."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     from coopsim.render import fixed_layout
@@ -94,6 +94,7 @@ def _check_jobs(jobs):
         FigureCanvasAgg(fig)
         fixed_layout(fig)
         fig.draw_without_rendering()
+        assert scene in (fig.get_suptitle() or fig.axes[0].get_title()), Path(path).name
         assert legend_overlaps(fig) == [], Path(path).name
 
 
@@ -125,7 +126,7 @@ def test_work_precision_points_are_labelled_and_off_the_legend():
     report = json.loads((ROOT / "validation" / "results" / "bench" / "bench.json").read_text())
     scenario = report["scenarios"][0]
     fig = work_precision_plot(scenario)
-    _check_jobs([(lambda: fig, (), "work_precision.png")])
+    _check_jobs([(lambda: fig, (), "work_precision.png")], scenario["name"])
     runs = [r for r in scenario["runs"] if np.isfinite(r["max_error"]) and np.isfinite(r["wall_s"])]
     assert sorted(t.get_text() for t in fig.axes[0].texts) == sorted(r["label"] for r in runs)
     assert {"1e-06", "5ms"} <= {r["label"] for r in runs}, "native tolerances and MuJoCo steps"

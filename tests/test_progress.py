@@ -87,8 +87,9 @@ def test_bar_gives_the_remaining_time_then_the_time_taken():
 
 
 def test_simulate_and_mjcf_report_their_stage_on_a_terminal(tmp_path, monkeypatch, capsys):
-    """`coopsim simulate` draws its 'native' stage and `coopsim mjcf` its 'mjcf' stage, each ending at
-    100 % (the paths printed after the bar); with --json, or not on a terminal, nothing."""
+    """`coopsim simulate` draws its 'native' stage, `coopsim mjcf` its 'mjcf' stage (the paths printed
+    after the bar) and `coopsim validate` (as `run`) 'native' and 'mujoco', each ending at 100 %; with
+    --json, or not on a terminal, nothing."""
     from conftest import SCENARIOS
 
     from coopsim.cli import main
@@ -98,11 +99,13 @@ def test_simulate_and_mjcf_report_their_stage_on_a_terminal(tmp_path, monkeypatc
     monkeypatch.setattr("sys.stderr", err)
     assert main(["simulate", paper, "--duration", "0.5"]) == 0
     assert main(["mjcf", paper, spatial, "--out", str(tmp_path)]) == 0
+    assert main(["validate", paper, "--duration", "0.2"]) == 0     # run's stages too (the same harness)
     frames = [f for f in err.getvalue().replace("\n", "\r").split("\r") if f.strip()]
     last = {f.split()[0]: f for f in frames}
-    assert list(last) == ["native", "mjcf"] and all(f.endswith("100%") for f in last.values()), frames
-    assert capsys.readouterr().out.splitlines()[-2:] == [str(tmp_path / "paper_planar_2x3.xml"),
-                                                         str(tmp_path / "spatial_6r_pair.xml")]
+    assert list(last) == ["native", "mjcf", "mujoco"] and all(f.endswith("100%") for f in last.values()), frames
+    printed = capsys.readouterr().out.splitlines()
+    assert [str(tmp_path / "paper_planar_2x3.xml"), str(tmp_path / "spatial_6r_pair.xml")] == [
+        line for line in printed if line.endswith(".xml")]
     quiet = _Tty()
     monkeypatch.setattr("sys.stderr", quiet)
     assert main(["simulate", paper, "--duration", "0.5", "--json"]) == 0
