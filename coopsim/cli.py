@@ -13,12 +13,15 @@ from .resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
+    from .progress import ProgressBar
     from .scenario import load_scenario
     from .simulate import simulate
     from .summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration)
-    res = simulate(model, duration=args.duration)
+    with ProgressBar(enabled=not args.json) as bar:
+        res = simulate(model, duration=args.duration, progress=lambda f: bar("native", f))
+        bar("native", 1.0)
     summary = simulation_summary(res)
     print(json.dumps(summary, indent=2) if args.json else format_simulation_summary(summary))
     _print_warnings(res)
@@ -71,12 +74,19 @@ def _cmd_mjcf(args) -> int:
 
     from .atomic import write_text_atomic
     from .mjcf import mjcf_text
+    from .progress import ProgressBar
     from .scenario import load_scenario
 
-    for scenario in _scenario_paths(args.scenarios):
-        path = Path(args.out) / f"{Path(scenario).stem}.xml"
-        write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
-        print(path)
+    _announce_compile()                     # the keyframes come from the native model's initial state
+    scenarios = _scenario_paths(args.scenarios)
+    paths = []
+    with ProgressBar() as bar:
+        for i, scenario in enumerate(scenarios):   # drawn after each file: a first-run compile notice comes first
+            path = Path(args.out) / f"{Path(scenario).stem}.xml"
+            write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
+            paths.append(path)
+            bar("mjcf", (i + 1) / len(scenarios))
+    print("\n".join(map(str, paths)))     # after the bar: the paths never share its line
     return 0
 
 

@@ -77,6 +77,17 @@ def rot_log(R: np.ndarray) -> np.ndarray:
     return (2.0 * np.arctan2(n, q[0]) / n) * v
 
 
+def orientation_error(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
+    """Angle (N,) rad of the rotation between two quaternion series [w, x, y, z] (N, 4)."""
+    return np.array([np.linalg.norm(rot_log(quat_to_rot(a) @ quat_to_rot(b).T)) for a, b in zip(q_a, q_b)])
+
+
+def rotation_from(q: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Rotation vectors φ (N, 3) rad, world axes, of the orientations q (N, 4) [w, x, y, z] relative to
+    R0 (3, 3): exp([φ×]) R0 = R(q) (|φ| <= π)."""
+    return np.array([rot_log(quat_to_rot(x) @ R0.T) for x in q]).reshape(len(q), 3)
+
+
 _I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
