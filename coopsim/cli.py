@@ -136,11 +136,19 @@ def _cmd_plot(args) -> int:
 
     from .log import read_run_log
     from .plots import comparison_plots
+    from .progress import ProgressBar
 
     log_path = Path(args.log)
     if not log_path.is_file():
         raise CoopsimError(f"{log_path}: log file not found")
-    for path in comparison_plots(read_run_log(log_path), Path(args.out or log_path.parent)):
+    with ProgressBar() as bar:
+        bar("read log", 0.0)
+        log = read_run_log(log_path)
+        bar("read log", 1.0)
+        bar("figures", 0.0)
+        paths = comparison_plots(log, Path(args.out or log_path.parent))
+        bar("figures", 1.0)
+    for path in paths:
         print(path)
     return 0
 

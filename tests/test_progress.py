@@ -112,3 +112,20 @@ def test_simulate_and_mjcf_report_their_stage_on_a_terminal(tmp_path, monkeypatc
     monkeypatch.setattr("sys.stderr", io.StringIO())      # not a terminal
     assert main(["mjcf", paper, "--out", str(tmp_path)]) == 0
     assert quiet.getvalue() == "" and sys.stderr.getvalue() == ""
+
+
+def test_plot_reports_its_stages_on_a_terminal(tmp_path, monkeypatch, capsys):
+    """`coopsim plot` draws 'read log' and 'figures', each ending at 100 % (the log reader and the
+    figures replaced here by stand-ins: the stages are what is checked), then prints the paths."""
+    from coopsim.cli import main
+
+    log = tmp_path / "run.mcap"
+    log.write_bytes(b"stand-in")
+    monkeypatch.setattr("coopsim.log.read_run_log", lambda path: "log")
+    monkeypatch.setattr("coopsim.plots.comparison_plots", lambda data, out: [out / "joint_angles.png"])
+    err = _Tty()
+    monkeypatch.setattr("sys.stderr", err)
+    assert main(["plot", str(log)]) == 0
+    frames = [f for f in err.getvalue().replace("\n", "\r").split("\r") if f.strip()]
+    assert [f.split("  ")[0].strip() for f in frames if f.endswith("100%")] == ["read log", "figures"], frames
+    assert capsys.readouterr().out.splitlines() == [str(tmp_path / "joint_angles.png")]
