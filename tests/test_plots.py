@@ -36,19 +36,14 @@ def _check_pngs(paths, folder):
         assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 400
 
 
-def test_comparison_plots_of_both_models(logs, tmp_path):
-    both, _ = logs
-    out = tmp_path / "plots"
-    _check_pngs(comparison_plots(both, out), out)
-
-
-def test_native_only_log_is_plotted(logs, tmp_path):
+def test_comparison_plots_of_both_models_and_of_the_native_one_alone(logs, tmp_path):
     both, native = logs
     assert "/mujoco/joint_state" not in native.topics
     paths = comparison_plots(native, tmp_path)
     _check_pngs(paths, tmp_path)
-    # without the difference rows the joint figure is shorter than the comparison one
     full = comparison_plots(both, tmp_path / "both")
+    _check_pngs(full, tmp_path / "both")
+    # without the difference rows the joint figure is shorter than the comparison one
     assert mpimg.imread(paths[0]).shape[0] < mpimg.imread(full[0]).shape[0]
 
 
