@@ -43,8 +43,11 @@ def test_inverse_and_capacity_report_their_stages_on_a_terminal(workdir, monkeyp
     from coopsim.cli import main
 
     monkeypatch.chdir(workdir)
+    from coopsim.render import FigureWorkers
+
     for name in ("inverse_plots", "capacity_plots"):
         monkeypatch.setattr(f"coopsim.plots_inverse.{name}", lambda log, folder, workers=None: [])
+    monkeypatch.setattr("coopsim.render.FigureWorkers", lambda: FigureWorkers(n=0))   # no worker processes
     err = _Tty()
     monkeypatch.setattr("sys.stderr", err)
     scenario = "scenarios/paper_planar_2x3.yaml"
