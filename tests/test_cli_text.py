@@ -34,7 +34,7 @@ def test_closed_pipe_is_quiet(tmp_path):
 
 
 def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "coopsim.cli", "run", str(SCENARIOS / "spatial_6r_pair.yaml"),
+    proc = subprocess.Popen([sys.executable, "-m", "coopsim.cli", "run", str(SCENARIOS / "paper_planar_2x3.yaml"),
                              "--out", str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tmp_path)
     deadline = time.monotonic() + 60
