@@ -31,9 +31,10 @@ MIN_MOTION = 0.1  # rad: every run the harness is judged on turns some joint at 
 CARRY_DURATION, CARRY_TABLE_DT = 3.0, 1e-3
 
 # Shortened runs for the wrong-twin test, each long enough to move MIN_MOTION (measured: paper 0.219 rad
-# at 1.5 s, 3-arm plate 0.117 rad at 1 s, spatial 0.233 rad at 0.5 s, carry 0.157 rad at 3 s).
+# at 1.5 s, 3-arm plate 0.117 rad at 1 s, spatial 0.233 rad at 0.5 s, carry 0.157 rad at 3 s, gantry
+# 0.26 (rad or m) at 0.5 s).
 WRONG_TWIN_DURATION = {"paper_planar_2x3": 1.5, "planar_3arm_vertical": 1.0, "spatial_6r_pair": 0.5,
-                       "paper_planar_2x3_carry": 3.0}
+                       "paper_planar_2x3_carry": 3.0, "gantry_prismatic": 0.5}
 
 
 def _metric(cv, name):
