@@ -18,10 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import PRISMATIC, REVOLUTE
+from collections.abc import Sequence
+
+from .model import JOINT_TYPES, PRISMATIC, REVOLUTE
 from .spatial import axis_angle_to_rot, cross
 
-UNITS = {REVOLUTE: ("rad", "rad/s", "N·m"), PRISMATIC: ("m", "m/s", "N")}
+TYPE_NAMES = {code: name for name, code in JOINT_TYPES.items()}          # 0 → "revolute", 1 → "prismatic"
+UNITS = {"revolute": ("rad", "rad/s", "N·m"), "prismatic": ("m", "m/s", "N")}
+COORDINATE, RATE, EFFORT = 0, 1, 2                                       # index into a joint's units
 
 
 def joint_transform(joint_type: int, axis: np.ndarray, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -47,6 +51,19 @@ def motion_subspace(joint_type: np.ndarray, z: np.ndarray, p: np.ndarray, point:
     return linear, np.broadcast_to(z * rev, linear.shape)
 
 
-def joint_units(joint_type: int) -> tuple[str, str, str]:
-    """(coordinate, rate, effort) units of a joint type: ('rad', 'rad/s', 'N·m') or ('m', 'm/s', 'N')."""
-    return UNITS[int(joint_type)]
+def type_names(joint_type: Sequence[int]) -> list[str]:
+    """'revolute' or 'prismatic' per joint of the type codes joint_type (n,)."""
+    return [TYPE_NAMES[int(t)] for t in joint_type]
+
+
+def joint_units(joint_type: int | str) -> tuple[str, str, str]:
+    """(coordinate, rate, effort) units of a joint type (code or name): ('rad', 'rad/s', 'N·m') or
+    ('m', 'm/s', 'N')."""
+    return UNITS[joint_type if isinstance(joint_type, str) else TYPE_NAMES[int(joint_type)]]
+
+
+def units_of(joint_type: Sequence, kind: int, sep: str = " or ") -> str:
+    """The unit of quantity `kind` (COORDINATE, RATE, EFFORT) of several joints (codes or names), for one
+    axis label: 'rad', 'm', or both joined by `sep` ('rad or m') when the joints mix types."""
+    units = list(dict.fromkeys(joint_units(t)[kind] for t in joint_type))
+    return sep.join(units)

@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .labels import arm_label, metadata_arms, metadata_joint_labels
+from .joints import COORDINATE, RATE, units_of
+from .labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
 from .log import LogData
 from .render import FigureWorkers, render_figures
 
@@ -120,19 +121,22 @@ def _compare_columns(axes, t, x, y, cols, labels, quantity: str, unit: str, titl
         _finish_log_axis(axes[1], any(drawn), f"|Δ {quantity}| ({unit})")
 
 
-def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list[str]) -> Figure:
+def _joint_figure(log: LogData, key: str, quantity: str, kind: int, labels: list[str]) -> Figure:
+    """Joint `key` of both models per arm; kind (`joints.COORDINATE`, `RATE`) picks each panel's unit
+    from its joints' types (rad, m, or rad or m)."""
     from matplotlib.figure import Figure
 
     nat = log.topics[NATIVE + "/joint_state"]
     t, x = nat["t"], nat[key]
     y = _twin(log, "/joint_state", key, t)
     groups = _arm_groups(log, x.shape[1])
+    types = metadata_joint_types(log.metadata, x.shape[1])
     rows = 1 if y is None else 2
     fig = Figure(figsize=(5.5 * len(groups), 3.6 * rows))
     axes = fig.subplots(rows, len(groups), squeeze=False)
     for col, (arm, sl) in enumerate(groups):
         cols = range(sl.start, sl.stop)
-        _compare_columns(axes[:, col], t, x, y, cols, [labels[j] for j in cols], quantity, unit,
+        _compare_columns(axes[:, col], t, x, y, cols, [labels[j] for j in cols], quantity, units_of(types[sl], kind),
                          f"{arm}: joint {quantity}", f"{arm}: |native − mujoco|")
     fig.suptitle(run_title(log, f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"),
                            twin=y is not None))
@@ -183,6 +187,6 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     out.mkdir(parents=True, exist_ok=True)
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
-    jobs = [(_joint_figure, (log, "angle", "angle", "rad", labels)), (_joint_figure, (log, "rate", "rate", "rad/s", labels)),
+    jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)), (_joint_figure, (log, "rate", "rate", RATE, labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
     return render_figures([(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)], workers)
