@@ -77,15 +77,16 @@ def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
 def test_every_figure_names_its_scenario_and_settings(logs):
     """Titles carry the scenario's name and the integrator settings the log records (issue 10)."""
     from coopsim import plots
+    from coopsim.joints import COORDINATE
 
     both, native = logs
     labels = [f"j{i}" for i in range(6)]
-    figs = [plots._joint_figure(both, "angle", "angle", "rad", labels), plots._object_figure(both)]
+    figs = [plots._joint_figure(both, "angle", "angle", COORDINATE, labels), plots._object_figure(both)]
     titles = [f.get_suptitle() for f in figs] + [plots._constraint_figure(both).axes[0].get_title()]
     for title in titles:
         assert title.startswith("paper_planar_2x3 — ") and "native dop853 rtol 1e-12" in title, title
         assert "MuJoCo RK4 0.001 s" in title, title
-    alone = plots._joint_figure(native, "angle", "angle", "rad", labels).get_suptitle()
+    alone = plots._joint_figure(native, "angle", "angle", COORDINATE, labels).get_suptitle()
     assert alone == "paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12)", alone
 
 
