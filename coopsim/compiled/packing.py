@@ -182,7 +182,8 @@ def pack(model: Model) -> PackedModel:
     return PackedModel(
         dof, stack("base_pos"), stack("base_rot"), cat("joint_pos"), R0, a,
         _f(K1), _f(K1 @ ax), _f(np.einsum("nij,nj->ni", R0, a)),
-        np.ascontiguousarray(np.concatenate([arm.joint_type for arm in arms]), dtype=np.int64), cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
+        np.ascontiguousarray(model.joint_type, dtype=np.int64),
+        cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
         float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
         _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],
         float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol), tq_off, tq_t, tq_v)
