@@ -1,24 +1,80 @@
-"""Atomic file output: write to a temporary file beside the target, rename when complete."""
+"""Atomic file output: write to a temporary file beside the target, rename when complete; a set of files
+(a run's outputs) is written into a temporary sibling folder and swapped into place as a whole.
+
+Temporaries are hidden and named `.{target name}.{process id}.{random}.tmp`; one left behind by a process
+that no longer runs (killed, or the machine stopped) is removed by the next atomic write beside it.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import os
+import re
+import shutil
 import tempfile
+import time
 from pathlib import Path
+
+# .NAME.PID.RANDOM.tmp (RANDOM: tempfile's 8 characters); .NAME.RANDOM.tmp: an older coopsim's
+_TEMP = re.compile(r"\.(?P<name>.+?)(?:\.(?P<pid>\d+))?\.[a-z0-9_]{8}\.tmp\Z")
+LEGACY_AGE_S = 3600   # a temporary without a process id counts as stale after an hour
+
+
+def _temp_prefix(name: str) -> str:
+    return f".{name}.{os.getpid()}."
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # another user's process
+        return True
+    return True
+
+
+def is_stale_temporary(path: str | Path) -> bool:
+    """Whether `path` is a coopsim temporary whose process no longer runs (one of an older coopsim, which
+    wrote no process id: untouched for LEGACY_AGE_S)."""
+    m = _TEMP.match(Path(path).name)
+    if m is None:
+        return False
+    if m["pid"] is None:
+        with contextlib.suppress(OSError):
+            return time.time() - os.lstat(path).st_mtime > LEGACY_AGE_S
+        return False
+    return int(m["pid"]) != os.getpid() and not _alive(int(m["pid"]))
+
+
+def sweep_stale(folder: str | Path) -> list[Path]:
+    """Remove the stale coopsim temporaries (files and folders) in `folder`; returns what was removed."""
+    removed = []
+    with contextlib.suppress(FileNotFoundError, NotADirectoryError):
+        for entry in os.scandir(folder):
+            if is_stale_temporary(entry.path):
+                path = Path(entry.path)
+                if entry.is_dir(follow_symlinks=False):
+                    shutil.rmtree(path, ignore_errors=True)
+                else:
+                    with contextlib.suppress(FileNotFoundError):
+                        path.unlink()
+                removed.append(path)
+    return removed
 
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path in the target's folder; on success it replaces `path`, on any exception
-    it is removed and `path` is left as it was."""
+    it is removed and `path` is left as it was. Stale temporaries in the folder are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    sweep_stale(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path.name), suffix=".tmp", dir=path.parent)
     os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the mode open() would
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the mode open() would
     try:
         yield Path(tmp)
         os.replace(tmp, path)
@@ -28,8 +84,75 @@ def atomic_path(path: str | Path):
         raise
 
 
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write `text` (UTF-8) to `path` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+_RENAME_EXCHANGE = 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux renameat2 RENAME_EXCHANGE); False where that is not available."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0
+
+
+def _keep_others(old: Path, new: Path, replaced: set[str]) -> None:
+    """Hard-link into `new` every entry of `old` that is not in `replaced`, not in `new` and not a
+    temporary (files another command wrote there: they stay; the old ones are left untouched)."""
+    for entry in os.scandir(old):
+        if entry.name in replaced or _TEMP.match(entry.name) or (new / entry.name).exists():
+            continue
+        src, dst = Path(entry.path), new / entry.name
+        if entry.is_dir(follow_symlinks=False):
+            shutil.copytree(src, dst, symlinks=True, copy_function=os.link)
+        elif entry.is_symlink():
+            os.symlink(os.readlink(src), dst)
+        else:
+            os.link(src, dst)
+
+
+@contextlib.contextmanager
+def staged_folder(out: str | Path, replaces=lambda old: set()):
+    """Write a set of files as a whole: yield a temporary sibling folder of `out` to write them into; on
+    success it becomes `out` in one rename (an atomic swap where `out` exists), on any exception it is
+    removed and `out` is left as it was. Where `out` already exists, the entries of it named by
+    `replaces(out)` (a previous set) go, every other entry stays (hard links, so nothing is copied).
+    Stale temporaries beside `out` and in it are removed first."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    sweep_stale(out.parent)
+    sweep_stale(out)
+    tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
+    os.chmod(tmp, 0o777 & ~_umask())   # mkdtemp creates 0700; give the folder the mode mkdir would
+    try:
+        yield tmp
+        if out.is_dir():
+            _keep_others(out, tmp, set(replaces(out)))
+            if _exchange(tmp, out):
+                shutil.rmtree(tmp)
+                return
+            old = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
+            os.replace(out, old / "old")
+            os.replace(tmp, out)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

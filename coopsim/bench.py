@@ -664,14 +664,40 @@ def startup_times(scenario: str | Path, attempts: int = 2) -> dict:
     return out
 
 
+COMMANDS = {"run": (["run"], 5.0), "inverse --replay": (["inverse", "--replay"], 3.0),
+            "capacity": (["capacity"], 3.0)}   # issue #7's wall-time targets (s), paper scene, warm cache
+
+
+def command_times(scenario: str | Path, repeats: int = 2, commands=COMMANDS) -> dict:
+    """Wall time s of each CLI command on `scenario` as a user runs it (a fresh `python -m coopsim.cli`
+    process writing into a temporary folder; the compiled kernels already cached): {name: {"wall_s": the
+    minimum over `repeats`, "target_s", "met"}}. A command that fails raises CoopsimError."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="coopsim-bench-") as folder:
+        for name, (words, target) in commands.items():
+            walls = []
+            for _ in range(max(1, repeats)):
+                cmd = [sys.executable, "-m", "coopsim.cli", words[0], str(scenario), *words[1:], "--json",
+                       "--out", folder]
+                start = time.perf_counter()
+                done = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+                walls.append(time.perf_counter() - start)
+                if done.returncode not in (0, 1):      # 1: ran, but a check failed (reported by the command)
+                    raise CoopsimError(f"coopsim {name} failed: {done.stderr.strip().splitlines()[-1:]}")
+            out[name] = {"wall_s": min(walls), "target_s": target, "met": min(walls) <= target}
+    return out
+
+
 # ------------------------------------------------------------------------------------------------
 # the whole benchmark
 
 
 def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
               log: Callable[[str], None] = lambda s: None) -> dict:
-    """Benchmark each scenario file, the scaling grid and (ladders.startup) the start-up times.
+    """Benchmark each scenario file, the scaling grid and (ladders.startup) the start-up times and the
+    commands' wall times on the first scenario.
     Returns {'scenarios': [bench_scenario dicts], 'scaling': scaling_study, 'startup': dict or None,
+    'commands': command_times or None,
     'settings': what was run, 'environment': versions and machine}."""
     from .scenario import load_scenario
     from .simulate import simulate
@@ -683,10 +709,12 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     for model in models:
         report["scenarios"].append(bench_scenario(model, ladders, peers, log))
     report["scaling"] = scaling_study(ladders, peers, log)
-    report["startup"] = None
+    report["startup"] = report["commands"] = None
     if ladders.startup:
         log("start-up: fresh processes (compile, then cached)")
         report["startup"] = startup_times(scenarios[0])
+        log("commands: run, inverse --replay, capacity as a user runs them")
+        report["commands"] = command_times(scenarios[0])
     report["environment"]["load_average_end"] = environment()["load_average"]
     return report
 

@@ -224,6 +224,16 @@ def startup_line(st: dict) -> str:
     return text
 
 
+def command_lines(commands: dict | None) -> list[str]:
+    """A table of the commands' wall times against their targets (`bench.command_times`)."""
+    if not commands:
+        return ["not measured"]
+    lines = ["| command | wall s | target s | met |", "|---|---|---|---|"]
+    lines += [f"| `coopsim {name}` | {c['wall_s']:.2f} | {c['target_s']:g} | {'yes' if c['met'] else 'NO'} |"
+              for name, c in commands.items()]
+    return lines
+
+
 def _load(env: dict) -> str:
     """'a → b' 1-minute load averages at the start and end of the run ('unknown')."""
     a, b = env.get("load_average"), env.get("load_average_end")
@@ -246,6 +256,8 @@ def markdown_report(report: dict) -> str:
     lines += headline_lines(report) + ["", "## µs per dynamics evaluation", ""] + eval_lines(report)
     lines += ["", "## Start-up", ""]
     lines.append("not measured" if st is None else startup_line(st))
+    lines += ["", "## Commands (first scenario, fresh processes, cache filled)", ""]
+    lines += command_lines(report.get("commands"))
     lines += ["", "## Scaling (synthetic scenes)", ""] + scaling_lines(report)
     for sc in report["scenarios"]:
         lines += ["", f"## {sc['name']}, {sc['duration_s']:g} s", "", reference_line(sc), ""]

@@ -27,8 +27,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .inverse import (InverseProblem, Resolution, distribute, energy, grasp_line_frames, internal_bound_components,
-                      internal_operator, min_energy_setup, min_energy_solve, nan_peak, resolve, torques_of)
+from .inverse import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
+                      internal_bound_components, internal_operator, min_energy_setup, min_energy_solve, nan_peak,
+                      resolve, torques_of)
 from .model import Model, Motors
 from .qp import LPBatch, QPError, solve_lps
 from .resolutions import LINEAR_METHODS, resolution_method
@@ -219,31 +220,56 @@ def _binding_motor(lp: LPBatch, act: np.ndarray) -> tuple[int | None, str | None
     return int(np.flatnonzero(act)[k % act.sum()]), ("lower" if k >= act.sum() else "upper")
 
 
+def min_energy_affine_torques(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray):
+    """(a, b) (N, n): the minimum-energy torques τ(μ) = a + μ b for the weights (n,), from a setup of the
+    two net wrenches y₀ and y₀ + y₁ of `mass_line` (`min_energy_setup`)."""
+    f0, f1 = min_energy_solve(prob, setup, weights)
+    a = torques_of(prob, f0)
+    return a, torques_of(prob, f1) - a
+
+
+def min_energy_interval(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray, lo: np.ndarray,
+                        hi: np.ndarray, act: np.ndarray) -> tuple[float, float, bool]:
+    """`mass_interval` (mass, lower, feasible) of the minimum-energy torques for the weights (n,) within
+    lo <= τ <= hi (N, n) on the joints act (n,) bool: compiled (`coopsim.compiled.capacity`, one pass
+    over the samples), or through `min_energy_affine_torques` where that is not certified (rank lost
+    or an ill-conditioned energy Hessian somewhere)."""
+    from .compiled.capacity import min_energy_mass_interval
+
+    mass, lower, certain = min_energy_mass_interval(setup.D, setup.u, np.where(setup.passive, 0.0, weights),
+                                                    lo, hi, act, setup.regular, prob.rank_tol)
+    if certain:
+        return mass, lower, (lower <= mass) if np.isfinite(mass) else mass > 0
+    a, b = min_energy_affine_torques(prob, setup, weights)
+    return mass_interval(*mass_limits(a[:, act], b[:, act], lo[:, act], hi[:, act]))
+
+
 def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                      max_evals: int = 400) -> tuple[np.ndarray, Capacity]:
     """Energy weights (n,) maximising the minimum-energy capacity (weights are scale-free: normalised
     to a geometric mean of 1 over the active joints), with that capacity. Nelder–Mead on log-weights
     (clipped to ±ln 10⁴) from equal weights and from the paper's suggestion (weight ×10 on the motor
     that saturates first); the better of the two is kept. The weight-independent part of the
-    minimum-energy problem (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once."""
+    minimum-energy problem (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once;
+    each evaluation is one compiled pass over the samples (`min_energy_interval`)."""
     from scipy.optimize import minimize
 
     act = ~res.passive
     lo, hi = torque_limits(motors, prob.qd)
     y0, y1 = mass_line(prob, mode)
     setup = min_energy_setup(prob, np.stack([y0, y0 + y1]), res.passive)
-    lo_act, hi_act = lo[:, act], hi[:, act]
 
-    def capacity_of(logw):
+    def weights_of(logw):
         w = np.ones(len(act))
         w[act] = np.exp(np.clip(logw, -np.log(1e4), np.log(1e4)))
-        f0, f1 = min_energy_solve(prob, setup, w)
-        a = torques_of(prob, f0)
-        return w, a, torques_of(prob, f1) - a
+        return w
+
+    def capacity_of(logw):
+        w = weights_of(logw)
+        return (w, *min_energy_affine_torques(prob, setup, w))
 
     def objective(logw):
-        _, a, b = capacity_of(logw)
-        mass, _, feasible = mass_interval(*mass_limits(a[:, act], b[:, act], lo_act, hi_act))
+        mass, _, feasible = min_energy_interval(prob, setup, weights_of(logw), lo, hi, act)
         return -mass if feasible else 1e6
 
     base = affine_capacity(*capacity_of(np.zeros(act.sum()))[1:], lo, hi, prob.t, act)

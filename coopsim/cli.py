@@ -13,14 +13,60 @@ from .resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
+    from .progress import ProgressBar
     from .scenario import load_scenario
     from .simulate import simulate
     from .summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration)
-    summary = simulation_summary(simulate(model, duration=args.duration))
+    with ProgressBar(enabled=not args.json) as bar:
+        res = simulate(model, duration=args.duration, progress=lambda f: bar("native", f))
+        bar("native", 1.0)
+    summary = simulation_summary(res)
     print(json.dumps(summary, indent=2) if args.json else format_simulation_summary(summary))
+    _print_warnings(res)
     return 0
+
+
+def _print_warnings(res) -> None:
+    """Each warning of a native run (`coopsim.diagnostics`) as one line on stderr."""
+    for w in res.warnings:
+        print(f"coopsim: warning: {w.message()}", file=sys.stderr)
+
+
+def _previous_set(index: str):
+    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
+    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
+    def names(out) -> set[str]:
+        try:
+            files = json.loads((out / index).read_text(encoding="utf-8"))["files"]
+            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
+            return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
+        except (OSError, ValueError, KeyError, TypeError):
+            return {index}
+    return names
+
+
+def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None):
+    """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
+    previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
+    draw(log, folder, workers=workers) drawn from the in-memory log meanwhile (`render_while`), and
+    the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
+    runs here while the figures are drawn, before the log is written (work that the log does not
+    hold). Returns (log path, plot paths)."""
+    from .atomic import staged_folder, write_text_atomic
+    from .log import log_data, write_mcap
+    from .render import render_while
+
+    def work():
+        during()
+        return write_mcap(stage / log_name, streams, meta)
+
+    with staged_folder(out, replaces=_previous_set(index)) as stage:
+        plots, log_path = render_while(lambda: draw(log_data(streams, meta), stage, workers=workers), work)
+        log_path, plots = out / log_path.name, [out / p.name for p in plots]
+        write_text_atomic(stage / index, summarize(log_path, plots))
+    return log_path, plots
 
 
 def _cmd_mjcf(args) -> int:
@@ -28,22 +74,28 @@ def _cmd_mjcf(args) -> int:
 
     from .atomic import write_text_atomic
     from .mjcf import mjcf_text
+    from .progress import ProgressBar
     from .scenario import load_scenario
 
-    for scenario in _scenario_paths(args.scenarios):
-        path = Path(args.out) / f"{Path(scenario).stem}.xml"
-        write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
-        print(path)
+    _announce_compile()                     # the keyframes come from the native model's initial state
+    scenarios = _scenario_paths(args.scenarios)
+    paths = []
+    with ProgressBar() as bar:
+        for i, scenario in enumerate(scenarios):   # drawn after each file: a first-run compile notice comes first
+            path = Path(args.out) / f"{Path(scenario).stem}.xml"
+            write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
+            paths.append(path)
+            bar("mjcf", (i + 1) / len(scenarios))
+    print("\n".join(map(str, paths)))     # after the bar: the paths never share its line
     return 0
 
 
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
     from .compare import format_comparison
     from .harness import cross_validate
-    from .log import file_sha256, read_mcap, write_run_log
+    from .log import file_sha256, run_log
     from .plots import comparison_plots
     from .progress import ProgressBar
     from .render import FigureWorkers
@@ -56,12 +108,18 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        log_path = write_run_log(out / f"{model.name}.mcap", model, cv.native, cv.twin, metadata_extra={
+        streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
-        plots = comparison_plots(read_mcap(log_path), out, workers=workers)
-    summary = run_summary(cv, log_path, plots)
-    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        summary: dict = {}
+
+        def summarize(log_path, plots) -> str:
+            summary.update(run_summary(cv, log_path, plots))
+            return json.dumps(summary, indent=2) + "\n"
+
+        log_path, plots = _write_set(out, "summary.json", f"{model.name}.mcap", streams, meta, comparison_plots,
+                                     workers, summarize)
+    _print_warnings(cv.native)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -78,11 +136,19 @@ def _cmd_plot(args) -> int:
 
     from .log import read_run_log
     from .plots import comparison_plots
+    from .progress import ProgressBar
 
     log_path = Path(args.log)
     if not log_path.is_file():
         raise CoopsimError(f"{log_path}: log file not found")
-    for path in comparison_plots(read_run_log(log_path), Path(args.out or log_path.parent)):
+    with ProgressBar() as bar:
+        bar("read log", 0.0)
+        log = read_run_log(log_path)
+        bar("read log", 1.0)
+        bar("figures", 0.0)
+        paths = comparison_plots(log, Path(args.out or log_path.parent))
+        bar("figures", 1.0)
+    for path in paths:
         print(path)
     return 0
 
@@ -94,7 +160,7 @@ def _cmd_validate(args) -> int:
     from .scenario import load_scenario
 
     results = []
-    for scenario in _scenario_paths(args.scenarios):
+    for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
         bar.close()
@@ -114,9 +180,8 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
-    from .inverse_report import format_inverse_summary, inverse_series, inverse_study, inverse_summary, json_safe
-    from .log import file_sha256, read_mcap, run_metadata, write_mcap
+    from .inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
+    from .log import file_sha256, run_metadata
     from .plots_inverse import inverse_plots
     from .progress import ProgressBar
     from .render import FigureWorkers
@@ -126,21 +191,33 @@ def _cmd_inverse(args) -> int:
     methods = METHODS if args.method == "all" else (args.method,)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
-        study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
-                              bounds=(args.bound_force, args.bound_moment), curve=not args.no_curve, progress=bar)
-        bar.close()
-        summary = inverse_summary(study)
+        study = solve_study(model, methods, duration=args.duration, bounds=(args.bound_force, args.bound_moment),
+                            progress=bar)
         out = Path(args.out or Path("out") / model.name)
-        log_path = write_mcap(out / "inverse.mcap", inverse_series(study), run_metadata(model, study.sim, {
+        streams, meta = inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
-                        "moment_bound_Nm": study.bounds[1]}}))
-        plots = inverse_plots(read_mcap(log_path), out, workers=workers)
-    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "inverse.json")]
-    write_text_atomic(out / "inverse.json", json.dumps(json_safe(summary), indent=2) + "\n")
+                        "moment_bound_Nm": study.bounds[1]}})
+        summary: dict = {}
+
+        def checks():   # replays and trade-off curve (not in the log): computed while the figures are drawn
+            summary.update(inverse_summary(add_checks(study, args.replay, not args.no_curve, bar)))
+            bar.close()
+
+        log_path, plots = _write_set(out, "inverse.json", "inverse.mcap", streams, meta, inverse_plots, workers,
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"),
+                                     during=checks)
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     return 0 if summary.get("complete", True) else 1
+
+
+def _summary_text(summary: dict, log_path, plots, index) -> str:
+    """The JSON text of an inverse or capacity summary, its "files" (log, plots, the summary) set first."""
+    from .inverse_report import json_safe
+
+    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(index)]
+    return json.dumps(json_safe(summary), indent=2) + "\n"
 
 
 def _cmd_capacity(args) -> int:
@@ -148,10 +225,9 @@ def _cmd_capacity(args) -> int:
 
     import numpy as np
 
-    from .atomic import write_text_atomic
     from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
-    from .log import file_sha256, read_mcap, run_metadata, write_mcap
+    from .log import file_sha256, run_metadata
     from .plots_inverse import capacity_plots
     from .progress import ProgressBar
     from .render import FigureWorkers
@@ -168,11 +244,9 @@ def _cmd_capacity(args) -> int:
         summary = capacity_summary(study)
         out = Path(args.out or Path("out") / model.name)
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
-        log_path = write_mcap(out / "capacity.mcap", capacity_series(study),
-                              run_metadata(model, None, meta | capacity_metadata(summary)))
-        plots = capacity_plots(read_mcap(log_path), out, workers=workers)
-    summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(out / "capacity.json")]
-    write_text_atomic(out / "capacity.json", json.dumps(json_safe(summary), indent=2) + "\n")
+        streams, meta = capacity_series(study), run_metadata(model, None, meta | capacity_metadata(summary))
+        log_path, plots = _write_set(out, "capacity.json", "capacity.mcap", streams, meta, capacity_plots, workers,
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "capacity.json"))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
@@ -254,13 +328,20 @@ def _cmd_view(args) -> int:
     return 0
 
 
-def _scenario_paths(given: list[str]) -> list[str]:
-    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given."""
+def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
+    """The given scenario files, or every bundled `scenarios/*.yaml` when none is given (with `hard`,
+    also the hard cases `scenarios/hard/*.yaml` that set `validation` thresholds: those with a
+    meaningful MuJoCo twin)."""
     from pathlib import Path
+
+    from .scenario import load_yaml
 
     if given:
         return given
     found = sorted(str(p) for p in Path("scenarios").glob("*.yaml"))
+    if hard:
+        found += sorted(str(p) for p in Path("scenarios/hard").glob("*.yaml")
+                        if isinstance(data := load_yaml(p), dict) and "validation" in data)
     if not found:
         raise CoopsimError("no scenario given and no scenarios/*.yaml in the current folder")
     return found
@@ -277,8 +358,15 @@ def _display_path(path: str) -> str:
         return p.as_posix()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (`coopsim: error: …`, naming the option), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"coopsim: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="coopsim", description=(
+    parser = _Parser(prog="coopsim", description=(
         "Cooperative manipulators: recursive Gibbs-Appell closed-chain dynamics, validated against MuJoCo."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command")
@@ -307,7 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="cross-validate scenarios against their MuJoCo twins",
                        description=("Run the native model and the MuJoCo twin of each SCENARIO (default: "
-                                    "scenarios/*.yaml) and compare them; exit 0 only if all agree."))
+                                    "scenarios/*.yaml and the hard cases in scenarios/hard/ that set validation "
+                                    "thresholds) and compare them; exit 0 only if all agree."))
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")

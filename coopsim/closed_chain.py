@@ -16,7 +16,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
 
 from .gibbs_appell import arm_dynamics
 from .grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
@@ -159,7 +158,10 @@ def forward_dynamics(model: Model, terms: ChainTerms, tau: np.ndarray,
     """θ̈ (eqs. 25–27) and the grasp wrenches for joint torques tau (n,) N·m.
     stabilization (k(r−1),): extra right-hand side of Λθ̈ = −Λ̇θ̇ − stabilization (Baumgarte)."""
     # 𝐈 = L Lᵀ (LAPACK potrf: fails unless 𝐈 is positive definite) and both solves on that factor
-    # (potrs; scipy's solve_triangular would cost ~10× more on these tiny matrices)
+    # (potrs; scipy's solve_triangular would cost ~10× more on these tiny matrices). Imported here: the
+    # commands run the compiled engine and need not load scipy.linalg (about 0.3 s) to start.
+    from scipy.linalg import cho_factor, cho_solve
+
     try:
         factor = cho_factor(terms.M, lower=True, check_finite=False)
     except np.linalg.LinAlgError:

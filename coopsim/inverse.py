@@ -281,7 +281,8 @@ class MinEnergySetup(NamedTuple):
     fp (m, s, N) = C⁺b (minimum norm); Z (m, d, N) an orthonormal basis of null(C); with D = Jᵀ Z and
     u = τ_arms + Jᵀf_p (the torques of f_p), per joint j DD (n, d, d, N) = d_j d_jᵀ and
     Du (n, d, s, N) = d_j u_j (d_j: row j of D); regular (N,) bool: C has full row rank by the
-    forward model's rule (`has_full_rank`, the problem's rank_tol); passive (n,) bool."""
+    forward model's rule (`has_full_rank`, the problem's rank_tol); passive (n,) bool; D (n, d, N) and
+    u (n, s, N) themselves."""
 
     ys: np.ndarray
     fp: np.ndarray
@@ -290,6 +291,8 @@ class MinEnergySetup(NamedTuple):
     Du: np.ndarray
     regular: np.ndarray
     passive: np.ndarray
+    D: np.ndarray
+    u: np.ndarray
 
 
 def gram_rank(sv: np.ndarray, rank_tol: float) -> np.ndarray:
@@ -325,7 +328,7 @@ def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) 
     D = last(JT @ Z)                                                # (n, d, N)
     u = last(ta[..., None] + JT @ fp)                               # (n, s, N)
     return MinEnergySetup(ys, last(fp), last(Z), D[:, :, None] * D[:, None, :], D[:, :, None] * u[:, None, :],
-                          regular, np.asarray(passive, bool))
+                          regular, np.asarray(passive, bool), D, u)
 
 
 def min_energy_solve(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray) -> np.ndarray:

@@ -75,8 +75,17 @@ class InverseStudy:
 def inverse_study(model: Model, methods=METHODS, duration: float | None = None, with_replay: bool = False,
                   bounds: tuple[float | None, float | None] = (None, None), curve: bool = True,
                   progress: Progress | None = None) -> InverseStudy:
-    """Run the inverse dynamics of the scenario with every method in `methods`; `progress` hears the
-    stages forward (or ik), inverse, replay and curve."""
+    """Run the inverse dynamics of the scenario with every method in `methods` (`solve_study`), then
+    the checks asked for (`add_checks`); `progress` hears the stages forward (or ik), inverse, replay
+    and curve."""
+    return add_checks(solve_study(model, methods, duration, bounds, progress), with_replay, curve, progress)
+
+
+def solve_study(model: Model, methods=METHODS, duration: float | None = None,
+                bounds: tuple[float | None, float | None] = (None, None),
+                progress: Progress | None = None) -> InverseStudy:
+    """The inverse study without its checks (no replays, no trade-off curve): trajectory, every
+    resolution of `methods`, internal wrenches and stress — all that `inverse_series` logs."""
     traj, sim = trajectory_of(model, duration, progress)
     prob = inverse_problem(model, traj)
     base = resolution_for(model, "min_energy")
@@ -102,20 +111,27 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
         if box:
             stress[k] = section_loads(model.object.mass, model.object.box, model.object.grasp_pos, prob.R_o,
                                       prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows)
+    return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
+                        cap.torque_limits(model.motors, traj.qd), {}, [], (f_b, m_b))
+
+
+def add_checks(study: InverseStudy, with_replay: bool = False, curve: bool = True,
+               progress: Progress | None = None) -> InverseStudy:
+    """`study` with its checks: each resolution's torques replayed through the forward dynamics
+    (with_replay) and the energy–stress trade-off curve of the bounded minimum-energy resolution."""
     replays = {}
-    for i, (k, res) in enumerate(resolutions.items() if with_replay else ()):
-        _report(progress, "replay", i / len(resolutions))
-        replays[k] = replay(model, traj, res)
+    for i, (k, res) in enumerate(study.resolutions.items() if with_replay else ()):
+        _report(progress, "replay", i / len(study.resolutions))
+        replays[k] = replay(study.model, study.traj, res)
     if with_replay:
         _report(progress, "replay", 1.0)
     trade = []
     if curve:
         _report(progress, "curve", 0.0)
-        peak = default_bounds(prob, base, fraction=1.0)
-        trade = cap.energy_stress_curve(prob, base, peak)
+        base = resolution_for(study.model, "min_energy")
+        trade = cap.energy_stress_curve(study.problem, base, default_bounds(study.problem, base, fraction=1.0))
         _report(progress, "curve", 1.0)
-    return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
-                        cap.torque_limits(model.motors, traj.qd), replays, trade, (f_b, m_b))
+    return replace(study, replays=replays, curve=trade)
 
 
 def _trajectory_summary(model: Model, traj: JointTrajectory) -> dict:

@@ -194,16 +194,33 @@ def _field_values(a: np.ndarray) -> list:
     return [_wrap_rows(r, a.ndim - 1) for r in rows]
 
 
+def _field_texts(a: np.ndarray) -> list[str]:
+    """Array (N, ...) → the JSON text of each of its N samples, as `_dumps(_field_values(a)[i])` writes
+    it. Finite floats of up to one array axis per sample, integers and booleans are formatted directly
+    (Python's float repr is what JSON's encoder writes); anything else goes through `_dumps`."""
+    if a.ndim > 2 or not a.size or (a.dtype.kind == "f" and not np.isfinite(a).all()):
+        return [_dumps(v).decode("utf-8") for v in _field_values(a)]
+    flat = a.reshape(len(a), -1)
+    if a.dtype.kind == "b":
+        text = np.where(flat, "true", "false").tolist()
+    else:
+        text = [list(map(repr, row)) for row in flat.astype(np.float64 if a.dtype.kind == "f" else np.int64).tolist()]
+    if a.ndim == 1:
+        return [row[0] for row in text]
+    return ["[" + ",".join(row) + "]" for row in text]
+
+
 def _series_messages(s: Series) -> list[bytes]:
-    """Encoded JSON messages (N) of one series."""
-    ns = time_ns(s.t)
-    cols = {k: _field_values(a) for k, a in s.fields.items()}
-    out = []
-    for i, (ti, ni) in enumerate(zip(np.asarray(s.t, dtype=np.float64).tolist(), ns.tolist())):
-        msg = {"timestamp": stamp(ni), "t": ti}
-        msg.update((k, v[i]) for k, v in cols.items())
-        out.append(_dumps(msg))
-    return out
+    """Encoded JSON messages (N) of one series: {"timestamp": {"sec", "nsec"}, "t": t, <field>: value, …}
+    with no spaces, byte for byte what `_dumps` writes for that dict."""
+    ns = time_ns(s.t).tolist()
+    t = np.asarray(s.t, dtype=np.float64).tolist()
+    names = [json.dumps(k, ensure_ascii=False) for k in s.fields]
+    cols = [_field_texts(a) for a in s.fields.values()]
+    rows = zip(*cols) if cols else ((),) * len(t)
+    return [("{\"timestamp\":{\"sec\":%d,\"nsec\":%d},\"t\":%r" % (n // 1_000_000_000, n % 1_000_000_000, ti)
+             + "".join("," + k + ":" + v for k, v in zip(names, row)) + "}").encode("utf-8")
+            for n, ti, row in zip(ns, t, rows)]
 
 
 def _dumps(obj: Any) -> bytes:
@@ -274,6 +291,23 @@ def write_mcap(path: str | Path, series: Sequence[Series | JsonTopic],
         f.flush()
         os.fsync(f.fileno())
     return Path(path)
+
+
+def log_data(streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str, str]] | None = None) -> LogData:
+    """The LogData that `read_mcap` gives back for a log written by `write_mcap(path, streams, metadata)`,
+    built in memory (what the commands draw their figures from while the file is written): series as
+    float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them. Checked as `write_mcap`
+    checks them; tests/test_log.py compares it with the file read back."""
+    topics, schemas, messages = {}, {}, {}
+    for st in streams:
+        if isinstance(st, Series):
+            _check_series(st)
+            topics[st.topic] = {"t": np.array(st.t, dtype=np.float64)} | {
+                k: np.array(a, dtype=_DTYPE[_LEAF[a.dtype.kind]]) for k, a in st.fields.items()}
+        else:
+            messages[st.topic] = [json.loads(m) for m in _stream_parts(st)[2]]
+        schemas[st.topic] = st.schema_name
+    return LogData({k: dict(v) for k, v in (metadata or {}).items()}, topics, schemas, messages)
 
 
 def _unwrap_rows(v: Any, depth: int) -> Any:
@@ -571,7 +605,8 @@ def simulation_series(res, prefix: str = "/native") -> list[Series]:
     """Series of a native SimResult: {prefix}/joint_state (angle, rate, acceleration, torque (N, n)
     rad, rad/s, rad/s², N·m); {prefix}/object (position (N, 3) m, quaternion (N, 4) [w, x, y, z],
     twist (N, 6) [v_C; ω] world axes); {prefix}/grasp_wrench and {prefix}/internal_wrench (wrench
-    (N, r, 6) [f; n]); {prefix}/constraint (residual_pos, residual_vel, cond (N,))."""
+    (N, r, 6) [f; n]); {prefix}/constraint (residual_pos, residual_vel, cond (N,) and manipulability
+    (N, r): each arm's √det(A Aᵀ), A its end-effector Jacobian in the scene's rows)."""
     t = res.t
     return [
         _joint_state(prefix, t, res.q, res.qd, res.qdd, res.tau),
@@ -579,7 +614,8 @@ def simulation_series(res, prefix: str = "/native") -> list[Series]:
         Series(f"{prefix}/grasp_wrench", "coopsim.Wrenches", t, {"wrench": res.grasp_wrench}),
         Series(f"{prefix}/internal_wrench", "coopsim.Wrenches", t, {"wrench": res.internal_wrench}),
         Series(f"{prefix}/constraint", "coopsim.NativeConstraint", t,
-               {"residual_pos": res.residual_pos, "residual_vel": res.residual_vel, "cond": res.cond}),
+               {"residual_pos": res.residual_pos, "residual_vel": res.residual_vel, "cond": res.cond,
+                "manipulability": res.manipulability}),
     ]
 
 
@@ -709,8 +745,10 @@ def file_sha256(path: str | Path) -> str:
 def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str, dict[str, str]]:
     """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact):
     scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model (arm names,
-    joints per arm, joint names, joint types), native.integrator, mujoco, validation, and for a native result
-    native.initial_projection (dq, dqd, residual before/after, iterations) and native.integrator_stats.
+    joints per arm, joint names, joint types (revolute / prismatic)), native.integrator, mujoco, validation,
+    and for a native result native.initial_projection (dq, dqd, residual before/after, iterations),
+    native.integrator_stats and native.warnings (count; "1", "2", …: each warning as JSON,
+    `coopsim.diagnostics.RunWarning.as_dict`).
     Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
     {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
     extra = dict(extra or {})
@@ -736,6 +774,8 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
             "dq": p.dq, "dqd": p.dqd, "residual_before": p.residual_before, "residual_after": p.residual_after,
             "iterations": p.iterations})
         meta["native.integrator_stats"] = _record(asdict(res.stats))
+        meta["native.warnings"] = _record({"count": len(res.warnings)}
+                                          | {str(i + 1): w.as_dict() for i, w in enumerate(res.warnings)})
     rest = {}
     for k, v in extra.items():
         if isinstance(v, dict):
@@ -749,8 +789,14 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
 
 def write_run_log(path: str | Path, model: Model, native=None, twin=None, extra_series: Sequence = (),
                   metadata_extra: dict | None = None) -> Path:
-    """Write a run's MCAP log: native series (/native/…), twin series (/mujoco/…), `extra_series`,
-    /tf and /scene for Foxglove, and the run's metadata (see :func:`run_metadata`). Returns the path."""
+    """Write a run's MCAP log (`run_log`). Returns the path."""
+    return write_mcap(path, *run_log(model, native, twin, extra_series, metadata_extra))
+
+
+def run_log(model: Model, native=None, twin=None, extra_series: Sequence = (),
+            metadata_extra: dict | None = None) -> tuple[list, dict[str, dict[str, str]]]:
+    """(streams, metadata) of a run's log: native series (/native/…), twin series (/mujoco/…),
+    `extra_series`, /tf and /scene for Foxglove, and the run's metadata (see :func:`run_metadata`)."""
     streams: list = []
     if native is not None:
         streams += simulation_series(native)
@@ -759,4 +805,4 @@ def write_run_log(path: str | Path, model: Model, native=None, twin=None, extra_
     streams += list(extra_series)
     if native is not None or twin is not None:
         streams += [frame_transforms(model, native, twin), scene_update(model, native is not None, twin is not None)]
-    return write_mcap(path, streams, run_metadata(model, native, metadata_extra))
+    return streams, run_metadata(model, native, metadata_extra)

@@ -123,7 +123,15 @@ class IntegratorSettings:
     max_initial_correction: largest joint correction (rad) accepted when the initial state is made
     consistent; constraint_rows: 'auto' (planar rows for planar scenes) or 'spatial';
     rank_tol: relative eigenvalue below which the constraint matrix counts as rank-deficient;
-    on_rank_deficiency: 'warn' (minimum-norm grasp wrenches, warning) or 'error'."""
+    on_rank_deficiency: 'warn' (minimum-norm grasp wrenches, warning) or 'error';
+    condition_limit: condition number of Λ𝐈⁻¹Λᵀ above which a sample counts as ill-conditioned (the
+    chain is near a singular configuration: grasp wrenches lose about log10(cond) digits);
+    on_ill_conditioning: 'warn' (a warning naming the worst sample) or 'error' (the run stops);
+    initial_correction_warning: joint correction (rad) of the initial state above which a warning
+    says so (max_initial_correction stops the run);
+    singularity_limit: an arm counts as near a singularity where σ_min/σ_max of its end-effector
+    Jacobian in the scene's rows (linear rows divided by the arm's reach) falls below this.
+    rtol/atol are also the accuracy a fixed rk4 step is checked against (`coopsim.diagnostics`)."""
 
     method: str = "dop853"
     rtol: float = 1e-11
@@ -139,6 +147,10 @@ class IntegratorSettings:
     constraint_rows: str = "auto"
     rank_tol: float = 1e-10
     on_rank_deficiency: str = "warn"
+    condition_limit: float = 1e8
+    on_ill_conditioning: str = "warn"
+    initial_correction_warning: float = 1e-3
+    singularity_limit: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -221,7 +233,9 @@ class Model:
     """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
     a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
     spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
-    state as given (not yet consistent); duration s."""
+    state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
+    limit of each stacked joint, rad (m for a prismatic joint; ±inf: none; None: no joint has one),
+    from a robot file or a joint's `range`: checked at the initial state, not enforced by the dynamics."""
 
     name: str
     arms: tuple[ArmModel, ...]
@@ -238,6 +252,7 @@ class Model:
     mujoco: MujocoSettings = MujocoSettings()
     validation: ValidationThresholds = ValidationThresholds()
     inverse: InverseSettings = InverseSettings()
+    joint_range: np.ndarray | None = None
 
     @property
     def r(self) -> int:

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from .mjcf import build_spec, dof_address, qpos_address
-from .model import CoopsimError, Model, torque_at
+from .model import CoopsimError, Model, TorqueFunction, torque_at
 from .results import SampledMotion
 
 
@@ -33,8 +33,14 @@ class TwinResult(SampledMotion):
 
 
 @contextlib.contextmanager
-def _control(model: Model, ctrl_index: np.ndarray):
-    """Install a MuJoCo control callback that writes τ(d.time) (restored on exit)."""
+def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray):
+    """Drive the twin's motors with τ(d.time): constant torques (every table a single row) are written
+    into d.ctrl once; otherwise a MuJoCo control callback writes them at every stage (restored on exit)."""
+    if not isinstance(model.torques, TorqueFunction) and all(len(tab.times) == 1 for tab in model.torques):
+        d.ctrl[ctrl_index] = torque_at(model.torques, 0.0)
+        yield
+        return
+
     def callback(m, d):
         d.ctrl[ctrl_index] = torque_at(model.torques, d.time)
 
@@ -72,11 +78,10 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     d.qpos[qadr], d.qvel[dadr], d.time = q0, qd0, t_out[0]
     start = time.perf_counter()
     vel = np.zeros(6)
-    with _control(model, ctrl):
+    with _control(model, d, ctrl):
         for i in range(N):
             if i:
-                for _ in range(steps[i - 1]):
-                    mujoco.mj_step(m, d)
+                mujoco.mj_step(m, d, int(steps[i - 1]))
             mujoco.mj_forward(m, d)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, obj, vel, 0)
             out["q"][i], out["qd"][i], out["qdd"][i] = d.qpos[qadr], d.qvel[dadr], d.qacc[dadr]

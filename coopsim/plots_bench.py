@@ -5,7 +5,8 @@ line per (family, method) in ladder order, each point labelled with its toleranc
 `simulate()` end to end; hollow markers on dotted lines: its time loop alone), the
 Pareto front over every run drawn as a staircase with ringed points, the error targets and the
 reference's self-convergence difference as vertical lines. Runs with a non-finite error (diverged,
-failed) are left out. `scaling_figure`: µs per evaluation against total joints, one line per r.
+failed) are left out; the legend stands beside the axes. `scaling_figure`: µs per evaluation against
+total joints, one line per r.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from .plots import legend_beside, legend_width, panel_grid
 from .render import save_figure
 
 ERROR_FLOOR = 1e-17  # rad: where an error of exactly zero is drawn
@@ -42,11 +44,15 @@ def _draw_pareto(ax, runs: list[dict]) -> None:
     ax.scatter(e, t, s=140, facecolors="none", edgecolors="0.2", lw=1.2, zorder=4)
 
 
-def work_precision_figure(scenario: dict, path: Path) -> Path:
-    """Work-precision plot of one `bench_scenario` dict, written to `path` (PNG, atomically)."""
-    fig = Figure(figsize=(9, 6.5))
-    ax = fig.add_subplot()
-    for (family, method), rows in _series(scenario["runs"]).items():
+def work_precision_plot(scenario: dict) -> Figure:
+    """The work-precision figure of one `bench_scenario` dict (module docstring); legend beside it."""
+    series = _series(scenario["runs"])
+    sc = scenario["reference"]["self_convergence_rad"]
+    labels = [f"{family} {method}" for family, method in series] + [
+        "Pareto front", "reference self-convergence", "native time loop alone"]
+    fig = Figure()
+    ax = panel_grid(fig, 1, 1, (7.0, 5.2), legend=legend_width(labels), suptitle=False)[0, 0]
+    for (family, method), rows in series.items():
         color, marker = _STYLE.get((family, method), ("k", "^"))
         e = [max(r["max_error"], ERROR_FLOOR) for r in rows]
         t = [r["wall_s"] for r in rows]
@@ -59,25 +65,30 @@ def work_precision_figure(scenario: dict, path: Path) -> Path:
     _draw_pareto(ax, scenario["runs"])
     for target in (1e-3, 1e-6, 1e-8):
         ax.axvline(target, color="0.6", lw=0.8, ls=":")
-    sc = scenario["reference"]["self_convergence_rad"]
     if sc > 0:
-        ax.axvline(sc, color="C0", lw=0.8, ls="-.", label="reference self-convergence")
+        ax.axvline(sc, color="C0", lw=0.8, ls="-.", label=labels[-2])
     ax.set_xlabel("max joint error against the reference (rad)")
     ax.set_ylabel("wall time (s)")
     ax.set_title(f"Work–precision: {scenario['name']}, {scenario['duration_s']:g} s")
     ax.grid(True, which="both", alpha=0.25)
-    ax.plot([], [], "o:", color="0.4", mfc="none", ms=4, lw=0.6, label="native time loop alone")
-    ax.legend(fontsize=7, loc="best")
-    return save_figure(fig, path)
+    ax.plot([], [], "o:", color="0.4", mfc="none", ms=4, lw=0.6, label=labels[-1])
+    legend_beside(ax)
+    return fig
+
+
+def work_precision_figure(scenario: dict, path: Path) -> Path:
+    """Work-precision plot of one `bench_scenario` dict, written to `path` (PNG, atomically)."""
+    return save_figure(work_precision_plot(scenario), path)
 
 
 def scaling_figure(scaling: dict, path: Path) -> Path:
     """Native amortised µs per evaluation against total joints (log–log), one colour per r (dots:
     default; crosses: the Cholesky path forced), with the per-r power-law fits of the default;
     written to `path` (PNG, atomically)."""
-    fig = Figure(figsize=(6.5, 4.5))
-    ax = fig.add_subplot()
     pts = scaling["points"]
+    fig = Figure()
+    ax = panel_grid(fig, 1, 1, (5.0, 3.6), legend=legend_width(["r = 4, Cholesky forced", "fit: N^0.00"]),
+                    suptitle=False)[0, 0]
     for i, r in enumerate(sorted({p["r"] for p in pts})):
         sel = sorted((p for p in pts if p["r"] == r), key=lambda p: p["n_total"])
         x = np.array([p["n_total"] for p in sel], float)
@@ -93,5 +104,5 @@ def scaling_figure(scaling: dict, path: Path) -> Path:
     ax.set_ylabel("native µs per evaluation (amortised, 1 thread)")
     ax.set_title("Cost per closed-chain evaluation")
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=7)
+    legend_beside(ax)
     return save_figure(fig, path)

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .joints import EFFORT, units_of
-from .labels import metadata_joint_labels, metadata_joint_types
+from .labels import metadata_arms, metadata_joint_labels, metadata_joint_types
 from .log import LogData
-from .plots import run_title
+from .plots import legend_beside, legend_width, panel_grid, run_title
 from .render import FigureWorkers, render_figures
 from .resolutions import RESOLUTIONS
 
@@ -50,36 +50,54 @@ def _methods(log: LogData, prefix: str, suffix: str) -> list[str]:
 MOTOR_LINES = "motor lines τ_max, τ_min (eq. 36)"
 
 
+def _torque_grid(log: LogData, n: int) -> list[list[int]]:
+    """Joint indices (stacked) per row of the torque figure: each arm starts a row, at most 4 panels a
+    row (one row of all n when the log names no arms)."""
+    arms = metadata_arms(log.metadata)
+    dofs = arms[1] if arms is not None and sum(arms[1]) == n else [n]
+    cols = min(max(dofs), 4)
+    rows, start = [], 0
+    for d in dofs:
+        rows += [list(range(start + i, start + min(i + cols, d))) for i in range(0, d, cols)]
+        start += d
+    return rows
+
+
 def inverse_torques_figure(log: LogData) -> Figure:
-    """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint,
-    with the motor lines of eq. 36 (grey)."""
+    """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint
+    (a row per arm, at most 4 panels a row), with the motor lines of eq. 36 (grey); one legend beside
+    the first row."""
     from matplotlib.figure import Figure
 
     traj = log.topics["/inverse/trajectory"]
     t, n = traj["t"], traj["q"].shape[1]
     names, types = _joints(log, n), metadata_joint_types(log.metadata, n)
-    cols = int(np.ceil(n / 2)) if n > 3 else n
-    rows = int(np.ceil(n / cols))
-    fig = Figure(figsize=(4.2 * cols, 3.0 * rows))
-    for j in range(n):
-        ax = fig.add_subplot(rows, cols, j + 1)
-        for k in _methods(log, "/inverse/", "/torque"):
-            ax.plot(t, log.topics[f"/inverse/{k}/torque"]["tau"][:, j], label=LABEL.get(k, k), **STYLE.get(k, {}))
-        lo, hi = traj["tau_min"][:, j], traj["tau_max"][:, j]
-        if np.all(np.isfinite(hi)):
-            span = max(np.max(np.abs([ln.get_ydata() for ln in ax.lines])), 1e-9)
-            if np.min(hi) < 3 * span:
-                ax.plot(t, hi, color="0.6", lw=0.8, label=MOTOR_LINES)
-                ax.plot(t, lo, color="0.6", lw=0.8)
-        ax.set_title(names[j], fontsize=9)
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel(f"τ ({units_of(types[j:j + 1], EFFORT)})")
-        ax.grid(alpha=0.3)
+    methods = _methods(log, "/inverse/", "/torque")
+    grid = _torque_grid(log, n)
+    cols = max(len(r) for r in grid)
+    fig = Figure()
+    axes = panel_grid(fig, len(grid), cols, (3.4, 2.3), legend=legend_width([LABEL.get(k, k) for k in methods] + [MOTOR_LINES]))
+    for row, joints in zip(axes, grid):
+        for ax in row[len(joints):]:
+            ax.remove()
+        for ax, j in zip(row, joints):
+            for k in methods:
+                ax.plot(t, log.topics[f"/inverse/{k}/torque"]["tau"][:, j], label=LABEL.get(k, k), **STYLE.get(k, {}))
+            lo, hi = traj["tau_min"][:, j], traj["tau_max"][:, j]
+            if np.all(np.isfinite(hi)):
+                span = max(np.max(np.abs([ln.get_ydata() for ln in ax.lines])), 1e-9)
+                if np.min(hi) < 3 * span:
+                    ax.plot(t, hi, color="0.6", lw=0.8, label=MOTOR_LINES)
+                    ax.plot(t, lo, color="0.6", lw=0.8)
+            ax.set_title(names[j], fontsize=9)
+            ax.set_xlabel("t (s)")
+            ax.set_ylabel(f"τ ({units_of(types[j:j + 1], EFFORT)})")
+            ax.grid(alpha=0.3)
     legend = {}   # label → handle over every panel: the motor lines may be drawn on other panels only
     for ax in fig.axes:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             legend.setdefault(label, handle)
-    fig.axes[0].legend(list(legend.values()), list(legend), fontsize=7)
+    legend_beside(axes[0, len(grid[0]) - 1], list(legend.values()))
     fig.suptitle(run_title(log, "Joint torques of each resolution (Fig. 6)"))
     return fig
 
@@ -88,9 +106,10 @@ def inverse_norms_figure(log: LogData) -> Figure:
     """Fig. 7: the torque norm |τ| and the cost ½τᵀQτ of every resolution over time."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 6))
-    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
-    for k in _methods(log, "/inverse/", "/torque"):
+    methods = _methods(log, "/inverse/", "/torque")
+    fig = Figure()
+    ax1, ax2 = panel_grid(fig, 2, 1, (6.4, 2.4), legend=legend_width([LABEL.get(k, k) for k in methods]))[:, 0]
+    for k in methods:
         d = log.topics[f"/inverse/{k}/torque"]
         ax1.plot(d["t"], d["torque_norm"], label=LABEL.get(k, k), **STYLE.get(k, {}))
         ax2.plot(d["t"], d["cost"], label=LABEL.get(k, k), **STYLE.get(k, {}))
@@ -102,7 +121,7 @@ def inverse_norms_figure(log: LogData) -> Figure:
     for ax in (ax1, ax2):
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
-    ax1.legend(fontsize=8)
+    legend_beside(ax1)
     fig.suptitle(run_title(log, "Torque norm and cost (Fig. 7)"))
     return fig
 
@@ -114,9 +133,9 @@ def inverse_internal_figure(log: LogData) -> Figure:
 
     methods = _methods(log, "/inverse/", "/internal")
     has_stress = all(f"/inverse/{k}/stress" in log.topics for k in methods)
-    rows = 3 if has_stress else 2
-    fig = Figure(figsize=(8, 2.8 * rows))
-    axes = [fig.add_subplot(rows, 1, i + 1) for i in range(rows)]
+    fig = Figure()
+    axes = panel_grid(fig, 3 if has_stress else 2, 1, (6.4, 2.0),
+                      legend=legend_width([LABEL.get(k, k) for k in methods]))[:, 0]
     for k in methods:
         d = log.topics[f"/inverse/{k}/internal"]
         F = d["nonsqueezing"]
@@ -132,52 +151,61 @@ def inverse_internal_figure(log: LogData) -> Figure:
     for ax in axes:
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    legend_beside(axes[0])
     fig.suptitle(run_title(log, "Internal wrench and object stress"))
     return fig
 
 
+def inverse_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
+    """The figures of `inverse_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
+    out = Path(out_dir)
+    return [(inverse_torques_figure, (log,), out / "inverse_torques.png"),
+            (inverse_norms_figure, (log,), out / "inverse_norms.png"),
+            (inverse_internal_figure, (log,), out / "inverse_internal.png")]
+
+
 def inverse_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
     """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir (drawn on `workers`)."""
-    out = Path(out_dir)
-    return render_figures([(inverse_torques_figure, (log,), out / "inverse_torques.png"),
-                           (inverse_norms_figure, (log,), out / "inverse_norms.png"),
-                           (inverse_internal_figure, (log,), out / "inverse_internal.png")], workers)
+    return render_figures(inverse_jobs(log, out_dir), workers)
 
 
 def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
     """Fig. 8: per resolution, the torque of the motor that saturates first, at the capacity mass,
-    against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation."""
+    against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation. Each
+    panel's legend stands beside it."""
     from matplotlib.figure import Figure
 
     lim = log.topics["/capacity/limits"]
     t = lim["t"]
-    methods = _methods(log, "/capacity/", f"/{mode}")
-    methods = [k for k in methods if k != "lp"]
+    methods = [k for k in _methods(log, "/capacity/", f"/{mode}") if k != "lp"]
     names = _joints(log, lim["qd"].shape[1])
+    records = [log.metadata.get(f"capacity.{k}.{mode}", {}) for k in methods]
+    masses = [json.loads(rec.get("mass_kg", "NaN")) for rec in records]  # Python's json reads Infinity and NaN
+    lines = ["τ_max line (eq. 36)", "τ_min line (eq. 36)", "first saturation"]
     cols = min(2, max(1, len(methods)))
     rows = int(np.ceil(max(1, len(methods)) / cols))
-    fig = Figure(figsize=(5.5 * cols, 3.8 * rows))
-    for i, k in enumerate(methods):
-        ax = fig.add_subplot(rows, cols, i + 1)
-        rec = log.metadata.get(f"capacity.{k}.{mode}", {})
+    fig = Figure()
+    axes = panel_grid(fig, rows, cols, (4.2, 2.8), legend=legend_width([f"τ at {m:.4g} kg" for m in masses] + lines),
+                      legend_after=range(cols)).ravel()
+    for ax in axes[len(methods):]:
+        ax.remove()
+    for ax, k, rec, mass in zip(axes, methods, records, masses):
         j = json.loads(rec.get("stacked_joint", "null"))
-        mass = json.loads(rec.get("mass_kg", "NaN"))  # Python's json reads Infinity and NaN
         if j is None:
             ax.text(0.5, 0.5, "no saturating motor", ha="center", va="center", transform=ax.transAxes)
             continue
         tau = log.topics[f"/capacity/{k}/{mode}"]["tau"][:, j]
         ax.plot(t, tau, label=f"τ at {mass:.4g} kg", **STYLE.get(k, {}))
-        ax.plot(t, lim["tau_max"][:, j], color="0.4", lw=1, label="τ_max line (eq. 36)")
-        ax.plot(t, lim["tau_min"][:, j], color="0.4", lw=1, ls="--", label="τ_min line (eq. 36)")
+        ax.plot(t, lim["tau_max"][:, j], color="0.4", lw=1, label=lines[0])
+        ax.plot(t, lim["tau_min"][:, j], color="0.4", lw=1, ls="--", label=lines[1])
         ts = json.loads(rec.get("time_s", "null"))
         if ts is not None:
-            ax.plot([ts], [np.interp(ts, t, tau)], "o", color="black")
+            ax.plot([ts], [np.interp(ts, t, tau)], "o", color="black", label=lines[2])
         ax.set_title(f"{LABEL.get(k, k)}\n{names[j]}", fontsize=9)
         ax.set_xlabel("t (s)")
         ax.set_ylabel(f"τ ({units_of(metadata_joint_types(log.metadata, len(names))[j:j + 1], EFFORT)})")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        legend_beside(ax)
     fig.suptitle(run_title(log, f"Capacity: the motor that saturates first ({mode})"))
     return fig
 
@@ -187,9 +215,10 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
     the lowest point of each curve."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 4))
-    ax = fig.add_subplot(1, 1, 1)
-    for k in _methods(log, "/capacity/", f"/{mode}"):
+    methods = _methods(log, "/capacity/", f"/{mode}")
+    fig = Figure()
+    ax = panel_grid(fig, 1, 1, (6.4, 3.0), legend=legend_width([LABEL.get(k, k) for k in methods]))[0, 0]
+    for k in methods:
         d = log.topics[f"/capacity/{k}/{mode}"]
         y = np.where(np.isfinite(d["per_sample_mass"]), d["per_sample_mass"], np.nan)
         ax.plot(d["t"], y, label=LABEL.get(k, k), **STYLE.get(k, {}))
@@ -197,14 +226,13 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
     ax.set_xlabel("t (s)")
     ax.set_ylabel("largest mass this sample allows (kg)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    legend_beside(ax)
     fig.suptitle(run_title(log, f"Largest mass each sample allows ({mode})"))
     return fig
 
 
-def capacity_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
-    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir (drawn on
-    `workers`)."""
+def capacity_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
+    """The figures of `capacity_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
     out = Path(out_dir)
     jobs = []
     for mode in ("scaled", "payload"):
@@ -213,4 +241,10 @@ def capacity_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | N
         tag = "" if mode == "scaled" else "_payload"
         jobs += [(capacity_motor_figure, (log, mode), out / f"capacity_motors{tag}.png"),
                  (capacity_along_path_figure, (log, mode), out / f"capacity_along_path{tag}.png")]
-    return render_figures(jobs, workers)
+    return jobs
+
+
+def capacity_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
+    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir (drawn on
+    `workers`)."""
+    return render_figures(capacity_jobs(log, out_dir), workers)

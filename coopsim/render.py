@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, TypeVar
 
 from .atomic import atomic_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+T = TypeVar("T")
 DPI = 110
 WORKER_NICENESS = 5   # the workers yield the CPU to the command while it computes
 # Margins and gaps (inches) around a grid of axes with 10-point tick labels, axis labels and titles of
@@ -119,6 +120,16 @@ class FigureWorkers:
 
     def __exit__(self, exc_type, *exc) -> None:
         self.close(stop=exc_type is not None)
+
+
+def render_while(draw: Callable[[], list[Path]], work: Callable[[], T]) -> tuple[list[Path], T]:
+    """(draw(), work()): `draw` — a call that hands its figure jobs to FigureWorkers and waits for them —
+    runs on a thread of this process while `work` (e.g. writing the log) runs here, so the workers
+    draw while it runs. An error of either is raised here once both have ended."""
+    with ThreadPoolExecutor(1) as thread:
+        figures = thread.submit(draw)
+        done = work()
+        return figures.result(), done
 
 
 def render_figures(jobs: list, workers: FigureWorkers | None = None) -> list[Path]:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .joints import COORDINATE, joint_units
 from .kinematics import arm_pose, reach_check
 from .model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, CoopsimError, IntegratorSettings, InverseSettings,
                     Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
@@ -291,15 +292,22 @@ def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=Non
     return mass, com, I, np.zeros(3)
 
 
-def _arm(sec: _Section, index: int) -> tuple[ArmModel, dict]:
-    """One arm; returns the model and its per-arm extras (initial state, torque, motors)."""
+def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
+    """One arm, from its `links` or from a robot file (`robot` or `file`, `robots.py`); returns the
+    model and its per-arm extras: n, joint_range (n, 2) rad (m for a prismatic joint), motor defaults
+    stall (n,) and speed (n,)."""
     name = sec.string("name", default=f"arm{index + 1}")
     base = sec.section("base", default={})
     base_pos = base.array("position", (3,), default=[0.0, 0.0, 0.0])
     base_rot = _rotation(base)
     base.done()
+    kinds = [k for k in ("links", "robot", "file") if sec.has(k)]
+    if len(kinds) != 1:
+        sec.fail("links", "give exactly one of links, robot (a bundled robot) or file (a URDF or MJCF file)")
+    if kinds[0] != "links":
+        return _robot_arm(sec, name, base_pos, base_rot, base_dir)
     links = sec.items("links", min_len=1)
-    jp, jr, ja, jt, lm, lc, li, lb = [], [], [], [], [], [], [], []
+    jp, jr, ja, jt, lm, lc, li, lb, rng = [], [], [], [], [], [], [], [], []
     prev_length = 0.0
     for link in links:
         joint = link.section("joint", default={})
@@ -307,6 +315,7 @@ def _arm(sec: _Section, index: int) -> tuple[ArmModel, dict]:
         jp.append(joint.array("position", (3,), default=[prev_length, 0.0, 0.0]))
         jr.append(_rotation(joint))
         ja.append(_unit(joint, "axis", [0.0, 0.0, 1.0]))
+        rng.append(_joint_range(joint, jt[-1]))
         joint.done()
         m, c, I, box = _body(link, com_default="link")
         lm.append(m), lc.append(c), li.append(I), lb.append(box)
@@ -319,7 +328,59 @@ def _arm(sec: _Section, index: int) -> tuple[ArmModel, dict]:
     n = len(links)
     arm = ArmModel(name, base_pos, base_rot, np.array(jp), np.array(jr), np.array(ja), np.array(lm),
                    np.array(lc), np.array(li), np.array(lb), ee_pos, ee_rot, np.array(jt))
-    return arm, {"n": n}
+    return arm, {"n": n, "joint_range": np.array(rng), "stall": np.full(n, np.inf), "speed": np.full(n, np.inf),
+                 "joint_names": None}
+
+
+def _joint_range(joint: _Section, joint_type: int) -> np.ndarray:
+    """A hand-written joint's position limits `range` [lower, upper]: rad (`range_deg`: deg) for a
+    revolute joint, m for a prismatic one (its `range_deg` refused); none by default."""
+    if not (joint.has("range") or joint.has("range_deg")):
+        return np.array([-np.inf, np.inf])
+    unit = joint_units(joint_type)[COORDINATE]
+    if joint_type == PRISMATIC:
+        if joint.has("range_deg"):
+            joint.fail("range_deg", "the joint is prismatic (m): give range in m, not range_deg")
+        lo, hi = joint.array("range", (2,))
+    else:
+        lo, hi = joint.angles("range", (2,))
+    if not lo < hi:
+        joint.fail("range", f"lower limit must be below the upper one, got [{lo:g}, {hi:g}] {unit}")
+    return np.array([lo, hi])
+
+
+def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> tuple[ArmModel, dict]:
+    """An arm read from a robot file (`robots.read_chain`): `robot` (a bundled robot, `robots.ROBOTS`)
+    or `file` (URDF or MJCF, relative to the scenario's folder); `chain` {base, tip, lock} (defaults
+    from the bundled robot); `end_effector` in the tip link's frame (default: that frame)."""
+    from . import robots
+
+    try:
+        if sec.has("robot"):
+            key = "robot"
+            robot_name = sec.string("robot")
+            path = robots.robot_file(robot_name)
+            default = robots.ROBOTS[robot_name]
+        else:
+            key = "file"
+            path, default = _relative_file(sec, "file", base_dir), None
+        chain_sec = sec.section("chain", default={} if default is not None else _REQUIRED)
+        base_link = chain_sec.string("base", default=_REQUIRED if default is None else default.base)
+        tip_link = chain_sec.string("tip", default=_REQUIRED if default is None else default.tip)
+        lock = chain_sec.raw("lock", default=[] if default is None else list(default.lock))
+        if not isinstance(lock, list) or not all(isinstance(x, str) for x in lock):
+            chain_sec.fail("lock", f"expected a list of joint names, got {_show(lock)}")
+        chain_sec.done()
+        chain = robots.read_chain(path, base_link, tip_link, tuple(lock))
+    except robots.RobotFileError as exc:
+        sec.fail(key if exc.field is None else f"chain.{exc.field}", str(exc))
+    ee = sec.section("end_effector", default={})
+    ee_pos = ee.array("position", (3,), default=[0.0, 0.0, 0.0])
+    ee_rot = _rotation(ee)
+    ee.done()
+    arm = chain.arm(name, base_pos, base_rot, ee_pos, ee_rot)
+    return arm, {"n": chain.n, "joint_range": chain.joint_range, "stall": chain.effort, "speed": chain.velocity,
+                 "joint_names": chain.joint_names}
 
 
 def _joint_values(sec: _Section, key: str, types: np.ndarray, labels: list[str], rates: bool = False,
@@ -338,12 +399,20 @@ def _joint_values(sec: _Section, key: str, types: np.ndarray, labels: list[str],
     return sec.angles(key, (n,), default, is_angle=types == REVOLUTE)
 
 
-def _arm_state(sec: _Section, types: np.ndarray):
-    n = len(types)
-    labels = [f"joint {j + 1}" for j in range(n)]
+def _arm_state(sec: _Section, arm: ArmModel, info: dict):
+    """Initial coordinates (rad, m for a prismatic joint; within the joints' ranges) and rates of one
+    arm."""
+    n, types, names = info["n"], arm.joint_type, info["joint_names"]
+    labels = [f"joint {j + 1}" + ("" if names is None else f" ({names[j]})") for j in range(n)]
     init = sec.section("initial")
     q0 = _joint_values(init, "angles", types, labels)
     qd0 = _joint_values(init, "rates", types, labels, rates=True, default=np.zeros(n))   # no turn limit
+    lo, hi = info["joint_range"].T
+    outside = np.flatnonzero((q0 < lo) | (q0 > hi))
+    if outside.size:
+        i = int(outside[0])
+        unit = joint_units(types[i])[COORDINATE]
+        init.fail("angles", f"{labels[i]} at {q0[i]:.6g} {unit} is outside its range [{lo[i]:.6g}, {hi[i]:.6g}] {unit}")
     init.done()
     return q0, qd0
 
@@ -367,6 +436,15 @@ def _torque(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     return table
 
 
+def _check_passive_torque(sec: _Section, table: TorqueTable, passive: np.ndarray) -> None:
+    """A passive joint has no motor: its torque must be zero throughout (ScenarioError naming it)."""
+    loaded = passive & np.any(table.values != 0, axis=0)
+    if np.any(loaded):
+        j = int(np.flatnonzero(loaded)[0])
+        sec.fail("torque", f"joint {j + 1} is passive ({sec.field('passive')}) but its torque is not zero "
+                           f"(up to {np.max(np.abs(table.values[:, j])):g} N·m)")
+
+
 def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarray) -> TorqueTable:
     if len(times) < 1 or np.any(np.diff(times) <= 0):
         sec.fail(key, "times must be strictly increasing")
@@ -376,12 +454,7 @@ def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarra
 def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     """CSV (UTF-8) with a header row; first column time (s), then one column per joint (N·m); every
     value a finite number of at most MAX_MAGNITUDE; rows starting with # are skipped."""
-    rel = sec.string("csv")
-    if "\0" in rel:
-        sec.fail("csv", f"a file name cannot hold a NUL character, got {_show(rel)}")
-    path = (where_dir / rel).resolve()
-    if not path.is_file():
-        sec.fail("csv", f"file not found: {path}")
+    path = _relative_file(sec, "csv", where_dir)
 
     def bad(reason: str, line: int | None = None):
         sec.fail("csv", f"{path.name}: " + ("" if line is None else f"line {line}: ") + reason)
@@ -418,6 +491,17 @@ def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     return _checked_table(sec, "csv", data[:, 0], data[:, 1:])
 
 
+def _relative_file(sec: _Section, key: str, base_dir: Path) -> Path:
+    """The existing file named by `key`, relative to the scenario's folder."""
+    rel = sec.string(key)
+    if "\0" in rel:
+        sec.fail(key, f"a file name cannot hold a NUL character, got {_show(rel)}")
+    path = (base_dir / rel).resolve()
+    if not path.is_file():
+        sec.fail(key, f"file not found: {path}")
+    return path
+
+
 def _csv_number(x: str) -> float | None:
     try:
         return float(x)
@@ -441,10 +525,13 @@ def _read_text(path: Path, fail) -> str:
         fail(f"not UTF-8 text: byte 0x{raw[exc.start]:02x} on line {line} is not UTF-8 (save the file as UTF-8)")
 
 
-def _motors(sec: _Section, n: int):
+def _motors(sec: _Section, info: dict):
+    """Motor lines (defaults: none for hand-written links; a robot file's effort and velocity limits),
+    energy weights, passive joints of one arm."""
+    n = info["n"]
     mot = sec.section("motors", default={})
-    stall = mot.array("stall_torque", (n,), default=np.full(n, np.inf), positive=True, allow_inf=True)
-    speed = mot.array("no_load_speed", (n,), default=np.full(n, np.inf), positive=True, allow_inf=True)
+    stall = mot.array("stall_torque", (n,), default=info["stall"], positive=True, allow_inf=True)
+    speed = mot.array("no_load_speed", (n,), default=info["speed"], positive=True, allow_inf=True)
     mot.done()
     weights = sec.array("energy_weights", (n,), default=np.ones(n), positive=True)
     passive = sec.raw("passive", default=[False] * n)
@@ -472,6 +559,11 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
         constraint_rows=sec.string("constraint_rows", ("auto", "spatial"), d.constraint_rows),
         rank_tol=sec.number("rank_tol", d.rank_tol, positive=True),
         on_rank_deficiency=sec.string("on_rank_deficiency", ("warn", "error"), d.on_rank_deficiency),
+        condition_limit=sec.number("condition_limit", d.condition_limit, positive=True),
+        on_ill_conditioning=sec.string("on_ill_conditioning", ("warn", "error"), d.on_ill_conditioning),
+        initial_correction_warning=sec.number("initial_correction_warning", d.initial_correction_warning,
+                                              positive=True),
+        singularity_limit=sec.number("singularity_limit", d.singularity_limit, positive=True),
     )
     sec.done()
     return s
@@ -772,14 +864,15 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     duration, duration_field = (file_duration, "duration") if duration is None else \
         (check_duration(duration), "--duration")
     arm_secs = root.items("arms", min_len=2)
-    arms, q0, qd0, torques, motor_parts = [], [], [], [], []
+    arms, q0, qd0, torques, motor_parts, ranges = [], [], [], [], [], []
     for i, sec in enumerate(arm_secs):
-        arm, info = _arm(sec, i)
-        q, qd = _arm_state(sec, arm.joint_type)
+        arm, info = _arm(sec, i, base_dir)
+        q, qd = _arm_state(sec, arm, info)
         torques.append(_torque(sec, info["n"], base_dir))
-        motor_parts.append(_motors(sec, info["n"]))
+        motor_parts.append(_motors(sec, info))
+        _check_passive_torque(sec, torques[-1], motor_parts[-1][3])
         sec.done()
-        arms.append(arm), q0.append(q), qd0.append(qd)
+        arms.append(arm), q0.append(q), qd0.append(qd), ranges.append(info["joint_range"])
     names = [a.name for a in arms]
     if len(set(names)) != len(names):
         root.fail("arms", f"arm names must be unique, got {names}")
@@ -796,7 +889,8 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
     planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
     return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
-                 tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse)
+                 tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse,
+                 joint_range=np.concatenate(ranges))
 
 
 def _arm_poses(arms: list[ArmModel], q: np.ndarray):

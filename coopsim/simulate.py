@@ -20,11 +20,14 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
+from . import diagnostics
 from .closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
                            forward_dynamics, position_residual)
+from .diagnostics import RunWarning, describe_state, run_warning
 from .grasp import grasp_matrix, internal_wrench
 from .integrate import IntegrationError, IntegratorStats, integrate
 from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
@@ -50,7 +53,11 @@ class SimResult(SampledMotion):
     object at its EE point; internal_wrench (N, r, 6) at C (eq. 7, paper's W⁺; rows sum to zero);
     residual_pos (N,) max |Φ| (m or rad); residual_vel (N,) max |Λθ̇|; cond (N,) condition number of
     Λ𝐈⁻¹Λᵀ; initial: the projection applied to the scenario's initial state; stats: integrator counts;
-    wall_time s (not deterministic: never logged as data)."""
+    wall_time s (not deterministic: never logged as data); events: warnings raised while integrating
+    (a rank-deficient constraint matrix).
+
+    Computed on first use (`coopsim.diagnostics`; about 4 µs a sample): manipulability (N, r) of each
+    arm, kinetic_energy (N,) J, warnings (every `RunWarning` of the run, events included)."""
 
     model: Model
     object_acc: np.ndarray
@@ -62,6 +69,23 @@ class SimResult(SampledMotion):
     initial: Projection
     stats: IntegratorStats
     wall_time: float
+    events: tuple[RunWarning, ...] = ()
+
+    @cached_property
+    def arm_terms(self) -> diagnostics.ArmTerms:
+        return diagnostics.arm_terms(self.model, self.q, self.qd)
+
+    @cached_property
+    def manipulability(self) -> np.ndarray:
+        return diagnostics.manipulability(self.model, self.arm_terms.J)
+
+    @cached_property
+    def kinetic_energy(self) -> np.ndarray:
+        return diagnostics.kinetic_energy(self.model, self.qd, self.arm_terms, self.object_twist)
+
+    @cached_property
+    def warnings(self) -> tuple[RunWarning, ...]:
+        return diagnostics.collect(self, self.arm_terms)
 
 
 def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[ChainTerms, ChainAcceleration]:
@@ -69,11 +93,6 @@ def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tup
     terms = chain_terms(model, q, qd)
     stab = baumgarte_term(model, q, terms.Lam_qd) if model.integrator.stabilization == "baumgarte" else None
     return terms, forward_dynamics(model, terms, tau, stab)
-
-
-def describe_state(t: float, q: np.ndarray) -> str:
-    """'t=0.35 s, q=[0.1, …] rad': the time and configuration every failure and rank warning names."""
-    return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
 
 
 def initial_state(model: Model, engine: str = "compiled") -> Projection:
@@ -97,11 +116,23 @@ def initial_state(model: Model, engine: str = "compiled") -> Projection:
     return proj
 
 
-def _rhs(model: Model, progress=None):
+def _rank_reason(rank: int, cond: float) -> str:
+    return f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, cond {cond:.3g})"
+
+
+def _rank_event(t: float, q: np.ndarray, rank: int, cond: float, stacklevel: int) -> RunWarning:
+    """The rank-deficiency warning (a ConstraintRankWarning now, a RunWarning on the result)."""
+    reason = _rank_reason(rank, cond) + "; using minimum-norm grasp wrenches"
+    warnings.warn(f"at {describe_state(t, q)}: {reason}", ConstraintRankWarning, stacklevel=stacklevel + 1)
+    return run_warning("rank_deficient", t, q, reason, rank=rank, condition_number=cond)
+
+
+def _rhs(model: Model, progress=None, warned: list | None = None):
     """dy/dt for y = [θ; θ̇]; wraps failures with the time and configuration; reports the fraction
-    of the run done to `progress` (called with t / duration)."""
+    of the run done to `progress` (called with t / duration); the first loss of rank is appended to
+    `warned` (a RunWarning)."""
     n = model.n_total
-    warned = []
+    warned = [] if warned is None else warned
 
     def rhs(t, y):
         q, qd = y[:n], y[n:]
@@ -117,13 +148,10 @@ def _rhs(model: Model, progress=None):
             raise SimulationError(f"simulation failed at {describe_state(t, q)}: non-finite joint accelerations "
                                   f"(torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to {np.max(np.abs(qd)):.3g} rad/s)")
         if acc.rank < model.rows.shape[0] * (model.r - 1):
-            reason = f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {acc.rank}, cond {acc.cond:.3g})"
             if model.integrator.on_rank_deficiency == "error":
-                raise SimulationError(f"simulation failed at {describe_state(t, q)}: {reason}")
+                raise SimulationError(f"simulation failed at {describe_state(t, q)}: {_rank_reason(acc.rank, acc.cond)}")
             if not warned:
-                warned.append(t)
-                warnings.warn(f"at {describe_state(t, q)}: {reason}; using minimum-norm grasp wrenches",
-                              ConstraintRankWarning, stacklevel=2)
+                warned.append(_rank_event(t, q, acc.rank, acc.cond, stacklevel=2))
         return np.concatenate([qd, acc.qdd])
 
     return rhs
@@ -174,8 +202,23 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine == "reference":
         if fixed_step is not None:
             raise ValueError("fixed_step needs the compiled engine and tabulated torques")
-        return _simulate_reference(model, init, t_out, progress, start)
-    return _simulate_compiled(model, init, t_out, progress, start, fixed_step)
+        res = _simulate_reference(model, init, t_out, progress, start)
+    else:
+        res = _simulate_compiled(model, init, t_out, progress, start, fixed_step)
+    _check_conditioning(res)
+    return res
+
+
+def _check_conditioning(res: SimResult) -> None:
+    """With integrator.on_ill_conditioning: error, stop at the first sample whose constraint matrix is
+    ill-conditioned (`coopsim.diagnostics`); a warning on the result otherwise."""
+    m = res.model
+    i = diagnostics.first_ill_conditioned(m, res.cond) if m.integrator.on_ill_conditioning == "error" else None
+    if i is not None:
+        force = float(np.max(np.linalg.norm(res.internal_wrench[i, :, :3], axis=1)))
+        raise SimulationError(f"simulation stopped at {describe_state(res.t[i], res.q[i])}: "
+                              f"{diagnostics.ill_conditioning_reason(m, res.cond[i], force)} "
+                              f"(integrator.on_ill_conditioning: error)")
 
 
 def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
@@ -191,10 +234,10 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
     run = api.integrate_chain(model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
                               fixed_step=fixed, progress=progress)
     n = model.n_total
+    events = ()
     if run.rank_warning is not None:
         t, y, rank, cond = run.rank_warning
-        warnings.warn(f"at {describe_state(t, y[:n])}: constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, "
-                      f"cond {cond:.3g}); using minimum-norm grasp wrenches", ConstraintRankWarning, stacklevel=3)
+        events = (_rank_event(t, y[:n], rank, cond, stacklevel=3),)
     if run.status:
         raise SimulationError(f"simulation failed at {describe_state(run.fail_t, run.fail_y[:n])}: "
                               f"{_compiled_reason(model, run)}")
@@ -205,7 +248,7 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
                      object_pos=smp.object_pos, object_quat=smp.object_quat, object_twist=smp.object_twist,
                      object_acc=smp.object_acc, grasp_wrench=smp.grasp_wrench, internal_wrench=smp.internal_wrench,
                      residual_pos=smp.residual_pos, residual_vel=smp.residual_vel, cond=smp.cond, initial=init,
-                     stats=stats, wall_time=time.perf_counter() - start)
+                     stats=stats, wall_time=time.perf_counter() - start, events=events)
 
 
 def _compiled_reason(model: Model, run) -> str:
@@ -229,13 +272,14 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
     s = model.integrator
     project = _projector(model) if s.stabilization == "projection" else None
     step = s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
+    events: list = []
     try:
-        Y, stats = integrate(_rhs(model, progress), np.concatenate([init.q, init.qd]), t_out, method=s.method,
-                             rtol=s.rtol, atol=s.atol, step=step, project=project)
+        Y, stats = integrate(_rhs(model, progress, events), np.concatenate([init.q, init.qd]), t_out,
+                             method=s.method, rtol=s.rtol, atol=s.atol, step=step, project=project)
     except IntegrationError as exc:
         n = model.n_total
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
-    return _sample(model, t_out, Y, init, stats, time.perf_counter() - start)
+    return replace(_sample(model, t_out, Y, init, stats, time.perf_counter() - start), events=tuple(events))
 
 
 def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:

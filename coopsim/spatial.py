@@ -77,6 +77,17 @@ def rot_log(R: np.ndarray) -> np.ndarray:
     return (2.0 * np.arctan2(n, q[0]) / n) * v
 
 
+def orientation_error(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
+    """Angle (N,) rad of the rotation between two quaternion series [w, x, y, z] (N, 4)."""
+    return np.array([np.linalg.norm(rot_log(quat_to_rot(a) @ quat_to_rot(b).T)) for a, b in zip(q_a, q_b)])
+
+
+def rotation_from(q: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Rotation vectors φ (N, 3) rad, world axes, of the orientations q (N, 4) [w, x, y, z] relative to
+    R0 (3, 3): exp([φ×]) R0 = R(q) (|φ| <= π)."""
+    return np.array([rot_log(quat_to_rot(x) @ R0.T) for x in q]).reshape(len(q), 3)
+
+
 _I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
@@ -93,8 +104,9 @@ def rigid_acceleration(a_O: np.ndarray, w: np.ndarray, dw: np.ndarray, r: np.nda
     return a_O + cross(dw, r) + cross(w, cross(w, r))
 
 
-def box_inertia(mass: float, size: np.ndarray) -> np.ndarray:
-    """Inertia (3, 3) of a solid box of `mass` kg and edges `size` (3,) m about its centre, box axes:
-    m/12 diag(b² + c², a² + c², a² + b²)."""
+def box_inertia(mass, size: np.ndarray) -> np.ndarray:
+    """Inertia (…, 3, 3) of a solid box of `mass` (…) kg and edges `size` (…, 3) m about its centre,
+    box axes: m/12 diag(b² + c², a² + c², a² + b²) (broadcasting over the leading axes)."""
     a2 = np.asarray(size, dtype=float) ** 2
-    return mass / 12.0 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
+    d = np.stack([a2[..., 1] + a2[..., 2], a2[..., 0] + a2[..., 2], a2[..., 0] + a2[..., 1]], axis=-1)
+    return np.asarray(mass, dtype=float)[..., None, None] / 12.0 * (d[..., :, None] * np.eye(3))

@@ -97,41 +97,40 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
         N_cut = K_p ω̇ + ω × K_p ω + (ρ − p_s) × m_p (a_c − g) − Σ [n_m + (p_m − p_s) × f_m].
     Resolved in the section frame (e_a and the two other box axes): axial = F_cut·e_a (tension > 0),
     shear, torsion = N_cut·e_a, bending. Inputs per sample: R_o (N, 3, 3), twist [v; ω] and acc
-    [a_C; ω̇] (N, 6), F_e (N, r, 6); grasp_pos (r, 3) object frame; rows S (k, 6) restrict loads to
-    the modelled rows (planar: in-plane force, moment about the normal)."""
+    [a_C; ω̇] (N, 6), F_e (N, r, 6) world axes; grasp_pos (r, 3) object frame; rows S (k, 6, world
+    axes) restrict loads to the modelled rows (planar: in-plane force, moment about the normal). Every
+    sample and cut at once, in the object frame (where K_p is diagonal and c, p_s, p_m are constant)."""
     a = grasp_axis(box, grasp_pos)
+    others = [i for i in range(3) if i != a]
     L = box[a]
     xi = np.linspace(-L / 2, L / 2, cuts + 2)[1:-1]
-    P = rows.T @ rows                                   # projector on the modelled rows (6, 6)
-    N = len(R_o)
-    out = {k: np.zeros((N, cuts)) for k in ("axial", "shear", "torsion", "bending", "m1", "m2")}
-    others = [i for i in range(3) if i != a]
-    w, dw = twist[:, 3:], acc[:, 3:]
-    Rt = np.swapaxes(R_o, 1, 2)
-    p_m = np.einsum("nij,mj->nmi", R_o, grasp_pos)      # grasp points relative to C (N, r, 3)
-    for j, x in enumerate(xi):
-        frac = (x + L / 2) / L
-        size = box.copy()
-        size[a] = x + L / 2
-        c, ps = np.zeros(3), np.zeros(3)
-        c[a], ps[a] = (x - L / 2) / 2, x
-        rho, p_s = R_o @ c, R_o @ ps                    # (N, 3)
-        a_c = rigid_acceleration(acc[:, :3], w, dw, rho)
-        Kp = R_o @ box_inertia(mass * frac, size) @ Rt
-        inert_f = mass * frac * (a_c - gravity)
-        force = inert_f.copy()
-        moment = (np.einsum("nij,nj->ni", Kp, dw) + cross(w, np.einsum("nij,nj->ni", Kp, w))
-                  + cross(rho - p_s, inert_f))
-        for m in np.flatnonzero(grasp_pos[:, a] < x):
-            force -= F_e[:, m, :3]
-            moment -= F_e[:, m, 3:] + cross(p_m[:, m] - p_s, F_e[:, m, :3])
-        wrench = np.concatenate([force, moment], axis=1) @ P.T
-        fl = np.einsum("nji,nj->ni", R_o, wrench[:, :3])   # box axes
-        ml = np.einsum("nji,nj->ni", R_o, wrench[:, 3:])
-        out["axial"][:, j], out["torsion"][:, j] = fl[:, a], ml[:, a]
-        out["shear"][:, j] = np.hypot(fl[:, others[0]], fl[:, others[1]])
-        out["bending"][:, j] = np.hypot(ml[:, others[0]], ml[:, others[1]])
-        out["m1"][:, j], out["m2"][:, j] = ml[:, others[0]], ml[:, others[1]]
+    frac = (xi + L / 2) / L                             # mass fraction of the part x < ξ (c,)
+    sizes = np.tile(box, (cuts, 1))
+    sizes[:, a] = xi + L / 2
+    K_diag = np.diagonal(box_inertia(mass * frac, sizes), axis1=-2, axis2=-1)   # part inertias, box axes (c, 3)
+    c_o, ps_o = np.zeros((cuts, 3)), np.zeros((cuts, 3))
+    c_o[:, a], ps_o[:, a] = (xi - L / 2) / 2, xi        # part centre, section centre (object frame)
+
+    def body(v):                                        # world vectors (N, …, 3) → object frame
+        return np.einsum("nji,n...j->n...i", R_o, v)
+
+    w, dw = body(twist[:, 3:])[:, None], body(acc[:, 3:])[:, None]     # (N, 1, 3), object frame
+    a_c = rigid_acceleration(body(acc[:, :3])[:, None], w, dw, c_o)    # every sample × cut (N, c, 3)
+    inert_f = (mass * frac)[:, None] * (a_c - body(np.broadcast_to(gravity, (len(R_o), 3)))[:, None])
+    on = (grasp_pos[:, a][:, None] < xi).astype(float)  # grasp m on the part x < ξ (r, c)
+    f_m, n_m = body(F_e[..., :3]), body(F_e[..., 3:])
+    f_on = np.einsum("nmk,mc->nck", f_m, on)
+    force = inert_f - f_on
+    moment = (K_diag * dw + cross(w, K_diag * w) + cross(c_o - ps_o, inert_f)
+              - np.einsum("nmk,mc->nck", n_m + cross(grasp_pos, f_m), on) + cross(ps_o, f_on))
+    Rb = np.zeros((len(R_o), 6, 6))
+    Rb[:, :3, :3] = Rb[:, 3:, 3:] = R_o
+    Q = np.swapaxes(Rb, 1, 2) @ (rows.T @ rows) @ Rb    # projector on the modelled rows, object frame
+    wrench = np.concatenate([force, moment], axis=-1) @ np.swapaxes(Q, 1, 2)
+    fl, ml = wrench[..., :3], wrench[..., 3:]           # box axes
+    out = {"axial": fl[..., a], "torsion": ml[..., a], "shear": np.hypot(fl[..., others[0]], fl[..., others[1]]),
+           "bending": np.hypot(ml[..., others[0]], ml[..., others[1]]), "m1": ml[..., others[0]],
+           "m2": ml[..., others[1]]}
     d1, d2 = box[others[0]], box[others[1]]
     area = d1 * d2
     Z1, Z2 = d1 * d2 ** 2 / 6.0, d2 * d1 ** 2 / 6.0    # a moment about axis 1 varies the stress along axis 2

@@ -8,9 +8,22 @@ from .joints import COORDINATE, type_names, units_of
 from .simulate import SimResult
 
 
+def kinetic_energy_summary(res: SimResult) -> dict:
+    """Kinetic energy ½θ̇ᵀ𝐈θ̇ of the run (J): first, last, and its largest change from the first sample
+    (absolute, and relative to the largest value); `conserved`: no torque and no gravity act, so any
+    change is the integration's (and the stabilization's) drift."""
+    ke = res.kinetic_energy
+    change = float(np.max(np.abs(ke - ke[0])))
+    peak = float(np.max(np.abs(ke)))
+    conserved = not np.any(res.model.gravity) and not np.any(res.tau)
+    return {"initial_J": float(ke[0]), "final_J": float(ke[-1]), "max_change_J": change,
+            "max_relative_change": change / peak if peak > 0 else 0.0, "conserved": bool(conserved)}
+
+
 def simulation_summary(res: SimResult) -> dict:
     """JSON-ready summary of a forward simulation (SI units; a prismatic joint's entries of the `_rad`
-    joint vectors are in m; wall_time_s is the only non-deterministic entry)."""
+    joint vectors are in m; wall_time_s is the only non-deterministic entry); `warnings`: the run's
+    `coopsim.diagnostics.RunWarning`s."""
     m, init = res.model, res.initial
     return {
         "scenario": m.name,
@@ -36,6 +49,9 @@ def simulation_summary(res: SimResult) -> dict:
         "max_velocity_residual": float(np.max(res.residual_vel)),
         "max_condition_number": float(np.max(res.cond)),
         "max_internal_force_N": float(np.max(np.linalg.norm(res.internal_wrench[:, :, :3], axis=2))),
+        "min_manipulability": np.min(res.manipulability, axis=0).tolist(),
+        "kinetic_energy": kinetic_energy_summary(res),
+        "warnings": [w.as_dict() for w in res.warnings],
         "rhs_evaluations": res.stats.n_rhs,
         "steps_accepted": res.stats.n_accepted,
         "steps_rejected": res.stats.n_rejected,
@@ -59,7 +75,7 @@ def run_summary(cv, log_path, plots) -> dict:
 
 def format_simulation_summary(s: dict) -> str:
     """Short human-readable version of `simulation_summary`."""
-    ic = s["initial_correction"]
+    ic, ke = s["initial_correction"], s["kinetic_energy"]
     unit = units_of(s.get("joint_types") or ["revolute"], COORDINATE, sep=", ")
     lines = [
         f"scenario        {s['scenario']}: {len(s['arms'])} arms, {s['joints']} joints, {s['constraint_rows']} constraint rows",
@@ -72,5 +88,8 @@ def format_simulation_summary(s: dict) -> str:
         f"constraints     max |phi| {s['max_constraint_residual']:.3g}, max |Lambda qd| {s['max_velocity_residual']:.3g}, "
         f"max cond {s['max_condition_number']:.3g}",
         f"internal force  max {s['max_internal_force_N']:.4g} N",
+        f"kinetic energy  {ke['initial_J']:.6g} -> {ke['final_J']:.6g} J, max change {ke['max_change_J']:.3g} J "
+        f"({ke['max_relative_change']:.3g} of the peak{'; nothing does work: this is drift' if ke['conserved'] else ''})",
+        f"warnings        {len(s['warnings']) or 'none'}",
     ]
     return "\n".join(lines)

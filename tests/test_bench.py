@@ -7,15 +7,17 @@ import csv
 import io
 import json
 import math
+import subprocess
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from coopsim import bench
+from coopsim import bench, bench_report
 from coopsim.bench import Ladders, RunRow
 from coopsim.bench_report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
 from coopsim.cli import build_parser, main
+from coopsim.model import CoopsimError
 from conftest import SCENARIOS
 
 # Tiny ladders: enough to exercise every family and table, a second or two per scenario.
@@ -172,7 +174,7 @@ def test_report_shape_tables_and_json(report):
     assert any(r["pareto"] for r in sc["runs"])
     assert [h["target_rad"] for h in sc["headline"]] == list(bench.TARGETS)
     assert sc["reference"]["far_below_targets"] and sc["eval_us"]["native_amortised_us"] > 0
-    assert len(report["scaling"]["points"]) == 4 and report["startup"] is None
+    assert len(report["scaling"]["points"]) == 4 and report["startup"] is None and report["commands"] is None
     data = json.loads(json_text(report))  # strict JSON: NaN written as the string "NaN"
     assert data["scenarios"][0]["runs"][0].keys() >= {"family", "wall_s", "loop_s", "max_error", "pareto"}
     rows = list(csv.reader(io.StringIO(csv_text(report))))
@@ -225,3 +227,22 @@ def test_startup_script_reports_its_phases_from_a_filled_cache():
     wall, phases = bench.startup_process(str(SCENARIOS / "paper_planar_2x3.yaml"), warm=False)
     assert set(phases) == {"imports", "first", "again"}, f"phases {phases}"
     assert 0 < phases["again"] < phases["first"] < wall, f"wall {wall:.3f} s, phases {phases}"
+
+
+def test_command_times_take_the_minimum_and_judge_the_targets(monkeypatch):
+    """The commands run as a user runs them (`python -m coopsim.cli CMD SCENARIO … --json --out DIR`); the
+    minimum over the repeats is compared with the target; exit 1 (a failed check) still counts, exit 2
+    is an error naming the command. (Subprocesses replaced here: the real ones run in `coopsim bench`.)"""
+    calls, clock = [], iter([0.0, 4.0, 10.0, 12.5, 20.0, 23.0, 30.0, 32.0])
+    monkeypatch.setattr(bench.time, "perf_counter", lambda: next(clock))
+    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or
+                        subprocess.CompletedProcess(cmd, 1 if "capacity" in cmd else 0, "", ""))
+    times = bench.command_times("s.yaml", repeats=2, commands={"run": (["run"], 3.0), "capacity": (["capacity"], 1.5)})
+    assert times == {"run": {"wall_s": 2.5, "target_s": 3.0, "met": True},
+                     "capacity": {"wall_s": 2.0, "target_s": 1.5, "met": False}}
+    assert calls[0][1:5] == ["-m", "coopsim.cli", "run", "s.yaml"] and calls[0][5:7] == ["--json", "--out"]
+    assert "| `coopsim capacity` | 2.00 | 1.5 | NO |" in bench_report.command_lines(times)
+    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 2, "", "bad\n"))
+    monkeypatch.setattr(bench.time, "perf_counter", lambda: 0.0)
+    with pytest.raises(CoopsimError, match="coopsim run failed"):
+        bench.command_times("s.yaml", repeats=1, commands={"run": (["run"], 3.0)})

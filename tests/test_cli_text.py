@@ -38,11 +38,12 @@ def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
                              "--out", str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tmp_path)
     deadline = time.monotonic() + 60
-    while not (tmp_path / "out").exists() and time.monotonic() < deadline:   # made once the scenario is read
-        time.sleep(0.05)
-    time.sleep(0.3)                           # inside the run
+    while not any(tmp_path.glob(".out.*.tmp")) and time.monotonic() < deadline:   # the outputs' staging folder
+        time.sleep(0.02)
+    time.sleep(0.1)                           # inside the writing of the outputs
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("\r")]
     assert proc.returncode == 130, (proc.returncode, err)
     assert lines[-1] == "coopsim: interrupted" and "Traceback" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], "no partial set, no temporaries"

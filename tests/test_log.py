@@ -118,6 +118,63 @@ def test_generic_series_edge_cases_round_trip(tmp_path):
     assert first["cube"][1] == {"row": [{"row": [4 / 7, 5 / 7]}, {"row": [6 / 7, 1.0]}]}
 
 
+def _assert_same_log(a: L.LogData, b: L.LogData) -> None:
+    assert a.metadata == b.metadata and a.schemas == b.schemas and a.messages == b.messages
+    assert list(a.topics) == list(b.topics)
+    for topic, fields in a.topics.items():
+        assert list(fields) == list(b.topics[topic]), topic
+        for name, x in fields.items():
+            y = b.topics[topic][name]
+            assert x.dtype == y.dtype and x.shape == y.shape, (topic, name)
+            assert np.array_equal(x, y, equal_nan=True) and np.array_equal(np.signbit(x), np.signbit(y)), (topic, name)
+
+
+def test_log_data_in_memory_equals_the_file_read_back(run, logged):
+    """What the commands draw their figures from (`log_data`, no file) is what `read_mcap` reads back:
+    same topics, field order, dtypes, bits (nan, -0.0), /tf and /scene messages and metadata."""
+    model, res, tw = run
+    path, data = logged
+    streams, meta = L.run_log(model, res, tw, metadata_extra={"scenario_file": SCENARIO_FILE, "note": "test"})
+    _assert_same_log(L.log_data(streams, meta), data)
+
+
+def test_log_data_of_edge_cases_equals_the_file_read_back(tmp_path):
+    t = np.array([0.0, 0.5])
+    s = L.Series("/x", "test.X", t, {"f": np.array([[np.nan, -0.0], [np.inf, 1e-310]]),
+                                      "f32": np.array([0.1, -2.5], dtype=np.float32),
+                                      "i": np.array([[1, -2]], dtype=np.int16).repeat(2, 0),
+                                      "u": np.array([7, 255], dtype=np.uint8), "b": np.array([True, False])})
+    j = L.JsonTopic("/j", "test.J", {"type": "object"}, t, ({"a": (1, 2.5)}, {"a": [None, "é"]}))
+    _assert_same_log(L.log_data([s, j], {"r": {"k": "v"}}),
+                     L.read_mcap(L.write_mcap(tmp_path / "e.mcap", [s, j], {"r": {"k": "v"}})))
+
+
+def test_series_messages_are_the_json_encoders_bytes():
+    """The hand-formatted messages equal json.dumps (no spaces, UTF-8) of the message dict, built here
+    from the documented encoding: floats exact, non-finite as strings, rows of 3-D fields wrapped."""
+    rng = np.random.default_rng(3)
+    f = rng.normal(size=(6, 3)) * 10.0 ** rng.integers(-300, 300, size=(6, 3))
+    f[1, 1], f[2, 0], f[4, 2] = -0.0, np.nan, -np.inf
+    fields = {"ángulo": f, "g": f[:, 0].copy(), "w": rng.normal(size=(6, 2, 3)), "k": np.arange(6) - 3,
+              "ok": np.arange(6) % 2 == 0, "h": rng.normal(size=(6, 2)).astype(np.float32)}
+    t = np.linspace(0.0, 2.5, 6) + 1e-9
+    spell = {"nan": "NaN", "inf": "Infinity", "-inf": "-Infinity"}
+
+    def value(x):
+        if isinstance(x, float) and not np.isfinite(x):
+            return spell[repr(x)]
+        return [value(v) for v in x] if isinstance(x, list) else x
+
+    expected = []
+    for i in range(6):
+        msg = {"timestamp": {"sec": int(round(t[i] * 1e9)) // 10**9, "nsec": int(round(t[i] * 1e9)) % 10**9},
+               "t": float(t[i]), "ángulo": value(f[i].tolist()), "g": value(float(f[i, 0])),
+               "w": [{"row": r} for r in fields["w"][i].tolist()], "k": int(fields["k"][i]), "ok": bool(i % 2 == 0),
+               "h": fields["h"][i].astype(float).tolist()}
+        expected.append(json.dumps(msg, separators=(",", ":"), ensure_ascii=False).encode())
+    assert L._series_messages(L.Series("/m", "test.M", t, fields)) == expected
+
+
 def test_messages_are_ordered_by_time_then_series(tmp_path):
     a = L.Series("/a", "test.S", np.array([0.0, 0.2]), {"v": np.array([1.0, 2.0])})
     b = L.Series("/b", "test.S", np.array([0.0, 0.1, 0.2]), {"v": np.array([3.0, 4.0, 5.0])})

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import matplotlib.image as mpimg
+import numpy as np
 import pytest
 
 from coopsim.log import read_mcap, write_run_log
@@ -99,5 +100,99 @@ def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     assert main(["inverse", str(SCENARIOS / "paper_planar_2x3.yaml"), "--duration", "0.3", "--no-curve",
                  "--out", str(tmp_path), "--json"]) == 0
     fig = inverse_torques_figure(read_mcap(tmp_path / "inverse.mcap"))
-    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 1, "one legend for every panel"
+    texts = [t.get_text() for t in legends[0].get_texts()]
     assert texts.count(MOTOR_LINES) == 1 and len(texts) == 6, texts
+
+
+def _panel(fig, title):
+    return next(ax for ax in fig.axes if ax.get_title() == title)
+
+
+def test_object_orientation_panel_against_the_heading_by_hand(logs):
+    """The orientation column of the object figure (issue 10): the paper's bar turns about z only, so the
+    rotation vector from t = 0 is [0, 0, ψ(t) − ψ(0)] with ψ = 2 atan2(q_z, q_w) of the logged
+    quaternion [w, x, y, z]; the difference panel is the angle between the two models' orientations,
+    here |ψ_native − ψ_mujoco|."""
+    from coopsim import plots
+
+    both, _ = logs
+    fig = plots._object_figure(both)
+    heading = {}
+    for prefix in ("/native", "/mujoco"):
+        q = both.topics[prefix + "/object"]["quaternion"]
+        heading[prefix] = 2 * np.arctan2(q[:, 3], q[:, 0])
+    top = _panel(fig, "Object orientation (rotation vector)")
+    assert "rad" in top.get_ylabel()
+    native = [ln.get_ydata() for ln in top.lines if not ln.get_label().endswith("(MuJoCo)")]
+    twin = [ln.get_ydata() for ln in top.lines if ln.get_label().endswith("(MuJoCo)")]
+    turn = heading["/native"] - heading["/native"][0]
+    assert np.ptp(turn) > 1e-3, "the bar turns"
+    np.testing.assert_allclose(native[2], turn, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(twin[2], heading["/mujoco"] - heading["/native"][0], rtol=0, atol=1e-13)
+    assert max(np.max(np.abs(native[0])), np.max(np.abs(native[1]))) < 1e-13
+    diff = _panel(fig, "orientation (rotation vector): native − MuJoCo").lines[0].get_ydata()
+    want = np.abs(heading["/native"] - heading["/mujoco"])
+    drawn = np.isfinite(diff)
+    assert drawn.sum() >= len(diff) - 1 and np.max(want) > 1e-12
+    np.testing.assert_allclose(diff[drawn], want[drawn], rtol=1e-6, atol=1e-15)
+
+
+def _wrapped_log(both):
+    """`both` with its angles wrapped into (−π, π], joint 1 passing π between two samples mid-run."""
+    q = both.topics["/native/joint_state"]["angle"]
+    mid = len(q) // 2
+    shift = np.pi - 0.5 * (q[mid, 0] + q[mid + 1, 0])     # joint 1 crosses π between two samples mid-run
+    assert np.ptp(q[:, 0]) > 1e-3 and np.all(np.diff(q[:, 0]) > 0)
+
+    def wrapped(a):
+        return np.mod(a + shift + np.pi, 2 * np.pi) - np.pi
+
+    topics = dict(both.topics)
+    for prefix in ("/native", "/mujoco"):
+        topics[prefix + "/joint_state"] = dict(topics[prefix + "/joint_state"],
+                                               angle=wrapped(topics[prefix + "/joint_state"]["angle"]))
+    assert np.max(np.abs(np.diff(topics["/native/joint_state"]["angle"][:, 0]))) > 6, "the log jumps by 2π"
+    return dataclasses.replace(both, topics=topics)
+
+
+def test_joint_angles_are_drawn_unwrapped(logs):
+    """A log whose angles are wrapped into (−π, π] (joint 1 passing π mid-run) is drawn continuous, for
+    both models, with 'unwrapped' in the axis label, and its difference panel stays at the models'
+    difference (not 2π)."""
+    from coopsim import plots
+    from coopsim.joints import COORDINATE
+
+    both, _ = logs
+    fig = plots._joint_figure(_wrapped_log(both), "angle", "angle", COORDINATE, [f"j{i}" for i in range(6)])
+    top = fig.axes[0]
+    assert top.get_ylabel() == "angle (rad, unwrapped)"
+    for line, prefix in zip(top.lines[:2], ("/native", "/mujoco")):   # joint 1, native and MuJoCo
+        y, logged = line.get_ydata(), both.topics[prefix + "/joint_state"]["angle"][:, 0]
+        np.testing.assert_allclose(y - y[0], logged - logged[0], rtol=0, atol=1e-12)
+    diff = fig.axes[2].lines[0].get_ydata()      # arm 1's difference panel, joint 1
+    assert np.nanmax(diff) < 1e-6
+
+
+def test_prismatic_coordinates_are_not_unwrapped(logs):
+    """The same wrapped log with joint 1 recorded as prismatic: its coordinate (m) is drawn exactly as
+    logged, jump included (unwrapping metres by 2π would invent motion), while arm 2's revolute angles
+    are still unwrapped; each arm's axis names its units."""
+    import json
+
+    from coopsim import plots
+    from coopsim.joints import COORDINATE
+
+    both, _ = logs
+    log = _wrapped_log(both)
+    types = ["prismatic"] + ["revolute"] * 5
+    log = dataclasses.replace(log, metadata=dict(log.metadata, model=dict(log.metadata["model"],
+                                                                         joint_types=json.dumps(types))))
+    fig = plots._joint_figure(log, "angle", "angle", COORDINATE, [f"j{i}" for i in range(6)])
+    arm1, arm2 = fig.axes[0], fig.axes[1]
+    assert arm1.get_ylabel() == "angle (m or rad, unwrapped)" and arm2.get_ylabel() == "angle (rad, unwrapped)"
+    for line, prefix in zip(arm1.lines[:2], ("/native", "/mujoco")):
+        np.testing.assert_array_equal(line.get_ydata(), log.topics[prefix + "/joint_state"]["angle"][:, 0])
+    wrapped_rev = log.topics["/native/joint_state"]["angle"][:, 3]
+    np.testing.assert_allclose(arm2.lines[0].get_ydata(), np.unwrap(wrapped_rev), rtol=0, atol=0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import sys
 
 from coopsim.progress import ProgressBar
 
@@ -58,3 +59,73 @@ def test_inverse_and_capacity_report_their_stages_on_a_terminal(workdir, monkeyp
     monkeypatch.setattr("sys.stderr", quiet)
     assert main(["capacity", scenario, "--duration", "0.3", "--out", "c", "--json"]) == 0
     assert quiet.getvalue() == "", quiet.getvalue()[:200]
+
+
+def test_bar_gives_the_remaining_time_then_the_time_taken():
+    """ETA from the stage's pace (a fake clock): 25 % done after 3 s leaves 9 s; nothing is guessed in the
+    first half second; at 100 % the time the stage took; a new stage restarts the clock."""
+    now = [0.0]
+    out = _Tty()
+    bar = ProgressBar(out, width=10, clock=lambda: now[0])
+    bar("native", 0.0)
+    now[0] = 0.2
+    bar("native", 0.1)
+    now[0] = 3.0
+    bar("native", 0.25)
+    now[0] = 150.0
+    bar("native", 0.5)
+    now[0] = 151.0
+    bar("native", 1.0)
+    now[0] = 160.0
+    bar("mujoco", 0.5)
+    bar.close()
+    frames = [f for f in out.getvalue().replace("\n", "\r").split("\r") if f]
+    expected = [("native", "", 0, "  0"), ("native", "", 1, " 10"), ("native", "ETA 9 s", 2, " 25"),
+                ("native", "ETA 2:30", 5, " 50"), ("native", "2:31", 10, "100"), ("mujoco", "", 5, " 50")]
+    assert frames == [f"{label:<8} {timing:>11} [{'#' * k}{'.' * (10 - k)}] {pct}%"
+                      for label, timing, k, pct in expected], frames
+
+
+def test_simulate_and_mjcf_report_their_stage_on_a_terminal(tmp_path, monkeypatch, capsys):
+    """`coopsim simulate` draws its 'native' stage, `coopsim mjcf` its 'mjcf' stage (the paths printed
+    after the bar) and `coopsim validate` (as `run`) 'native' and 'mujoco', each ending at 100 %; with
+    --json, or not on a terminal, nothing."""
+    from conftest import SCENARIOS
+
+    from coopsim.cli import main
+
+    paper, spatial = str(SCENARIOS / "paper_planar_2x3.yaml"), str(SCENARIOS / "spatial_6r_pair.yaml")
+    err = _Tty()
+    monkeypatch.setattr("sys.stderr", err)
+    assert main(["simulate", paper, "--duration", "0.5"]) == 0
+    assert main(["mjcf", paper, spatial, "--out", str(tmp_path)]) == 0
+    assert main(["validate", paper, "--duration", "0.2"]) == 0     # run's stages too (the same harness)
+    frames = [f for f in err.getvalue().replace("\n", "\r").split("\r") if f.strip()]
+    last = {f.split()[0]: f for f in frames}
+    assert list(last) == ["native", "mjcf", "mujoco"] and all(f.endswith("100%") for f in last.values()), frames
+    printed = capsys.readouterr().out.splitlines()
+    assert [str(tmp_path / "paper_planar_2x3.xml"), str(tmp_path / "spatial_6r_pair.xml")] == [
+        line for line in printed if line.endswith(".xml")]
+    quiet = _Tty()
+    monkeypatch.setattr("sys.stderr", quiet)
+    assert main(["simulate", paper, "--duration", "0.5", "--json"]) == 0
+    monkeypatch.setattr("sys.stderr", io.StringIO())      # not a terminal
+    assert main(["mjcf", paper, "--out", str(tmp_path)]) == 0
+    assert quiet.getvalue() == "" and sys.stderr.getvalue() == ""
+
+
+def test_plot_reports_its_stages_on_a_terminal(tmp_path, monkeypatch, capsys):
+    """`coopsim plot` draws 'read log' and 'figures', each ending at 100 % (the log reader and the
+    figures replaced here by stand-ins: the stages are what is checked), then prints the paths."""
+    from coopsim.cli import main
+
+    log = tmp_path / "run.mcap"
+    log.write_bytes(b"stand-in")
+    monkeypatch.setattr("coopsim.log.read_run_log", lambda path: "log")
+    monkeypatch.setattr("coopsim.plots.comparison_plots", lambda data, out: [out / "joint_angles.png"])
+    err = _Tty()
+    monkeypatch.setattr("sys.stderr", err)
+    assert main(["plot", str(log)]) == 0
+    frames = [f for f in err.getvalue().replace("\n", "\r").split("\r") if f.strip()]
+    assert [f.split("  ")[0].strip() for f in frames if f.endswith("100%")] == ["read log", "figures"], frames
+    assert capsys.readouterr().out.splitlines() == [str(tmp_path / "joint_angles.png")]

@@ -20,7 +20,7 @@ import numpy as np
 from ..closed_chain import ConstraintError
 from ..manifold import Projection
 from ..model import Model
-from . import chain, ik, integrate, manifold, sample
+from . import capacity, chain, ik, integrate, manifold, sample
 from .packing import PackedModel, Workspace, pack, tabulated_torques, workspace
 from .structs import Struct, to_struct
 
@@ -54,7 +54,8 @@ def compile_pending() -> bool:
     cannot be located."""
     try:
         return any(not os.path.exists(e._cache._cache_file._index_path)
-                   for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve))
+                   for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve,
+                             capacity.min_energy_mass_interval))
     except AttributeError:
         return False
 

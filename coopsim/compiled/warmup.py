@@ -24,10 +24,14 @@ def _model():
 
 
 def compile_loop() -> None:
-    """The time loop, through a short simulation of the paper scenario."""
+    """The time loop, through a short simulation of the paper scenario, and the capacity objective."""
     from ..simulate import simulate
+    from .capacity import min_energy_mass_interval
 
     simulate(_model(), duration=0.02)
+    z = np.zeros((1, 1, 1))
+    min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
+                             np.ones(1, bool), np.ones(1, bool), 1e-12)
 
 
 def compile_evaluations() -> None:

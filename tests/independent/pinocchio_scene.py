@@ -240,7 +240,7 @@ class PinocchioScene:
         self.name = data.get("name", path.stem)
         self.gravity = np.asarray(data.get("gravity", [0.0, 0.0, -9.81]), dtype=float)
         self.duration = float(data["duration"])
-        self.arms = [_read_arm(a, i, path.parent, conv) for i, a in enumerate(data["arms"])]
+        self.arms = [self._read_arm(a, i, path.parent, conv) for i, a in enumerate(data["arms"])]
         self.r = len(self.arms)
         ends = np.cumsum([0] + [a.n for a in self.arms])
         self.slices = [slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:])]
@@ -296,6 +296,10 @@ class PinocchioScene:
             pin.ProximalSettings(1e-14, 1e-12, 50)
 
     # ---------------------------------------------------------------- reading
+    def _read_arm(self, arm: dict, index: int, folder: Path, conv: Conventions) -> ArmSpec:
+        """One arm of the file (a subclass reads other kinds of arm, `pinocchio_urdf.RobotScene`)."""
+        return _read_arm(arm, index, folder, conv)
+
     def _grasps(self, obj: dict, conv: Conventions) -> tuple[int, list[pin.SE3]]:
         """(carrier index, grasp frames G_m = object ← end-effector m)."""
         names = [a.name for a in self.arms]

@@ -1,0 +1,106 @@
+"""Minimum-energy load capacity for one weight vector, compiled: the objective that
+`coopsim.capacity.optimise_weights` evaluates hundreds of times (paper eqs. 33–36).
+
+From the weight-independent setup of the minimum-energy problem (`coopsim.inverse.MinEnergySetup`: the
+torques u of a particular solution and D = Jᵀ Z over the null space of the constraints, for the net
+object wrenches of zero payload and of one unit of payload), per sample i
+
+    H = Dᵀ Q D,  g = Dᵀ Q u,  H z = −g (Cholesky),  τ = u + D z        (two right-hand sides),
+
+then τ(μ) = a + μ b with a = τ₀, b = τ₁ − τ₀, and the mass interval of lo ≤ τ(μ) ≤ hi over the active
+joints — `coopsim.capacity.mass_limits` and `mass_interval`, sample by sample. Where C lost rank or H
+is not certified well-conditioned — λ_min/λ_max ≥ 1/(trace(H)·trace(H⁻¹)) > rank_tol, the forward
+model's rank rule with a bound within a factor d² of the eigenvalues (`coopsim.inverse._spd_solve`
+decides by eigenvalues where its bound is not enough) — the result is marked uncertain and the caller
+takes the NumPy path, which handles rank loss.
+"""
+
+import numpy as np
+
+from .jit import entry, kernel
+
+
+@kernel
+def _trace_of_inverse(L, d, x):
+    """trace(H⁻¹) = ‖L⁻¹‖_F² for H = L Lᵀ (L: the lower triangle of the d × d array L; x (d,) work)."""
+    total = 0.0
+    for c in range(d):                           # column c of L⁻¹: L x = e_c (x_r = 0 for r < c)
+        for r in range(c, d):
+            acc = 1.0 if r == c else 0.0
+            for k in range(c, r):
+                acc -= L[r, k] * x[k]
+            x[r] = acc / L[r, r]
+            total += x[r] * x[r]
+    return total
+
+
+@entry
+def min_energy_mass_interval(D, u, Q, lo, hi, act, regular, rank_tol):
+    """(mass kg, lower kg, certain) of the minimum-energy torques for energy weights Q (n,) (0 on passive
+    joints): D (n, d, N), u (n, 2, N) (setup arrays, samples last), lo, hi (N, n) N·m torque limits, act
+    (n,) bool joints whose limits count, regular (N,) bool C of full row rank. mass = the smallest upper
+    limit (+inf: none), lower = max(0, the largest lower limit); certain False: some sample needs the
+    rank-deficient path (mass and lower are then meaningless)."""
+    n, d, N = D.shape
+    H = np.empty((d, d))
+    z = np.empty((d, 2))
+    x = np.empty(d)
+    mass, lower = np.inf, 0.0
+    for i in range(N):
+        if not regular[i]:
+            return mass, lower, False
+        trace = 0.0
+        for a in range(d):
+            for b in range(a + 1):
+                acc = 0.0
+                for j in range(n):
+                    acc += Q[j] * D[j, a, i] * D[j, b, i]
+                H[a, b] = acc
+            trace += H[a, a]
+            for s in range(2):
+                acc = 0.0
+                for j in range(n):
+                    acc -= Q[j] * D[j, a, i] * u[j, s, i]
+                z[a, s] = acc
+        for c in range(d):                       # Cholesky, lower triangle in place
+            for r in range(c, d):
+                acc = H[r, c]
+                for k in range(c):
+                    acc -= H[r, k] * H[c, k]
+                if r == c:
+                    if not acc > 0.0:
+                        return mass, lower, False
+                    H[c, c] = np.sqrt(acc)
+                else:
+                    H[r, c] = acc / H[c, c]
+        if not rank_tol * trace * _trace_of_inverse(H, d, x) < 1.0:
+            return mass, lower, False
+        for s in range(2):                       # L Lᵀ z = −g
+            for a in range(d):
+                for k in range(a):
+                    z[a, s] -= H[a, k] * z[k, s]
+                z[a, s] /= H[a, a]
+            for a in range(d - 1, -1, -1):
+                for k in range(a + 1, d):
+                    z[a, s] -= H[k, a] * z[k, s]
+                z[a, s] /= H[a, a]
+        for j in range(n):
+            if not act[j]:
+                continue
+            t0, t1 = u[j, 0, i], u[j, 1, i]
+            for a in range(d):
+                t0 += D[j, a, i] * z[a, 0]
+                t1 += D[j, a, i] * z[a, 1]
+            slope = t1 - t0
+            if slope > 0.0:
+                up, dn = (hi[i, j] - t0) / slope, (lo[i, j] - t0) / slope
+            elif slope < 0.0:
+                up, dn = (lo[i, j] - t0) / slope, (hi[i, j] - t0) / slope
+            else:
+                up = -np.inf if t0 < lo[i, j] or t0 > hi[i, j] else np.inf
+                dn = -np.inf
+            if up < mass:                        # (nan: no limit)
+                mass = up
+            if dn > lower:
+                lower = dn
+    return mass, lower, True

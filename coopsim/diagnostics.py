@@ -1,0 +1,270 @@
+"""Run diagnostics: what a forward run's own samples say about how far to trust it, as warnings.
+
+A run can finish and still be wrong, or right but fragile; each check below turns one such case into a
+`RunWarning` that names the time, the configuration and the reason (`coopsim simulate` and `coopsim run`
+print them, `summary.json` and the run log's metadata record them):
+
+- `rank_deficient`: Λ𝐈⁻¹Λᵀ lost rank while integrating (minimum-norm grasp wrenches; found by the
+  integrator, `coopsim.simulate`);
+- `ill_conditioned`: its condition number above `integrator.condition_limit` at some sample (the chain
+  is near a singular configuration: grasp and internal wrenches lose about log10(cond) digits, and a
+  small torque can ask for a large internal force); `integrator.on_ill_conditioning: error` stops the
+  run instead (`first_ill_conditioned`);
+- `arm_singularity`: an arm's end-effector Jacobian in the scene's rows near rank loss (σ_min/σ_max of
+  the Jacobian with its linear rows divided by the arm's reach below `integrator.singularity_limit`), or
+  passing through one (det changes sign between two samples, square Jacobians);
+- `initial_correction`: closing the loop at t = 0 moved a joint by more than
+  `integrator.initial_correction_warning` rad;
+- `step_too_large`: a fixed rk4 step whose local error, estimated by step doubling at up to
+  `STEP_CHECK_SAMPLES` samples, exceeds the requested accuracy atol + rtol·|y|.
+
+Also the per-sample quantities they rest on: each arm's manipulability √det(A Aᵀ), A = S J_m (the
+product of A's singular values; S the scene's constraint rows, J_m the end-effector Jacobian at the EE
+point, world axes) and the kinetic energy ½θ̇ᵀ𝐈θ̇ of arms and object. Pure functions of a model and
+sampled arrays (the compiled per-sample terms, `coopsim.compiled.api.inverse_terms`); no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from .labels import arm_label
+from .model import Model, TorqueFunction, torque_at
+
+STEP_CHECK_SAMPLES = 64   # states at which a fixed rk4 step is checked by step doubling
+
+
+def describe_state(t: float, q: np.ndarray) -> str:
+    """'t=0.35 s, q=[0.1, …] rad': the time and configuration every failure and warning names."""
+    return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
+
+
+@dataclass(frozen=True)
+class RunWarning:
+    """One warning about a run: kind (see the module docstring), time t s, configuration q (n,) rad
+    there, a one-line reason, and the numbers it names (`values`, SI)."""
+
+    kind: str
+    t: float
+    q: tuple[float, ...]
+    reason: str
+    values: dict = field(default_factory=dict)
+
+    def message(self) -> str:
+        """'at t=…, q=[…] rad: reason' (one line)."""
+        return f"at {describe_state(self.t, self.q)}: {self.reason}"
+
+    def as_dict(self) -> dict:
+        return {"kind": self.kind, "t_s": self.t, "q_rad": list(self.q), "reason": self.reason,
+                "values": dict(self.values)}
+
+
+def run_warning(kind: str, t: float, q: np.ndarray, reason: str, **values) -> RunWarning:
+    return RunWarning(kind, float(t), tuple(float(x) for x in q), reason, {k: float(v) for k, v in values.items()})
+
+
+# ------------------------------------------------------------------------------------------------
+# per-sample quantities
+# ------------------------------------------------------------------------------------------------
+
+class ArmTerms(NamedTuple):
+    """Per sample (S samples, r arms, nmax joints per arm at most): J (S, r, 6, nmax) end-effector
+    Jacobians (world axes, EE point); I_qd (S, n) 𝐈_m θ̇_m per arm (no object), N·m·s;
+    R_o (S, 3, 3) object rotation."""
+
+    J: np.ndarray
+    I_qd: np.ndarray
+    R_o: np.ndarray
+
+
+def arm_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> ArmTerms:
+    """`ArmTerms` at the states (q, qd) (S, n): the compiled per-sample inverse-dynamics terms at θ̈ = θ̇
+    and at θ̈ = 0, whose difference is 𝐈_m θ̇_m."""
+    from .compiled import api
+
+    with_rate = api.inverse_terms(model, q, qd, qd)
+    without = api.inverse_terms(model, q, qd, np.zeros_like(qd))
+    return ArmTerms(with_rate.J, with_rate.tau_arms - without.tau_arms, with_rate.R_o)
+
+
+def _row_jacobians(model: Model, J: np.ndarray, m: int, scaled: bool = False) -> np.ndarray:
+    """A = S J_m (S, k, n_m) of arm m; `scaled`: linear rows divided by the arm's reach (dimensionless)."""
+    arm = model.arms[m]
+    Jm = J[:, m, :, :arm.n]
+    if scaled:
+        reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
+        Jm = Jm * np.r_[np.full(3, 1.0 / reach if reach > 0 else 1.0), np.ones(3)][:, None]
+    return np.einsum("kc,scj->skj", model.rows, Jm)
+
+
+def manipulability(model: Model, J: np.ndarray) -> np.ndarray:
+    """Each arm's manipulability (S, r): the product of the singular values of A = S J_m (k × n_m), which
+    is √det(A Aᵀ) for k ≤ n_m (Yoshikawa's measure in the scene's rows; units m^(linear rows)); zero at
+    a singular configuration."""
+    return np.stack([np.prod(np.linalg.svd(_row_jacobians(model, J, m), compute_uv=False), axis=1)
+                     for m in range(model.r)], axis=1)
+
+
+def kinetic_energy(model: Model, qd: np.ndarray, terms: ArmTerms, twist: np.ndarray) -> np.ndarray:
+    """Kinetic energy (S,) J of arms and object: ½ Σ_m θ̇_mᵀ 𝐈_m θ̇_m + ½ (m_o |v_C|² + ωᵀ R_o I_o R_oᵀ ω)
+    (= ½ θ̇ᵀ 𝐈 θ̇ of the closed chain); twist (S, 6) [v_C; ω] of the object."""
+    obj = model.object
+    v, w = twist[:, :3], twist[:, 3:]
+    w_body = np.einsum("sji,sj->si", terms.R_o, w)
+    return 0.5 * (np.sum(qd * terms.I_qd, axis=1) + obj.mass * np.sum(v * v, axis=1)
+                  + np.einsum("si,ij,sj->s", w_body, obj.inertia, w_body))
+
+
+# ------------------------------------------------------------------------------------------------
+# checks
+# ------------------------------------------------------------------------------------------------
+
+def _internal_force(internal_wrench: np.ndarray) -> np.ndarray:
+    """max over arms of |F_I| (S,) N."""
+    return np.max(np.linalg.norm(internal_wrench[:, :, :3], axis=2), axis=1)
+
+
+def first_ill_conditioned(model: Model, cond: np.ndarray) -> int | None:
+    """Index of the first sample whose condition number exceeds integrator.condition_limit, or None."""
+    above = np.flatnonzero(~(cond <= model.integrator.condition_limit))
+    return int(above[0]) if len(above) else None
+
+
+def ill_conditioning_reason(model: Model, cond: float, force: float) -> str:
+    lim = model.integrator.condition_limit
+    digits = np.log10(cond) if np.isfinite(cond) else np.inf
+    return (f"constraint matrix Λ𝐈⁻¹Λᵀ is ill-conditioned: condition number {cond:.3g} > "
+            f"integrator.condition_limit = {lim:g} (the chain is near a singular configuration: grasp and internal "
+            f"wrenches lose about {digits:.0f} digits); internal force there {force:.4g} N")
+
+
+def conditioning(model: Model, t, q, cond, internal_wrench) -> list[RunWarning]:
+    """An `ill_conditioned` warning at the sample of largest condition number, if above the limit."""
+    if first_ill_conditioned(model, cond) is None:
+        return []
+    i = int(np.argmax(np.where(np.isnan(cond), np.inf, cond)))
+    force = _internal_force(internal_wrench)
+    reason = ill_conditioning_reason(model, cond[i], force[i]) + f" (max over the run {np.max(force):.4g} N)"
+    return [run_warning("ill_conditioned", t[i], q[i], reason, condition_number=cond[i], internal_force_N=force[i],
+                        max_internal_force_N=np.max(force))]
+
+
+def arm_singularities(model: Model, t, q, J) -> list[RunWarning]:
+    """Per arm, at most one `arm_singularity` warning: where its end-effector Jacobian in the scene's rows
+    passes through a singularity (square: det changes sign between two samples), else at its most
+    singular sample if σ_min/σ_max (linear rows over the reach) is below integrator.singularity_limit."""
+    out = []
+    lim = model.integrator.singularity_limit
+    w = manipulability(model, J)
+    for m, arm in enumerate(model.arms):
+        A = _row_jacobians(model, J, m, scaled=True)
+        sv = np.linalg.svd(A, compute_uv=False)
+        ratio = sv[:, -1] / sv[:, 0]
+        label = arm_label(arm.name, m)
+        if A.shape[1] == A.shape[2] and len(t) > 1:
+            flips = np.flatnonzero(np.sign(np.linalg.det(A[:-1])) * np.sign(np.linalg.det(A[1:])) < 0)
+            if len(flips):
+                i = int(flips[0]) + int(ratio[flips[0] + 1] < ratio[flips[0]])
+                out.append(run_warning(
+                    "arm_singularity", t[i], q[i],
+                    f"{label} passes through a singular configuration between t={t[flips[0]]:.6g} s and "
+                    f"t={t[flips[0] + 1]:.6g} s (det of its end-effector Jacobian in the scene's rows changes sign; "
+                    f"manipulability {w[i, m]:.3g}, σ_min/σ_max {ratio[i]:.3g})",
+                    arm=m + 1, manipulability=w[i, m], sigma_ratio=ratio[i]))
+                continue
+        i = int(np.argmin(ratio))
+        if ratio[i] < lim:
+            out.append(run_warning(
+                "arm_singularity", t[i], q[i],
+                f"{label} is near a singular configuration: σ_min/σ_max of its end-effector Jacobian in the scene's "
+                f"rows {ratio[i]:.3g} < integrator.singularity_limit = {lim:g} (manipulability {w[i, m]:.3g})",
+                arm=m + 1, manipulability=w[i, m], sigma_ratio=ratio[i]))
+    return out
+
+
+def initial_correction(model: Model, init) -> list[RunWarning]:
+    """An `initial_correction` warning when closing the loop at t = 0 moved a joint by more than
+    integrator.initial_correction_warning (init: the `coopsim.manifold.Projection`; the configuration
+    named is the scenario's, before the correction)."""
+    s = model.integrator
+    j = int(np.argmax(np.abs(init.dq)))
+    worst = float(abs(init.dq[j]))
+    if worst <= s.initial_correction_warning:
+        return []
+    from .joints import COORDINATE, joint_units
+    from .labels import joint_labels
+
+    return [run_warning(
+        "initial_correction", 0.0, model.q0,
+        f"arms[].initial is off the loop closure by {init.residual_before:.3g} (m or rad): closing it moved "
+        f"{joint_labels(model)[j]} by {init.dq[j]:.4g} {joint_units(model.joint_type[j])[COORDINATE]} "
+        f"(> integrator.initial_correction_warning = "
+        f"{s.initial_correction_warning:g} rad; integrator.max_initial_correction = {s.max_initial_correction:g} rad "
+        f"stops the run)", max_correction_rad=worst, residual_before=init.residual_before)]
+
+
+def _torques(model: Model, t: np.ndarray) -> np.ndarray:
+    if isinstance(model.torques, TorqueFunction):
+        return np.array([torque_at(model.torques, ti) for ti in t])
+    from .compiled.api import compiled, tabulated_torques
+
+    return tabulated_torques(compiled(model).P, t)
+
+
+def rk4_local_error(model: Model, t: np.ndarray, Y: np.ndarray, h: float) -> np.ndarray:
+    """Step-doubling estimate of one rk4 step's local error from the states Y (S, 2n) at times t (S,):
+    16/15 |y_h − y_{h/2,h/2}| per component (S, 2n) (the h/2 pair is 16 times more accurate at order 4)."""
+    from .compiled import api
+
+    n = model.n_total
+
+    def f(ts, Ys):
+        return np.hstack([Ys[:, n:], api.evaluate_states(model, Ys, _torques(model, ts)).qdd])
+
+    def step(ts, Ys, dt):
+        k1 = f(ts, Ys)
+        k2 = f(ts + dt / 2, Ys + dt / 2 * k1)
+        k3 = f(ts + dt / 2, Ys + dt / 2 * k2)
+        k4 = f(ts + dt, Ys + dt * k3)
+        return Ys + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    return np.abs(step(t, Y, h) - step(t + h / 2, step(t, Y, h / 2), h / 2)) * (16 / 15)
+
+
+def step_size(model: Model, t, q, qd) -> list[RunWarning]:
+    """A `step_too_large` warning when a fixed rk4 step's local error (`rk4_local_error` at up to
+    STEP_CHECK_SAMPLES samples, evenly spread) exceeds atol + rtol·|y| somewhere; it names the worst
+    sample and a step that would meet the tolerance (the error scales as h⁵)."""
+    s = model.integrator
+    if s.method != "rk4" or len(t) < 2:
+        return []
+    idx = np.unique(np.linspace(0, len(t) - 2, min(STEP_CHECK_SAMPLES, len(t) - 1)).round().astype(int))
+    Y = np.hstack([q[idx], qd[idx]])
+    err = rk4_local_error(model, t[idx], Y, s.step)
+    ratio = np.max(err / (s.atol + s.rtol * np.abs(Y)), axis=1)
+    k = int(np.argmax(ratio))
+    if not ratio[k] > 1:
+        return []
+    suggest = s.step * 0.9 * ratio[k] ** -0.2
+    return [run_warning(
+        "step_too_large", t[idx[k]], q[idx[k]],
+        f"integrator.step = {s.step:g} s is too large for integrator.rtol = {s.rtol:g}, atol = {s.atol:g}: a "
+        f"step-doubling estimate of one rk4 step's local error is {ratio[k]:.3g} times the tolerance here "
+        f"(max {np.max(err[k]):.3g}); a step of about {suggest:.2g} s would meet it, or use dop853",
+        error_ratio=ratio[k], local_error=np.max(err[k]), suggested_step_s=suggest)]
+
+
+def collect(res, terms: ArmTerms) -> tuple[RunWarning, ...]:
+    """Every warning of a native SimResult (its integration events first, then the checks in the order
+    of the module docstring)."""
+    m = res.model
+    found = list(res.events)
+    if not any(w.kind == "rank_deficient" for w in found):
+        found += conditioning(m, res.t, res.q, res.cond, res.internal_wrench)
+    found += arm_singularities(m, res.t, res.q, terms.J)
+    found += initial_correction(m, res.initial)
+    found += step_size(m, res.t, res.q, res.qd)
+    return tuple(found)

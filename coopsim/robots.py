@@ -1,0 +1,414 @@
+"""Arms from robot files: one serial chain of a URDF or MJCF file, read by MuJoCo's own compiler.
+
+This is an I/O edge, like `scenario.py`, which dispatches here for an arm given as `robot:` or `file:`.
+The file is parsed by `mujoco.MjSpec.from_file` (URDF and MJCF alike); everything the dynamics does not
+need is deleted from the spec before it is compiled (geoms, meshes, textures, materials, sites,
+tendons, sensors, equalities, contact pairs, keyframes, and actuators other than joint motors), and
+inertia comes from the file's inertials only (`inertiafromgeom` off): a missing mesh file never stops a
+scenario. Fixed bodies are kept apart (`fusestatic` off) so that every link keeps its name.
+
+The chain runs from the `base` body (link) to the `tip` body, which must lie below it. Along it:
+- a body with one hinge joint (URDF revolute or continuous) starts a link of the arm; its frame is the
+  body frame moved to the joint's anchor (MuJoCo's `pos`, zero in a URDF), so the link frame turns
+  about its own origin as coopsim's convention asks (`model.ArmModel`);
+- a body without a joint (a URDF fixed joint), or whose joint is listed in `lock` (held at its
+  reference position: 0 in a URDF), is merged into the link it hangs from: its mass and its inertia
+  moved to the link's combined centre of mass by the parallel-axis theorem (exact);
+- bodies hanging off the chain after its first joint (sensors, flanges, a hand beyond the tip) are
+  merged the same way when nothing between them and the chain moves; a moving joint there (a gripper
+  finger) is refused unless it is locked. What hangs off the chain before its first joint is fixed to
+  the world and plays no part.
+Slide, ball and free joints, several joints in one body, a hinge with a reference angle other than 0,
+a link without mass, a name not in the file and a tip that is not below the base are refused with one
+line naming them (`RobotFileError`; the scenario adds the file and field).
+
+What comes along per joint: the position range (rad; ±inf where the file gives none or the joint is
+continuous), the effort limit (N·m: MuJoCo's `actuatorfrcrange` of the joint, which a URDF's
+`<limit effort>` becomes, else a joint motor's `forcerange` × gear; the smaller bound in magnitude) and,
+from a URDF only, the velocity limit (rad/s: `<limit velocity>`, which MuJoCo does not keep, read from
+the XML attribute alone). They are the default motor lines: stall torque = effort, no-load speed =
+velocity (inf where none). Joint damping, friction, armature and springs in the file are not
+modelled by coopsim and are ignored.
+
+`ROBOTS` names the arms of the optional `example-robot-data` package (`pip install 'coopsim[robots]'`)
+that a scenario may ask for by name (`robot: ur5`), with their chain and locked joints.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from .model import ArmModel, CoopsimError
+from .spatial import quat_to_rot
+
+MAX_ROBOT_FILE_BYTES = 64 << 20
+ROBOTS_EXTRA = "pip install 'coopsim[robots]'"
+ROBOTS_PACKAGE = "example-robot-data"
+
+
+class RobotFileError(CoopsimError):
+    """A robot file, or a chain in it, that cannot become an arm; one line naming the element. field:
+    the `chain` key at fault ('base', 'tip', 'lock'), None when it is the file itself."""
+
+    def __init__(self, message: str, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A bundled robot (README, "Real robots"): `file` relative to example-robot-data's `robots/`
+    folder, the default chain (`base` and `tip` link names) and the joints locked by default (a
+    gripper's fingers)."""
+
+    file: str
+    base: str
+    tip: str
+    lock: tuple[str, ...] = ()
+
+
+ROBOTS: dict[str, Robot] = {
+    "ur3": Robot("ur_description/urdf/ur3_robot.urdf", "base_link", "tool0"),
+    "ur5": Robot("ur_description/urdf/ur5_robot.urdf", "base_link", "tool0"),
+    "ur10": Robot("ur_description/urdf/ur10_robot.urdf", "base_link", "tool0"),
+    "panda": Robot("panda_description/urdf/panda.urdf", "panda_link0", "panda_hand_tcp",
+                   ("panda_finger_joint1", "panda_finger_joint2")),
+    "kinova": Robot("kinova_description/robots/kinova.urdf", "j2s6s200_link_base", "j2s6s200_end_effector"),
+    "xarm7": Robot("xarm_description/urdf/xarm7.urdf", "link_base", "link_eef"),
+    "baxter_left": Robot("baxter_description/urdf/baxter.urdf", "base", "left_gripper",
+                         ("l_gripper_l_finger_joint", "l_gripper_r_finger_joint")),
+    "baxter_right": Robot("baxter_description/urdf/baxter.urdf", "base", "right_gripper",
+                          ("r_gripper_l_finger_joint", "r_gripper_r_finger_joint")),
+    "so100": Robot("so_arm_description/urdf/so100.urdf", "base", "gripper", ("gripper",)),
+    "so101": Robot("so_arm_description/urdf/so101.urdf", "base_link", "gripper_frame_link", ("gripper",)),
+}
+
+
+def robots_folder() -> Path | None:
+    """example-robot-data's `robots/` folder (its URDFs), or None when the package is not installed."""
+    from importlib import metadata
+
+    try:
+        dist = metadata.distribution(ROBOTS_PACKAGE)
+    except metadata.PackageNotFoundError:
+        return None
+    folder = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    return folder if folder.is_dir() else None
+
+
+def robot_file(name: str) -> Path:
+    """The URDF of a bundled robot; RobotFileError naming it (and the extra to install) otherwise."""
+    if name not in ROBOTS:
+        raise RobotFileError(f"no robot {name!r} (robots: {', '.join(ROBOTS)})")
+    folder = robots_folder()
+    if folder is None:
+        raise RobotFileError(f"robot {name!r} comes from the {ROBOTS_PACKAGE} package, which is not installed: "
+                             f"{ROBOTS_EXTRA}")
+    path = folder / ROBOTS[name].file
+    if not path.is_file():
+        raise RobotFileError(f"robot {name!r}: {path} is missing from the installed {ROBOTS_PACKAGE}")
+    return path
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """One serial chain of a robot file: `links`, the arm in coopsim's link convention
+    (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes) with its base
+    link's frame at the world origin and its end-effector at the tip body's frame; per joint (n of
+    them) joint_names, joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s
+    limits (inf: none)."""
+
+    file: Path
+    base: str
+    tip: str
+    joint_names: tuple[str, ...]
+    links: ArmModel
+    joint_range: np.ndarray
+    effort: np.ndarray
+    velocity: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.joint_names)
+
+    def arm(self, name: str, base_pos: np.ndarray, base_rot: np.ndarray, ee_pos: np.ndarray,
+            ee_rot: np.ndarray) -> ArmModel:
+        """The arm with its base link's frame at (base_pos, base_rot) in the world and its end-effector
+        at (ee_pos, ee_rot) in the tip body's frame."""
+        tip_pos, tip_rot = self.links.ee_pos, self.links.ee_rot
+        return replace(self.links, name=name, base_pos=np.asarray(base_pos, float),
+                       base_rot=np.asarray(base_rot, float), ee_pos=tip_pos + tip_rot @ ee_pos, ee_rot=tip_rot @ ee_rot)
+
+
+# ------------------------------------------------------------------------------------- the file
+_STRIPPED = ("geoms", "sites", "cameras", "lights", "tendons", "sensors", "equalities", "excludes", "pairs", "keys",
+             "meshes", "skins", "hfields", "materials", "textures", "flexes", "numerics", "texts", "tuples")
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
+    """(model, floor): the file compiled by MuJoCo with only bodies, joints, inertials and joint motors
+    left (see the module docstring), and the mass and principal inertia (kg, kg·m²) that stand for zero
+    in it (MuJoCo's MINVAL, given to massless bodies so that it compiles; 0 where the file sets its own
+    bounds); RobotFileError with MuJoCo's message when it cannot be read or compiled."""
+    size = path.stat().st_size
+    if size > MAX_ROBOT_FILE_BYTES:
+        raise RobotFileError(f"{path.name}: {size / 2 ** 20:.0f} MiB: larger than the "
+                             f"{MAX_ROBOT_FILE_BYTES >> 20} MiB a robot file may hold")
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except Exception as exc:          # MuJoCo reports a bad file as ValueError (FatalError on some)
+        raise RobotFileError(f"MuJoCo cannot read {path.name}: {_one_line(exc)}") from None
+    for kind in _STRIPPED:
+        for element in list(getattr(spec, kind)):
+            spec.delete(element)
+    for act in list(spec.actuators):
+        if act.trntype != mujoco.mjtTrn.mjTRN_JOINT:
+            spec.delete(act)
+    spec.compiler.fusestatic = False
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    floor = 0.0
+    if spec.compiler.boundmass == 0 and spec.compiler.boundinertia == 0:
+        # MuJoCo refuses a moving body without mass anywhere in the file (a dummy link, one whose mass
+        # sits on a fixed child): let it compile with MINVAL, read back as exactly zero (`_Link.add`)
+        floor = spec.compiler.boundmass = spec.compiler.boundinertia = mujoco.mjMINVAL
+    try:
+        return spec.compile(), floor
+    except Exception as exc:
+        raise RobotFileError(f"MuJoCo cannot compile {path.name} (meshes and geoms left out): "
+                             f"{_one_line(exc)}") from None
+
+
+def _urdf_velocity(path: Path) -> dict[str, float]:
+    """{joint name: `<limit velocity>`} of a URDF (rad/s; MuJoCo's importer drops it); {} for MJCF."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError:
+        return {}
+    if root.tag != "robot":
+        return {}
+    out = {}
+    for joint in root.iter("joint"):
+        limit = joint.find("limit")
+        if limit is not None and limit.get("velocity") is not None:
+            try:
+                v = float(limit.get("velocity"))
+            except ValueError:
+                raise RobotFileError(f"{path.name}: joint {joint.get('name')!r}: <limit velocity> is not a number, "
+                                     f"got {limit.get('velocity')!r}") from None
+            if v > 0:
+                out[joint.get("name")] = v
+    return out
+
+
+# ------------------------------------------------------------------------------------ the chain
+class _Pose:
+    """A rigid transform (R, p): a frame's axes and origin in another frame."""
+
+    __slots__ = ("R", "p")
+
+    def __init__(self, R=None, p=None):
+        self.R = np.eye(3) if R is None else R
+        self.p = np.zeros(3) if p is None else p
+
+    def __mul__(self, other: "_Pose") -> "_Pose":
+        return _Pose(self.R @ other.R, self.R @ other.p + self.p)
+
+
+def _body_pose(m: mujoco.MjModel, b: int) -> _Pose:
+    return _Pose(quat_to_rot(m.body_quat[b]), m.body_pos[b].copy())
+
+
+class _Link:
+    """Mass properties being merged into one link: point masses and inertias in the link frame."""
+
+    def __init__(self, floor: float):
+        self.parts: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self.floor = floor
+
+    def add(self, m: mujoco.MjModel, b: int, X: _Pose):
+        """Body b, whose frame is X in the link frame (a mass or principal moment at the floor is zero)."""
+        mass = float(m.body_mass[b])
+        if mass > self.floor:
+            R = X.R @ quat_to_rot(m.body_iquat[b])
+            moments = np.where(m.body_inertia[b] > self.floor, m.body_inertia[b], 0.0)
+            self.parts.append((mass, X.p + X.R @ m.body_ipos[b], R @ np.diag(moments) @ R.T))
+
+    def combined(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """(mass, centre of mass, inertia about it): parallel-axis theorem, exact."""
+        if not self.parts:
+            return 0.0, np.zeros(3), np.zeros((3, 3))
+        mass = sum(p[0] for p in self.parts)
+        com = sum(p[0] * p[1] for p in self.parts) / mass
+        inertia = np.zeros((3, 3))
+        for mk, ck, Ik in self.parts:
+            d = ck - com
+            inertia += Ik + mk * (d @ d * np.eye(3) - np.outer(d, d))
+        return mass, com, 0.5 * (inertia + inertia.T)
+
+
+_JOINT_KIND = {mujoco.mjtJoint.mjJNT_FREE: "free (floating)", mujoco.mjtJoint.mjJNT_BALL: "ball",
+               mujoco.mjtJoint.mjJNT_SLIDE: "prismatic (slide)", mujoco.mjtJoint.mjJNT_HINGE: "revolute"}
+
+
+def _name(m: mujoco.MjModel, kind, i: int) -> str:
+    return mujoco.mj_id2name(m, kind, i) or f"#{i}"
+
+
+def _body_id(m: mujoco.MjModel, name: str, role: str, path: Path) -> int:
+    b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+    if b < 0:
+        names = [_name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
+        raise RobotFileError(f"{role} link {name!r} is not in {path.name} (links: {_listed(names)})", role)
+    return b
+
+
+def _listed(names: list[str], limit: int = 12) -> str:
+    return ", ".join(names[:limit]) + (f", … ({len(names)} in all)" if len(names) > limit else "")
+
+
+def _path(m: mujoco.MjModel, base: int, tip: int, names: tuple[str, str], path: Path) -> list[int]:
+    """Bodies from base (excluded) down to tip (included)."""
+    bodies, b = [], tip
+    while b != base:
+        if b == 0:
+            up_base = _ancestors(m, base)
+            fork = next(a for a in _ancestors(m, tip) if a in up_base)
+            where = "it is above it (swap base and tip?)" if fork == tip else \
+                f"the path between them branches at link {_name(m, mujoco.mjtObj.mjOBJ_BODY, fork)!r}"
+            raise RobotFileError(f"tip link {names[1]!r} is not below base link {names[0]!r} in {path.name}: {where}",
+                                 "tip")
+        bodies.append(b)
+        b = int(m.body_parentid[b])
+    return bodies[::-1]
+
+
+def _ancestors(m: mujoco.MjModel, b: int) -> list[int]:
+    out = [b]
+    while b != 0:
+        b = int(m.body_parentid[b])
+        out.append(b)
+    return out
+
+
+def _joint_of(m: mujoco.MjModel, b: int, locked: set[int], path: Path) -> int | None:
+    """The hinge joint that moves body b, None if b is fixed to its parent (no joint, or locked)."""
+    joints = [j for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]) if j not in locked]
+    if not joints:
+        return None
+    body = _name(m, mujoco.mjtObj.mjOBJ_BODY, b)
+    if len(joints) > 1:
+        named = ", ".join(repr(_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)) for j in joints)
+        raise RobotFileError(f"link {body!r} of {path.name} has {len(joints)} joints ({named}): an arm takes one "
+                             f"joint per link")
+    j = joints[0]
+    jname = _name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+    if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
+        raise RobotFileError(f"joint {jname!r} (link {body!r}) of {path.name} is "
+                             f"{_JOINT_KIND[mujoco.mjtJoint(m.jnt_type[j])]}: an arm from a robot file takes revolute "
+                             f"joints only (lock it to hold it fixed)")
+    if m.qpos0[m.jnt_qposadr[j]] != 0.0:
+        raise RobotFileError(f"joint {jname!r} of {path.name} has a reference angle (ref) of "
+                             f"{m.qpos0[m.jnt_qposadr[j]]:g} rad: only 0 is supported")
+    return j
+
+
+def _children(m: mujoco.MjModel) -> list[list[int]]:
+    kids = [[] for _ in range(m.nbody)]
+    for b in range(1, m.nbody):
+        kids[int(m.body_parentid[b])].append(b)
+    return kids
+
+
+def _merge_branch(m, kids, link: _Link, top: int, X_top: _Pose, locked: set[int], on_chain: set[int], path):
+    """Merge every body hanging off chain body `top` (frame X_top in the link frame) that is not on the
+    chain; a moving joint among them is refused (lock it, or put it on the chain)."""
+    stack = [(c, X_top * _body_pose(m, c)) for c in kids[top] if c not in on_chain]
+    while stack:
+        b, X = stack.pop()
+        moving = [j for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]) if j not in locked]
+        if moving:
+            jname = _name(m, mujoco.mjtObj.mjOBJ_JOINT, moving[0])
+            raise RobotFileError(
+                f"the chain branches at link {_name(m, mujoco.mjtObj.mjOBJ_BODY, top)!r}: joint {jname!r} "
+                f"(link {_name(m, mujoco.mjtObj.mjOBJ_BODY, b)!r}) of {path.name} moves a branch off the chain "
+                f"(lock it, or choose a tip past it)")
+        link.add(m, b, X)
+        stack.extend((c, X * _body_pose(m, c)) for c in kids[b])
+
+
+def _locked_ids(m: mujoco.MjModel, lock, path: Path) -> set[int]:
+    ids = set()
+    for name in lock:
+        j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if j < 0:
+            names = [_name(m, mujoco.mjtObj.mjOBJ_JOINT, i) for i in range(m.njnt)]
+            raise RobotFileError(f"locked joint {name!r} is not in {path.name} (joints: {_listed(names)})", "lock")
+        ids.add(j)
+    return ids
+
+
+def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | list[str] = ()) -> Chain:
+    """The serial chain from link `base` to link `tip` of a URDF or MJCF file, joints in `lock` held
+    fixed (see the module docstring); RobotFileError naming what cannot be taken."""
+    path = Path(path)
+    if not path.is_file():
+        raise RobotFileError(f"robot file not found: {path}")
+    m, floor = compile_dynamics(path)
+    b0, bt = _body_id(m, base, "base", path), _body_id(m, tip, "tip", path)
+    locked = _locked_ids(m, lock, path)
+    chain = _path(m, b0, bt, (base, tip), path)
+    on_chain, kids = set(chain), _children(m)
+    X = _Pose()                 # the body being walked, in the current link frame (the base frame first)
+    links: list[_Link] = []
+    joints, placements = [], []
+    for b in chain:
+        X = X * _body_pose(m, b)
+        j = _joint_of(m, b, locked, path)
+        if j is not None:
+            anchor = m.jnt_pos[j].copy()
+            placements.append(_Pose(X.R, X.p + X.R @ anchor))
+            joints.append(j)
+            links.append(_Link(floor))
+            X = _Pose(np.eye(3), -anchor)             # body frame in the new link frame
+        if links:
+            links[-1].add(m, b, X)
+            _merge_branch(m, kids, links[-1], b, X, locked, on_chain, path)
+    if not joints:
+        raise RobotFileError(f"no moving joint between base link {base!r} and tip link {tip!r} in {path.name}")
+    parts = [link.combined() for link in links]
+    for j, (mass, _, inertia) in zip(joints, parts):
+        if mass <= 0 or np.linalg.eigvalsh(inertia)[0] <= 0:
+            raise RobotFileError(f"the link moved by joint {_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r} in {path.name} "
+                                 f"has no mass or a singular inertia (mass {mass:g} kg): give it an <inertial>")
+    names = tuple(_name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
+    velocity = _urdf_velocity(path)
+    links = ArmModel("", np.zeros(3), np.eye(3), np.array([P.p for P in placements]),
+                     np.array([P.R for P in placements]),
+                     np.array([m.jnt_axis[j] / np.linalg.norm(m.jnt_axis[j]) for j in joints]),
+                     np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), np.array([p[2] for p in parts]),
+                     np.zeros((len(joints), 3)), X.p.copy(), X.R.copy())
+    return Chain(path, base, tip, names, links, np.array([_range(m, j) for j in joints]),
+                 np.array([_effort(m, j) for j in joints]), np.array([velocity.get(name, np.inf) for name in names]))
+
+
+def _range(m: mujoco.MjModel, j: int) -> tuple[float, float]:
+    return tuple(m.jnt_range[j]) if m.jnt_limited[j] else (-np.inf, np.inf)
+
+
+def _effort(m: mujoco.MjModel, j: int) -> float:
+    """The joint's torque limit (N·m): its actuatorfrcrange, else the forcerange × gear of a motor on it
+    (the smaller bound in magnitude); inf when the file gives none."""
+    if m.jnt_actfrclimited[j]:
+        return float(np.min(np.abs(m.jnt_actfrcrange[j])))
+    limits = [float(np.min(np.abs(m.actuator_forcerange[a])) * abs(m.actuator_gear[a, 0]))
+              for a in range(m.nu) if m.actuator_trnid[a, 0] == j and m.actuator_forcelimited[a]]
+    return min(limits) if limits else np.inf
