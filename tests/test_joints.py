@@ -199,6 +199,18 @@ def test_a_long_slide_is_not_taken_for_degrees():
     assert _error(wrong) == "<scenario>: arms[0].initial.angles: 7 rad is more than a turn: degrees? use angles_deg"
 
 
+def test_a_slides_range_is_in_metres():
+    """A prismatic joint's `range` is in m (no turn check, no `range_deg`): kept, and checked at the
+    initial coordinate in m."""
+    rail = ["arms", 0, "links", 0, "joint"]
+    ranged = mutated(GANTRY, rail + ["range"], [-7.0, 8.0])
+    assert model_from_dict(ranged).joint_range[0].tolist() == [-7.0, 8.0]
+    assert _error(mutated(GANTRY, rail + ["range"], [0.2, 0.5])) == (
+        "<scenario>: arms[0].initial.angles: joint 1 at 0.1 m is outside its range [0.2, 0.5] m")
+    assert _error(mutated(GANTRY, rail + ["range_deg"], [-10, 10])) == (
+        "<scenario>: arms[0].links[0].joint.range_deg: the joint is prismatic (m): give range in m, not range_deg")
+
+
 def test_plane_of_motion_takes_slides_across_the_normal():
     """A slide in the plane keeps the scene planar (3 rows per grasp); one along the normal makes it
     spatial (6 rows). An arm with a slide has no fixed reach."""
