@@ -256,13 +256,20 @@ def _cmd_capacity(args) -> int:
 def _cmd_bench(args) -> int:
     from .bench import FULL, QUICK, run_bench
     from .bench_report import json_text, markdown_report, write_outputs
+    from .progress import ProgressBar
 
-    import time
+    stage: list[str] = []
 
-    start = time.perf_counter()
-    log = (lambda msg: None) if args.json else (
-        lambda msg: print(f"bench [{time.perf_counter() - start:4.0f} s]: {msg}", file=sys.stderr, flush=True))
-    report = run_bench(_scenario_paths(args.scenarios), QUICK if args.quick else FULL, log=log)
+    def log(msg: str) -> None:       # one bar per stage (on a terminal), ended with the time it took
+        if stage:
+            bar(stage.pop(), 1.0)
+        stage.append(msg)
+        bar(msg, 0.0)
+
+    with ProgressBar(enabled=not args.json) as bar:
+        report = run_bench(_scenario_paths(args.scenarios), QUICK if args.quick else FULL, log=log)
+        if stage:
+            bar(stage.pop(), 1.0)
     paths = write_outputs(report, args.out)
     print(json_text(report) if args.json else markdown_report(report) + f"\nwrote {len(paths)} files in {args.out}")
     return 0

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import io
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import mujoco
@@ -19,10 +22,31 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
-def run_cli(*args, cwd):
-    """The real `coopsim` command (python -m coopsim.cli) in folder `cwd`; returns CompletedProcess."""
-    return subprocess.run([sys.executable, "-m", "coopsim.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
+def _show_on_stderr(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
+def run_cli(*args, cwd, process: bool = False):
+    """The real `coopsim` command in folder `cwd`, its output captured; returns a CompletedProcess.
+    By default its entry point `coopsim.cli.main` runs in this process (the compiled kernels are loaded
+    once per test worker, not once per command; an argparse exit is its exit status); process=True runs
+    `python -m coopsim.cli` in a fresh process, for what only a new process shows (e.g. that a log does
+    not depend on the process's hash seed)."""
+    argv = [str(a) for a in args]
+    if process:
+        return subprocess.run([sys.executable, "-m", "coopsim.cli", *argv], cwd=cwd, capture_output=True, text=True,
+                              timeout=600)
+    from coopsim.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            warnings.catch_warnings():
+        warnings.showwarning = _show_on_stderr     # as Python shows them (pytest would record them instead)
+        try:
+            code = main(argv)
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    return subprocess.CompletedProcess(["coopsim", *argv], code, out.getvalue(), err.getvalue())
 
 
 def pytest_sessionstart(session):

@@ -60,7 +60,7 @@ def test_mass_matrix_cholesky_factor_does_the_solves(scenario, request, monkeypa
     as a definiteness check, then solved again by LU). Results equal those of the former LU solve of
     the same system ≤ 1e-12 relative (measured: θ̈ ≤ 9.4e-14, wrenches ≤ 1.6e-14); no LU solve runs;
     and a matrix that is not positive definite is still refused."""
-    from coopsim import closed_chain as cc
+    import scipy.linalg      # forward_dynamics imports cho_factor and cho_solve from it when it runs
 
     model = request.getfixturevalue(scenario)
     rng = np.random.default_rng(12)
@@ -72,7 +72,7 @@ def test_mass_matrix_cholesky_factor_does_the_solves(scenario, request, monkeypa
             mp.setattr(np.linalg, "solve", lambda *a, **k: pytest.fail("np.linalg.solve (LU) called"))
             new = forward_dynamics(model, terms, tau)
         with monkeypatch.context() as mp:            # the former path: the same system by LAPACK gesv
-            mp.setattr(cc, "cho_solve", lambda factor, B, check_finite=True, M=terms.M: np.linalg.solve(M, B))
+            mp.setattr(scipy.linalg, "cho_solve", lambda factor, B, check_finite=True, M=terms.M: np.linalg.solve(M, B))
             old = forward_dynamics(model, terms, tau)
         cases.append((new, old))
     worst = {k: max(rel_err(getattr(n, k), getattr(o, k)) for n, o in cases) for k in ("qdd", "F_e", "vd_o")}

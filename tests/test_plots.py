@@ -36,19 +36,14 @@ def _check_pngs(paths, folder):
         assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 400
 
 
-def test_comparison_plots_of_both_models(logs, tmp_path):
-    both, _ = logs
-    out = tmp_path / "plots"
-    _check_pngs(comparison_plots(both, out), out)
-
-
-def test_native_only_log_is_plotted(logs, tmp_path):
+def test_comparison_plots_of_both_models_and_of_the_native_one_alone(logs, tmp_path):
     both, native = logs
     assert "/mujoco/joint_state" not in native.topics
     paths = comparison_plots(native, tmp_path)
     _check_pngs(paths, tmp_path)
-    # without the difference rows the joint figure is shorter than the comparison one
     full = comparison_plots(both, tmp_path / "both")
+    _check_pngs(full, tmp_path / "both")
+    # without the difference rows the joint figure is shorter than the comparison one
     assert mpimg.imread(paths[0]).shape[0] < mpimg.imread(full[0]).shape[0]
 
 
@@ -93,13 +88,15 @@ def test_every_figure_names_its_scenario_and_settings(logs):
 
 def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
-    from coopsim.cli import main
+    from coopsim.inverse_report import inverse_series, solve_study
+    from coopsim.log import log_data, run_metadata
     from coopsim.plots_inverse import MOTOR_LINES, inverse_torques_figure
+    from coopsim.scenario import load_scenario
     from conftest import SCENARIOS
 
-    assert main(["inverse", str(SCENARIOS / "paper_planar_2x3.yaml"), "--duration", "0.3", "--no-curve",
-                 "--out", str(tmp_path), "--json"]) == 0
-    fig = inverse_torques_figure(read_mcap(tmp_path / "inverse.mcap"))
+    model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
+    study = solve_study(model, duration=0.3)                   # what `coopsim inverse` logs, in memory
+    fig = inverse_torques_figure(log_data(inverse_series(study), run_metadata(model, study.sim)))
     legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
     assert len(legends) == 1, "one legend for every panel"
     texts = [t.get_text() for t in legends[0].get_texts()]

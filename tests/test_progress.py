@@ -39,10 +39,15 @@ def test_bar_is_silent_when_not_a_terminal():
 
 def test_inverse_and_capacity_report_their_stages_on_a_terminal(workdir, monkeypatch, capsys):
     """`coopsim inverse --replay` and `coopsim capacity` draw one bar per stage on a terminal, each
-    ending at 100 %; with --json nothing."""
+    ending at 100 %; with --json nothing. (The figures are left out: stand-ins draw nothing.)"""
     from coopsim.cli import main
 
     monkeypatch.chdir(workdir)
+    from coopsim.render import FigureWorkers
+
+    for name in ("inverse_plots", "capacity_plots"):
+        monkeypatch.setattr(f"coopsim.plots_inverse.{name}", lambda log, folder, workers=None: [])
+    monkeypatch.setattr("coopsim.render.FigureWorkers", lambda: FigureWorkers(n=0))   # no worker processes
     err = _Tty()
     monkeypatch.setattr("sys.stderr", err)
     scenario = "scenarios/paper_planar_2x3.yaml"
@@ -129,3 +134,28 @@ def test_plot_reports_its_stages_on_a_terminal(tmp_path, monkeypatch, capsys):
     frames = [f for f in err.getvalue().replace("\n", "\r").split("\r") if f.strip()]
     assert [f.split("  ")[0].strip() for f in frames if f.endswith("100%")] == ["read log", "figures"], frames
     assert capsys.readouterr().out.splitlines() == [str(tmp_path / "joint_angles.png")]
+
+
+def test_bench_shows_one_bar_per_stage(tmp_path, monkeypatch):
+    """`coopsim bench` on a terminal: each stage it announces is a bar that ends at 100 % (with the time
+    it took) when the next begins or the benchmark ends (run_bench and its outputs are stand-ins here:
+    the stages are what is checked); with --json nothing."""
+    from coopsim import bench, bench_report
+    from coopsim.cli import main
+
+    def fake_bench(paths, ladders, log):
+        for msg in ("paper: reference", "paper: native ladders", "scaling: 2 arms x 3 joints"):
+            log(msg)
+        return {}
+
+    monkeypatch.setattr(bench, "run_bench", fake_bench)
+    monkeypatch.setattr(bench_report, "write_outputs", lambda report, out: [])
+    monkeypatch.setattr(bench_report, "markdown_report", lambda report: "report")
+    monkeypatch.setattr(bench_report, "json_text", lambda report: "{}")
+    for flags, expected in (([], ["paper: reference", "paper: native ladders", "scaling: 2 arms x 3 joints"]),
+                            (["--json"], [])):
+        err = _Tty()
+        monkeypatch.setattr("sys.stderr", err)
+        assert main(["bench", "scenarios/x.yaml", "--out", str(tmp_path), *flags]) == 0
+        done = [f.split("  ")[0].strip() for f in err.getvalue().replace("\n", "\r").split("\r") if f.endswith("100%")]
+        assert done == expected, err.getvalue()
