@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .joints import COORDINATE, RATE, joint_units
 from .labels import joint_labels
 from .model import ValidationThresholds
 from .mujoco_run import TwinResult
@@ -55,10 +56,11 @@ class Comparison:
 
 
 def _metric(name, unit, err, t, labels, threshold) -> Metric:
-    """err (N, k) absolute errors; labels (k,) names of the columns."""
+    """err (N, k) absolute errors; labels (k,) names of the columns; unit: one for every column, or (k,)
+    one per column (joint coordinates: rad or m by joint type; the metric takes its worst column's)."""
     err = np.abs(np.asarray(err, dtype=float).reshape(len(t), -1))
     i, j = np.unravel_index(int(np.argmax(err)), err.shape)
-    return Metric(name, unit, float(err[i, j]), float(np.sqrt(np.mean(err ** 2))), labels[j], float(t[i]), threshold)
+    return Metric(name, unit if isinstance(unit, str) else unit[j], float(err[i, j]), float(np.sqrt(np.mean(err ** 2))), labels[j], float(t[i]), threshold)
 
 
 def compare(native: SimResult, twin: TwinResult, thresholds: ValidationThresholds | None = None) -> Comparison:
@@ -69,9 +71,10 @@ def compare(native: SimResult, twin: TwinResult, thresholds: ValidationThreshold
     if not np.array_equal(native.t, twin.t):
         raise ValueError("native and twin results are not on the same time grid")
     t, joints = native.t, joint_labels(model)
+    units = [joint_units(jt) for jt in model.joint_type]
     metrics = (
-        _metric("joint angle error", "rad", twin.q - native.q, t, joints, th.max_angle_error),
-        _metric("joint rate error", "rad/s", twin.qd - native.qd, t, joints, th.max_rate_error),
+        _metric("joint angle error", [u[COORDINATE] for u in units], twin.q - native.q, t, joints, th.max_angle_error),
+        _metric("joint rate error", [u[RATE] for u in units], twin.qd - native.qd, t, joints, th.max_rate_error),
         _metric("object position error", "m", np.linalg.norm(twin.object_pos - native.object_pos, axis=1), t,
                 ["object centre of mass"], th.max_object_position_error),
         _metric("object orientation error", "rad", orientation_error(twin.object_quat, native.object_quat), t,

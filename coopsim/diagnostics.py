@@ -194,12 +194,14 @@ def initial_correction(model: Model, init) -> list[RunWarning]:
     worst = float(abs(init.dq[j]))
     if worst <= s.initial_correction_warning:
         return []
+    from .joints import COORDINATE, joint_units
     from .labels import joint_labels
 
     return [run_warning(
         "initial_correction", 0.0, model.q0,
         f"arms[].initial is off the loop closure by {init.residual_before:.3g} (m or rad): closing it moved "
-        f"{joint_labels(model)[j]} by {init.dq[j]:.4g} rad (> integrator.initial_correction_warning = "
+        f"{joint_labels(model)[j]} by {init.dq[j]:.4g} {joint_units(model.joint_type[j])[COORDINATE]} "
+        f"(> integrator.initial_correction_warning = "
         f"{s.initial_correction_warning:g} rad; integrator.max_initial_correction = {s.max_initial_correction:g} rad "
         f"stops the run)", max_correction_rad=worst, residual_before=init.residual_before)]
 

@@ -3,8 +3,10 @@
 The Gibbs function of link i (mass m_i, inertia I_i about its centre of mass c_i, world axes) is
     S_i = ½ m_i a_ci·a_ci + ½ ω̇_iᵀ I_i ω̇_i + ω̇_iᵀ (ω_i × I_i ω_i) + (terms free of θ̈),
 and Appell's equations ∂S/∂θ̈ = τ with S = Σ S_i give, since ∂a_ci/∂θ̈_j = z_j × (c_i − p_j) and
-∂ω̇_i/∂θ̈_j = z_j (j ≤ i),
-    ∂S/∂θ̈_j = z_j · Σ_{i≥j} [(c_i − p_j) × m_i a_ci + I_i ω̇_i + ω_i × I_i ω_i].
+∂ω̇_i/∂θ̈_j = z_j (j ≤ i) for a revolute joint j,
+    ∂S/∂θ̈_j = z_j · Σ_{i≥j} [(c_i − p_j) × m_i a_ci + I_i ω̇_i + ω_i × I_i ω_i],
+and, since ∂a_ci/∂θ̈_j = z_j and ∂ω̇_i/∂θ̈_j = 0 for a prismatic joint j (its motion subspace,
+`coopsim.joints`), ∂S/∂θ̈_j = z_j · Σ_{i≥j} m_i a_ci (a force, N).
 ∂S/∂θ̈ is affine in θ̈: ∂S/∂θ̈ = I_m θ̈ − Re_m, where the mass matrix I_m = ∂²S/∂θ̈² is the Gram
 matrix of the partial accelerations and −Re_m (velocity and gravity terms, "bias forces" h) is
 ∂S/∂θ̈ evaluated at θ̈ = 0. Arm m alone: I_m θ̈_m = Re_m + τ_m − J_mᵀ F_e^m (eq. 10).
@@ -14,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .joints import motion_subspace
 from .kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
-from .model import ArmModel
+from .model import PRISMATIC, ArmModel
 from .spatial import cross
 
 
@@ -29,23 +32,25 @@ def gibbs_gradient_of_motion(arm: ArmModel, pose: ArmPose, motion: LinkMotion) -
     """∂S/∂θ̈ (n,) N·m for a link motion of the forward recursion: the backward recursion
     F_j = m_j a_cj + F_{j+1},
     N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1} + (p_{j+1} − p_j) × F_{j+1},
-    ∂S/∂θ̈_j = z_j · N_j (evaluated with reverse prefix sums: moments about the arm's base point,
-    then moved to p_j, positions relative to the base point so that no lever arm is a world position)."""
+    ∂S/∂θ̈_j = z_j · N_j for a revolute joint, z_j · F_j for a prismatic one (evaluated with reverse
+    prefix sums: moments about the arm's base point, then moved to p_j, positions relative to the base
+    point so that no lever arm is a world position)."""
     ma = arm.link_mass[:, None] * link_com_accelerations(motion, pose)
     Iw = np.einsum("nij,nj->ni", pose.I, motion.w)
     local = cross(pose.c_rel, ma) + np.einsum("nij,nj->ni", pose.I, motion.dw) + cross(motion.w, Iw)
     F = np.cumsum(ma[::-1], axis=0)[::-1]
     N = np.cumsum(local[::-1], axis=0)[::-1] - cross(pose.p_rel, F)
-    return np.einsum("ni,ni->n", pose.z, N)
+    return np.einsum("ni,ni->n", pose.z, np.where(pose.joint_type[:, None] == PRISMATIC, F, N))
 
 
 def mass_matrix(arm: ArmModel, pose: ArmPose) -> np.ndarray:
-    """I_m = ∂²S/∂θ̈² (n, n) kg·m²: Σ_i m_i Jv_ciᵀ Jv_ci + Jω_iᵀ I_i Jω_i, with the partial
-    accelerations Jv_ci[:, j] = z_j × (c_i − p_j), Jω_i[:, j] = z_j for j ≤ i (zero for j > i)."""
+    """I_m = ∂²S/∂θ̈² (n, n) (kg·m², kg·m or kg by joint types): Σ_i m_i Jv_ciᵀ Jv_ci + Jω_iᵀ I_i Jω_i,
+    with the partial accelerations [Jv_ci; Jω_i][:, j] the motion subspace of joint j at c_i for j ≤ i
+    (revolute [z_j × (c_i − p_j); z_j], prismatic [z_j; 0]; zero for j > i)."""
     n = arm.n
     below = np.tril(np.ones((n, n)))[:, :, None]  # [i, j] = 1 where j <= i
-    Jv = cross(pose.z[None, :, :], pose.c_rel[:, None, :] - pose.p_rel[None, :, :]) * below
-    Jw = np.broadcast_to(pose.z[None, :, :], (n, n, 3)) * below
+    Jv, Jw = motion_subspace(pose.joint_type, pose.z, pose.p_rel, pose.c_rel[:, None, :])
+    Jv, Jw = Jv * below, Jw * below
     M = np.einsum("i,ijk,ilk->jl", arm.link_mass, Jv, Jv)
     M += np.einsum("ijk,ikm,ilm->jl", Jw, pose.I, Jw)
     return 0.5 * (M + M.T)

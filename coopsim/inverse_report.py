@@ -17,6 +17,7 @@ import numpy as np
 from . import capacity as cap
 from .inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
                       inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
+from .joints import type_names
 from .labels import joint_labels
 from .log import Series, nonfinite_name
 from .model import Model
@@ -189,7 +190,7 @@ def inverse_summary(study: InverseStudy) -> dict:
     complete = not any(e["failed_samples"] or e.get("replay", {}).get("failed_stage_times") for e in methods.values())
     return {
         "scenario": m.name,
-        "joints": joint_labels(m),
+        "joints": joint_labels(m), "joint_types": type_names(m.joint_type),
         "trajectory": _trajectory_summary(m, study.traj),
         "complete": complete,
         "energy_definition": "integral of 0.5 tau^T Q tau dt (trapezoidal), Q = diag(energy_weights)",
@@ -334,7 +335,7 @@ def capacity_summary(study: CapacityStudy) -> dict:
     m = study.model
     out = {
         "scenario": m.name,
-        "joints": joint_labels(m),
+        "joints": joint_labels(m), "joint_types": type_names(m.joint_type),
         "trajectory": _trajectory_summary(m, study.traj),
         "assumptions": {
             "scaled": "the whole object scaled at constant geometry (density), mass_kg is the object's mass; "
@@ -342,7 +343,8 @@ def capacity_summary(study: CapacityStudy) -> dict:
             "payload": None if study.payload_position is None else
             f"a point mass at {list(map(float, study.payload_position))} m (object frame) added to the nominal "
             f"{m.object.mass:.6g} kg object; mass_kg is the payload's",
-            "motor_lines": "eq. 36: tau_max = tau_s - (tau_s/omega_s) qd, tau_min = -tau_s - (tau_s/omega_s) qd",
+            "motor_lines": "eq. 36: tau_max = tau_s - (tau_s/omega_s) qd, tau_min = -tau_s - (tau_s/omega_s) qd "
+                           "(N·m against rad/s; a prismatic joint's: N against m/s)",
             "nonsqueezing": "virtual bodies fixed at the nominal object's",
         },
         "nominal_object_mass_kg": m.object.mass,

@@ -1,4 +1,5 @@
-"""Stage 1 — arm kinematics: frame poses, link motion recursion, Jacobians and J̇θ̇.
+"""Stage 1 — arm kinematics: frame poses, link motion recursion, Jacobians and J̇θ̇, for revolute and
+prismatic joints (the joint model: `coopsim.joints`).
 
 All outputs are in world axes. The twist of a point P of the last link is [v_P; ω] and its
 "acceleration" is [a_P; ω̇] with a_P = dv_P/dt (classical point acceleration), so that
@@ -17,16 +18,18 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .joints import joint_transform, motion_subspace, revolute_mask
 from .model import ArmModel
-from .spatial import axis_angle_to_rot, cross, rigid_acceleration
+from .spatial import cross, rigid_acceleration
 
 
 class ArmPose(NamedTuple):
     """Configuration-dependent geometry of one arm (world axes, SI).
-    p (n, 3) joint origins; R (n, 3, 3) link frames; z (n, 3) joint axes; c (n, 3) link centres of
-    mass; I (n, 3, 3) link inertias about c; p_ee (3,), R_ee (3, 3) end-effector frame;
-    origin (3,) the arm's base point (world); p_rel (n, 3), c_rel (n, 3), p_ee_rel (3,): p, c and
-    p_ee relative to origin, computed without it (the dynamics use these: module docstring)."""
+    p (n, 3) joint origins (frame origins, a prismatic joint's slide included); R (n, 3, 3) link
+    frames; z (n, 3) joint axes; c (n, 3) link centres of mass; I (n, 3, 3) link inertias about c;
+    p_ee (3,), R_ee (3, 3) end-effector frame; origin (3,) the arm's base point (world); p_rel (n, 3),
+    c_rel (n, 3), p_ee_rel (3,): p, c and p_ee relative to origin, computed without it (the dynamics
+    use these: module docstring); joint_type (n,) the arm's joint types (ArmModel.joint_type)."""
 
     p: np.ndarray
     R: np.ndarray
@@ -39,6 +42,7 @@ class ArmPose(NamedTuple):
     p_rel: np.ndarray
     c_rel: np.ndarray
     p_ee_rel: np.ndarray
+    joint_type: np.ndarray
 
 
 class LinkMotion(NamedTuple):
@@ -51,16 +55,20 @@ class LinkMotion(NamedTuple):
 
 
 def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
-    """Forward kinematics of one arm at joint angles q (n,) rad:
-    R_i = R_{i−1} R0_i Rot(axis_i, θ_i), p_i = p_{i−1} + R_{i−1} d_i, the positions accumulated from
-    the base point (p_rel, c_rel, p_ee_rel) and the world ones that plus base_pos."""
+    """Forward kinematics of one arm at joint coordinates q (n,) (rad or m): with the joint transform
+    (R_J, d_J) of joint i (`joints.joint_transform`), R_i = R_{i−1} R0_i R_J, p_i = p_{i−1} + R_{i−1} d_i
+    + R_{i−1} R0_i d_J (revolute: R_J = Rot(axis_i, θ_i), d_J = 0; prismatic: R_J = 1, d_J = θ_i axis_i),
+    the positions accumulated from the base point (p_rel, c_rel, p_ee_rel) and the world ones that plus
+    base_pos."""
     n = arm.n
     p = np.empty((n, 3))
     R = np.empty((n, 3, 3))
     p_prev, R_prev = np.zeros(3), arm.base_rot
     for i in range(n):
-        p[i] = p_prev + R_prev @ arm.joint_pos[i]
-        R[i] = R_prev @ arm.joint_rot[i] @ axis_angle_to_rot(arm.joint_axis[i], q[i])
+        R_J, d_J = joint_transform(arm.joint_type[i], arm.joint_axis[i], q[i])
+        R0 = R_prev @ arm.joint_rot[i]
+        p[i] = p_prev + R_prev @ arm.joint_pos[i] + R0 @ d_J
+        R[i] = R0 @ R_J
         p_prev, R_prev = p[i], R[i]
     z = np.einsum("nij,nj->ni", R, arm.joint_axis)
     c = p + np.einsum("nij,nj->ni", R, arm.link_com)
@@ -68,21 +76,27 @@ def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
     p_ee = p[-1] + R[-1] @ arm.ee_pos
     R_ee = R[-1] @ arm.ee_rot
     o = np.asarray(arm.base_pos, dtype=float)
-    return ArmPose(o + p, R, z, o + c, I, o + p_ee, R_ee, o, p, c, p_ee)
+    return ArmPose(o + p, R, z, o + c, I, o + p_ee, R_ee, o, p, c, p_ee, arm.joint_type)
 
 
 def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarray) -> LinkMotion:
-    """Forward recursion of the recursive Gibbs–Appell formulation (paper eq. 9):
-    ω_i = ω_{i−1} + z_i θ̇_i,  ω̇_i = ω̇_{i−1} + z_i θ̈_i + ω_{i−1} × z_i θ̇_i,
-    a_{i+1} = a_i + ω̇_i × (p_{i+1} − p_i) + ω_i × (ω_i × (p_{i+1} − p_i)),  a_0 = a_base
-    (gravity enters as an upward base acceleration a_base = −g). The recursions are evaluated as
-    prefix sums, which is the same recursion unrolled."""
-    z, p = pose.z, pose.p_rel
-    w = np.cumsum(z * qd[:, None], axis=0)
+    """Forward recursion of the recursive Gibbs–Appell formulation (paper eq. 9), with ρ_i = 1 for a
+    revolute and 0 for a prismatic joint i:
+    ω_i = ω_{i−1} + ρ_i z_i θ̇_i,  ω̇_i = ω̇_{i−1} + ρ_i (z_i θ̈_i + ω_{i−1} × z_i θ̇_i),
+    a_i = a_{i−1} + ω̇_{i−1} × (p_i − p_{i−1}) + ω_{i−1} × (ω_{i−1} × (p_i − p_{i−1}))
+          + (1 − ρ_i)(z_i θ̈_i + 2 ω_{i−1} × z_i θ̇_i),  a_{−1} = a_base, ω_{−1} = ω̇_{−1} = 0
+    (a_i the acceleration of the joint origin p_i, which a prismatic joint slides along z_i, fixed in
+    link i−1: its relative acceleration and the Coriolis term; gravity enters as an upward base
+    acceleration a_base = −g). The recursions are evaluated as prefix sums, which is the same
+    recursion unrolled."""
+    z, p, rev = pose.z, pose.p_rel, revolute_mask(pose.joint_type)
+    w = np.cumsum(rev * z * qd[:, None], axis=0)
     w_prev = np.vstack([np.zeros(3), w[:-1]])
-    dw = np.cumsum(z * qdd[:, None] + cross(w_prev, z) * qd[:, None], axis=0)
+    zw = cross(w_prev, z) * qd[:, None]
+    dw = np.cumsum(rev * (z * qdd[:, None] + zw), axis=0)
+    slide = (1.0 - rev) * (z * qdd[:, None] + 2.0 * zw)
     da = rigid_acceleration(0.0, w[:-1], dw[:-1], p[1:] - p[:-1])
-    a = a_base + np.vstack([np.zeros(3), np.cumsum(da, axis=0)])
+    a = a_base + np.cumsum(slide + np.vstack([np.zeros(3), da]), axis=0)
     return LinkMotion(w, dw, a)
 
 
@@ -99,9 +113,10 @@ def link_com_accelerations(motion: LinkMotion, pose: ArmPose) -> np.ndarray:
 
 def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
     """Geometric Jacobian J (6, n) of a point P fixed in the last link, given relative to the arm's
-    base point (pose.origin): columns [z_j × (P − p_j); z_j]."""
-    Jv = cross(pose.z, point - pose.p_rel).T
-    return np.vstack([Jv, pose.z.T])
+    base point (pose.origin): the joints' motion subspaces at P, columns [z_j × (P − p_j); z_j]
+    (revolute) or [z_j; 0] (prismatic)."""
+    Jv, Jw = motion_subspace(pose.joint_type, pose.z, pose.p_rel, point)
+    return np.vstack([Jv.T, Jw.T])
 
 
 def ee_jacobian(pose: ArmPose) -> np.ndarray:
@@ -140,7 +155,10 @@ def reach_check(arm: ArmModel, point: np.ndarray) -> Reach:
     """Whether `point` (3,), given relative to the arm's base point, is within the arm's reach: its
     distance from the first joint's origin (base_rot · joint_pos[0]) at most the sum of the distances
     between successive joint origins and from the last to the end-effector. The one reach test (scenario
-    grasps, object-motion targets); a point relative to the base, so no world position is rounded."""
+    grasps, object-motion targets); a point relative to the base, so no world position is rounded.
+    An arm with a prismatic joint has no such bound (no joint limits are modelled): reach = inf."""
     reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
+    if np.any(arm.prismatic):
+        reach = np.inf
     dist = float(np.linalg.norm(np.asarray(point, dtype=float) - arm.base_rot @ arm.joint_pos[0]))
     return Reach(dist, reach, dist <= reach * (1 + REACH_SLACK))

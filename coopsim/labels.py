@@ -43,6 +43,17 @@ def metadata_arms(metadata: Mapping) -> tuple[list[str], list[int]] | None:
         return None
 
 
+def metadata_joint_types(metadata: Mapping, n: int) -> list[str]:
+    """'revolute' or 'prismatic' per joint (n,) from a log's "model" metadata record; every joint
+    revolute when the record is missing, unreadable or describes another number of joints (a log
+    written before joint types were recorded holds revolute joints only)."""
+    try:
+        types = [str(x) for x in json.loads(metadata.get("model", {})["joint_types"])]
+    except (KeyError, TypeError, ValueError):
+        types = []
+    return types if len(types) == n and set(types) <= {"revolute", "prismatic"} else ["revolute"] * n
+
+
 def metadata_joint_labels(metadata: Mapping, n: int) -> list[str]:
     """Labels (n,) of the joints of a log from its "model" metadata record (`metadata_arms`);
     `plain_joint_labels` when the record is missing, unreadable or describes another number of joints."""

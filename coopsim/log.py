@@ -47,6 +47,7 @@ from mcap.writer import CompressionType, Writer
 
 from .atomic import atomic_path
 from .closed_chain import arm_poses
+from .joints import type_names
 from .labels import joint_labels
 from .model import CoopsimError, Model
 from .spatial import rot_to_quat
@@ -744,9 +745,10 @@ def file_sha256(path: str | Path) -> str:
 def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str, dict[str, str]]:
     """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact):
     scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model (arm names,
-    joints per arm, joint names), native.integrator, mujoco, validation, and for a native result
-    native.initial_projection (dq, dqd, residual before/after, iterations), native.integrator_stats and
-    native.warnings (count; "1", "2", …: each warning as JSON, `coopsim.diagnostics.RunWarning.as_dict`).
+    joints per arm, joint names, joint types (revolute / prismatic)), native.integrator, mujoco, validation,
+    and for a native result native.initial_projection (dq, dqd, residual before/after, iterations),
+    native.integrator_stats and native.warnings (count; "1", "2", …: each warning as JSON,
+    `coopsim.diagnostics.RunWarning.as_dict`).
     Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
     {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
     extra = dict(extra or {})
@@ -759,7 +761,7 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
         "versions": {"coopsim": _version("coopsim"), "mujoco": _version("mujoco"), "numpy": np.__version__,
                      "mcap": _version("mcap"), "python": platform.python_version()},
         "model": _record({"arms": [a.name for a in model.arms], "dofs": [a.n for a in model.arms],
-                          "joint_names": joint_labels(model),
+                          "joint_names": joint_labels(model), "joint_types": type_names(model.joint_type),
                           "carrier": model.object.carrier, "duration": model.duration,
                           "gravity": model.gravity}),
         "native.integrator": _record(asdict(model.integrator)),

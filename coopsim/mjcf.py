@@ -1,6 +1,7 @@
 """The MuJoCo twin: an MJCF model built with `mujoco.MjSpec` from the same frozen `Model`.
 
-Only what the scene needs: one body per link (explicit inertia, hinge joint, a visual box without
+Only what the scene needs: one body per link (explicit inertia, a hinge joint for a revolute joint and
+a slide joint for a prismatic one, along the same axis in the body frame, a visual box without
 contacts), the object as a child body of the carrier arm's last link (an exact rigid attachment),
 one `weld` equality per other arm, one `motor` per joint, contacts disabled. Sites mark each
 end-effector and each grasp on the object.
@@ -20,7 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .model import ArmModel, Model, MujocoSettings, torque_at
+from .model import PRISMATIC, ArmModel, Model, MujocoSettings, torque_at
 from .spatial import axis_angle_to_rot, rot_to_quat
 
 
@@ -42,7 +43,8 @@ def _add_arm(parent, arm: ArmModel, m: int, with_geoms: bool) -> list:
         if i == 0:
             pos, R = arm.base_pos + arm.base_rot @ pos, arm.base_rot @ R
         body = parent.add_body(name=f"a{m}_l{i}", pos=pos, quat=rot_to_quat(R))
-        body.add_joint(name=f"a{m}_j{i}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=arm.joint_axis[i])
+        kind = mujoco.mjtJoint.mjJNT_SLIDE if arm.joint_type[i] == PRISMATIC else mujoco.mjtJoint.mjJNT_HINGE
+        body.add_joint(name=f"a{m}_j{i}", type=kind, axis=arm.joint_axis[i])
         body.mass, body.ipos = float(arm.link_mass[i]), arm.link_com[i]
         body.fullinertia, body.explicitinertial = _full_inertia(arm.link_inertia[i]), True
         if with_geoms and np.all(arm.link_box[i] > 0):

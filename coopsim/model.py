@@ -2,9 +2,11 @@
 
 Units are SI throughout (m, kg, s, N, N·m, rad). Frames: "world" is Σ; each arm has a base frame and
 one frame per link, attached at the link's joint (MuJoCo's body convention: frame i sits at
-`joint_pos[i]` in the parent frame, rotated by `joint_rot[i]`, then turned by θ_i about
-`joint_axis[i]`, given in frame i). The object frame Σ_o sits at the object's centre of mass C.
-Joint vectors of all arms are stacked arm after arm (`Model.dof_slices`).
+`joint_pos[i]` in the parent frame, rotated by `joint_rot[i]`, then moved by the joint coordinate θ_i
+along `joint_axis[i]`, given in frame i: turned by θ_i rad about it (revolute joint) or slid θ_i m
+along it (prismatic joint; `coopsim.joints`). The object frame Σ_o sits at the object's centre of mass
+C. Joint vectors of all arms are stacked arm after arm (`Model.dof_slices`); a joint's coordinate,
+rate and effort are rad, rad/s, N·m (revolute) or m, m/s, N (prismatic).
 """
 
 from __future__ import annotations
@@ -20,16 +22,21 @@ class CoopsimError(Exception):
     """Base class of every error coopsim reports to a user as one line."""
 
 
+REVOLUTE, PRISMATIC = 0, 1                        # joint type codes (ArmModel.joint_type)
+JOINT_TYPES = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
+
+
 @dataclass(frozen=True, eq=False)
 class ArmModel:
-    """One serial arm of n revolute joints.
+    """One serial arm of n joints, each revolute or prismatic.
 
     base_pos (3,) world, base_rot (3, 3) world←base;
     joint_pos (n, 3) origin of frame i in frame i−1 (the base frame for i = 0);
     joint_rot (n, 3, 3) frame i−1 ← frame i at θ_i = 0; joint_axis (n, 3) unit, in frame i;
     link_mass (n,) kg; link_com (n, 3) centre of mass in frame i; link_inertia (n, 3, 3) about the
     centre of mass, frame-i axes (kg·m²); link_box (n, 3) box size for drawing (zeros: none), its
-    centre at link_com; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1.
+    centre at link_com; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1;
+    joint_type (n,) int: REVOLUTE or PRISMATIC per joint (None: every joint revolute).
     """
 
     name: str
@@ -44,10 +51,20 @@ class ArmModel:
     link_box: np.ndarray
     ee_pos: np.ndarray
     ee_rot: np.ndarray
+    joint_type: np.ndarray | None = None
+
+    def __post_init__(self):
+        types = np.full(len(self.link_mass), REVOLUTE) if self.joint_type is None else self.joint_type
+        object.__setattr__(self, "joint_type", np.asarray(types, dtype=np.int64))
 
     @property
     def n(self) -> int:
         return len(self.link_mass)
+
+    @property
+    def prismatic(self) -> np.ndarray:
+        """(n,) bool: which joints are prismatic."""
+        return self.joint_type == PRISMATIC
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,7 +84,8 @@ class ObjectModel:
 
 @dataclass(frozen=True, eq=False)
 class TorqueTable:
-    """Piecewise-linear joint torques of one arm: times (k,) s strictly increasing, values (k, n) N·m;
+    """Piecewise-linear joint torques of one arm: times (k,) s strictly increasing, values (k, n) N·m
+    (N for a prismatic joint);
     held constant outside [times[0], times[-1]] (one row = constant torque)."""
 
     times: np.ndarray
@@ -85,7 +103,8 @@ class TorqueFunction:
 
 @dataclass(frozen=True, eq=False)
 class Motors:
-    """Per joint, stacked: stall_torque (n,) N·m, no_load_speed (n,) rad/s (eq. 36; inf: no limit),
+    """Per joint, stacked: stall_torque (n,) N·m (N for a prismatic joint: a force), no_load_speed (n,)
+    rad/s (m/s for a prismatic joint) (eq. 36; inf: no limit),
     energy_weight (n,) diagonal of Q (eqs. 33–35), passive (n,) bool."""
 
     stall_torque: np.ndarray
@@ -215,8 +234,8 @@ class Model:
     a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
     spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
     state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
-    limit of each stacked joint, rad (±inf: none; None: no joint has one), from a robot file or a
-    joint's `range`: checked at the initial state, not enforced by the dynamics."""
+    limit of each stacked joint, rad (m for a prismatic joint; ±inf: none; None: no joint has one),
+    from a robot file or a joint's `range`: checked at the initial state, not enforced by the dynamics."""
 
     name: str
     arms: tuple[ArmModel, ...]
@@ -242,6 +261,11 @@ class Model:
     @property
     def n_total(self) -> int:
         return int(sum(a.n for a in self.arms))
+
+    @cached_property
+    def joint_type(self) -> np.ndarray:
+        """(n_total,) int: every arm's joint types stacked (REVOLUTE, PRISMATIC)."""
+        return np.concatenate([a.joint_type for a in self.arms])
 
     @cached_property
     def dof_slices(self) -> tuple[slice, ...]:

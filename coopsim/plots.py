@@ -6,9 +6,10 @@ run and a stored log are plotted by the same code. Topics used: /native/joint_st
 is drawn). Arms and joint names come from the log's "model" metadata record when it is there.
 Differences |native − mujoco| are drawn on log axes (exact zeros are left out: a log axis cannot show
 them); when the twin is sampled at other times it is interpolated linearly onto the native times.
-Joint angles are drawn unwrapped (continuous in time), the object's orientation as the rotation vector
-from its initial orientation. Legends stand outside the panels, right of them (`panel_grid`,
-`legend_beside`), so no legend covers a curve whatever the number of joints.
+Revolute joints' angles are drawn unwrapped (continuous in time; a prismatic joint's coordinate, m, as
+it is), the object's orientation as the rotation vector from its initial orientation. Legends stand
+outside the panels, right of them (`panel_grid`, `legend_beside`), so no legend covers a curve whatever
+the number of joints.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .labels import arm_label, metadata_arms, metadata_joint_labels
+from .joints import COORDINATE, RATE, units_of
+from .labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
 from .log import LogData
 from .render import FigureWorkers, render_figures
 
@@ -186,27 +188,42 @@ def _compare_columns(axes, t: np.ndarray, x: np.ndarray, y: np.ndarray | None, l
     return handles + _style_handles(y is not None)
 
 
-def _joint_figure(log: LogData, key: str, quantity: str, unit: str, labels: list[str]) -> Figure:
+def _unwrap_revolute(x: np.ndarray | None, types: list[str]) -> np.ndarray | None:
+    """x (N, n) joint coordinates with the columns of the revolute joints unwrapped along time (no 2π
+    jump where an angle passes ±π); a prismatic joint's coordinate (m) is left as it is. None → None."""
+    if x is None:
+        return None
+    rev = np.array([ty == "revolute" for ty in types], dtype=bool)
+    out = np.array(x, dtype=np.float64)
+    out[:, rev] = np.unwrap(out[:, rev], axis=0)
+    return out
+
+
+def _joint_figure(log: LogData, key: str, quantity: str, kind: int, labels: list[str]) -> Figure:
     """One column per arm: its joints' `key` series (native and twin) and, with the twin, their
-    difference; the legend of each arm beside its column. Angles are drawn unwrapped (continuous in
-    time: no 2π jump where a joint passes ±π), as the axis label says."""
+    difference; the legend of each arm beside its column. kind (`joints.COORDINATE`, `RATE`) picks each
+    column's unit from its joints' types (rad, m, or rad or m). Revolute joints' angles are drawn
+    unwrapped (continuous in time: no 2π jump where a joint passes ±π), as the axis label says;
+    prismatic joints' coordinates (m) are drawn as they are."""
     from matplotlib.figure import Figure
 
     nat = log.topics[NATIVE + "/joint_state"]
     t, x = nat["t"], nat[key]
     y = _twin(log, "/joint_state", key, t)
-    ylabel = f"{quantity} ({unit})"
+    types = metadata_joint_types(log.metadata, x.shape[1])
     if key == "angle":
-        x, y = np.unwrap(x, axis=0), (None if y is None else np.unwrap(y, axis=0))
-        ylabel = f"{quantity} ({unit}, unwrapped)"
+        x, y = _unwrap_revolute(x, types), _unwrap_revolute(y, types)
     groups = _arm_groups(log, x.shape[1])
     styles = list(STYLES[:1 + (y is not None)])
     fig = Figure()
     axes = panel_grid(fig, 1 if y is None else 2, len(groups), PANEL,
                       legend=max(legend_width(labels[sl] + styles) for _, sl in groups), legend_after=range(len(groups)))
     for col, (arm, sl) in enumerate(groups):
-        handles = _compare_columns(axes[:, col], t, x[:, sl], None if y is None else y[:, sl], labels[sl], ylabel,
-                                   f"{arm}: joint {quantity}", f"|Δ {quantity}| ({unit})", f"{arm}: |native − MuJoCo|")
+        unit = units_of(types[sl], kind)
+        unwrapped = ", unwrapped" if key == "angle" and "revolute" in types[sl] else ""
+        handles = _compare_columns(axes[:, col], t, x[:, sl], None if y is None else y[:, sl], labels[sl],
+                                   f"{quantity} ({unit}{unwrapped})", f"{arm}: joint {quantity}",
+                                   f"|Δ {quantity}| ({unit})", f"{arm}: |native − MuJoCo|")
         legend_beside(axes[0, col], handles)
     fig.suptitle(run_title(log, f"Joint {quantity}" + ("" if y is None else ": native model vs MuJoCo twin"),
                            twin=y is not None))
@@ -269,7 +286,7 @@ def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | 
     """The figures of `comparison_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
-    jobs = [(_joint_figure, (log, "angle", "angle", "rad", labels)), (_joint_figure, (log, "rate", "rate", "rad/s", labels)),
+    jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)), (_joint_figure, (log, "rate", "rate", RATE, labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
     return [(fn, args, Path(out_dir) / name) for (fn, args), name in zip(jobs, FILES)]
 

@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .labels import metadata_arms, metadata_joint_labels
+from .joints import EFFORT, units_of
+from .labels import metadata_arms, metadata_joint_labels, metadata_joint_types
 from .log import LogData
 from .plots import legend_beside, legend_width, panel_grid, run_title
 from .render import FigureWorkers, render_figures
@@ -70,7 +71,7 @@ def inverse_torques_figure(log: LogData) -> Figure:
 
     traj = log.topics["/inverse/trajectory"]
     t, n = traj["t"], traj["q"].shape[1]
-    names = _joints(log, n)
+    names, types = _joints(log, n), metadata_joint_types(log.metadata, n)
     methods = _methods(log, "/inverse/", "/torque")
     grid = _torque_grid(log, n)
     cols = max(len(r) for r in grid)
@@ -90,7 +91,7 @@ def inverse_torques_figure(log: LogData) -> Figure:
                     ax.plot(t, lo, color="0.6", lw=0.8)
             ax.set_title(names[j], fontsize=9)
             ax.set_xlabel("t (s)")
-            ax.set_ylabel("τ (N·m)")
+            ax.set_ylabel(f"τ ({units_of(types[j:j + 1], EFFORT)})")
             ax.grid(alpha=0.3)
     legend = {}   # label → handle over every panel: the motor lines may be drawn on other panels only
     for ax in fig.axes:
@@ -112,8 +113,11 @@ def inverse_norms_figure(log: LogData) -> Figure:
         d = log.topics[f"/inverse/{k}/torque"]
         ax1.plot(d["t"], d["torque_norm"], label=LABEL.get(k, k), **STYLE.get(k, {}))
         ax2.plot(d["t"], d["cost"], label=LABEL.get(k, k), **STYLE.get(k, {}))
-    ax1.set_ylabel("|τ| (N·m)")
-    ax2.set_ylabel("½ τᵀQτ (N²·m²)")
+    units = units_of(metadata_joint_types(log.metadata, log.topics["/inverse/trajectory"]["q"].shape[1]), EFFORT,
+                     sep=", ")
+    squared = {"N·m": "N²·m²", "N": "N²"}
+    ax1.set_ylabel(f"|τ| ({units})")
+    ax2.set_ylabel(f"½ τᵀQτ ({', '.join(squared[u] for u in units.split(', '))})")
     for ax in (ax1, ax2):
         ax.set_xlabel("t (s)")
         ax.grid(alpha=0.3)
@@ -199,7 +203,7 @@ def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
             ax.plot([ts], [np.interp(ts, t, tau)], "o", color="black", label=lines[2])
         ax.set_title(f"{LABEL.get(k, k)}\n{names[j]}", fontsize=9)
         ax.set_xlabel("t (s)")
-        ax.set_ylabel("τ (N·m)")
+        ax.set_ylabel(f"τ ({units_of(metadata_joint_types(log.metadata, len(names))[j:j + 1], EFFORT)})")
         ax.grid(alpha=0.3)
         legend_beside(ax)
     fig.suptitle(run_title(log, f"Capacity: the motor that saturates first ({mode})"))

@@ -8,9 +8,11 @@ inertia comes from the file's inertials only (`inertiafromgeom` off): a missing 
 scenario. Fixed bodies are kept apart (`fusestatic` off) so that every link keeps its name.
 
 The chain runs from the `base` body (link) to the `tip` body, which must lie below it. Along it:
-- a body with one hinge joint (URDF revolute or continuous) starts a link of the arm; its frame is the
-  body frame moved to the joint's anchor (MuJoCo's `pos`, zero in a URDF), so the link frame turns
-  about its own origin as coopsim's convention asks (`model.ArmModel`);
+- a body with one hinge joint (URDF revolute or continuous) or one slide joint (URDF prismatic) starts
+  a link of the arm, a revolute or a prismatic joint (`coopsim.joints`); its frame is the body frame
+  moved to the joint's anchor (MuJoCo's `pos`, zero in a URDF), so the link frame turns about its own
+  origin as coopsim's convention asks (`model.ArmModel`; a slide moves every point of the link alike,
+  so for it the anchor changes nothing but where the frame sits);
 - a body without a joint (a URDF fixed joint), or whose joint is listed in `lock` (held at its
   reference position: 0 in a URDF), is merged into the link it hangs from: its mass and its inertia
   moved to the link's combined centre of mass by the parallel-axis theorem (exact);
@@ -18,17 +20,18 @@ The chain runs from the `base` body (link) to the `tip` body, which must lie bel
   merged the same way when nothing between them and the chain moves; a moving joint there (a gripper
   finger) is refused unless it is locked. What hangs off the chain before its first joint is fixed to
   the world and plays no part.
-Slide, ball and free joints, several joints in one body, a hinge with a reference angle other than 0,
+Ball and free joints, several joints in one body, a joint with a reference position other than 0,
 a link without mass, a name not in the file and a tip that is not below the base are refused with one
 line naming them (`RobotFileError`; the scenario adds the file and field).
 
-What comes along per joint: the position range (rad; ±inf where the file gives none or the joint is
-continuous), the effort limit (N·m: MuJoCo's `actuatorfrcrange` of the joint, which a URDF's
-`<limit effort>` becomes, else a joint motor's `forcerange` × gear; the smaller bound in magnitude) and,
-from a URDF only, the velocity limit (rad/s: `<limit velocity>`, which MuJoCo does not keep, read from
-the XML attribute alone). They are the default motor lines: stall torque = effort, no-load speed =
-velocity (inf where none). Joint damping, friction, armature and springs in the file are not
-modelled by coopsim and are ignored.
+What comes along per joint: the position range (rad, m for a slide; ±inf where the file gives none or
+the joint is continuous), the effort limit (N·m, a force in N for a slide: MuJoCo's `actuatorfrcrange`
+of the joint, which a URDF's `<limit effort>` becomes, else a joint motor's `forcerange` × gear; the
+smaller bound in magnitude) and, from a URDF only, the velocity limit (rad/s, m/s for a slide:
+`<limit velocity>`, which MuJoCo does not keep, read from the XML attribute alone). They are the
+default motor lines: stall torque (a stall force for a slide) = effort, no-load speed = velocity (inf
+where none). Joint damping, friction, armature and springs in the file are not modelled by coopsim and
+are ignored.
 
 `ROBOTS` names the arms of the optional `example-robot-data` package (`pip install 'coopsim[robots]'`)
 that a scenario may ask for by name (`robot: ur5`), with their chain and locked joints.
@@ -43,7 +46,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .model import ArmModel, CoopsimError
+from .model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
 from .spatial import quat_to_rot
 
 MAX_ROBOT_FILE_BYTES = 64 << 20
@@ -121,7 +124,7 @@ class Chain:
     (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes) with its base
     link's frame at the world origin and its end-effector at the tip body's frame; per joint (n of
     them) joint_names, joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s
-    limits (inf: none)."""
+    limits (inf: none) — m, N and m/s for a prismatic joint (`links.joint_type`)."""
 
     file: Path
     base: str
@@ -188,7 +191,8 @@ def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
 
 
 def _urdf_velocity(path: Path) -> dict[str, float]:
-    """{joint name: `<limit velocity>`} of a URDF (rad/s; MuJoCo's importer drops it); {} for MJCF."""
+    """{joint name: `<limit velocity>`} of a URDF (rad/s, m/s for a prismatic joint; MuJoCo's importer
+    drops it); {} for MJCF."""
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError:
@@ -257,6 +261,7 @@ class _Link:
 
 _JOINT_KIND = {mujoco.mjtJoint.mjJNT_FREE: "free (floating)", mujoco.mjtJoint.mjJNT_BALL: "ball",
                mujoco.mjtJoint.mjJNT_SLIDE: "prismatic (slide)", mujoco.mjtJoint.mjJNT_HINGE: "revolute"}
+_JOINT_TYPE = {int(mujoco.mjtJoint.mjJNT_HINGE): REVOLUTE, int(mujoco.mjtJoint.mjJNT_SLIDE): PRISMATIC}   # an arm's
 
 
 def _name(m: mujoco.MjModel, kind, i: int) -> str:
@@ -300,7 +305,8 @@ def _ancestors(m: mujoco.MjModel, b: int) -> list[int]:
 
 
 def _joint_of(m: mujoco.MjModel, b: int, locked: set[int], path: Path) -> int | None:
-    """The hinge joint that moves body b, None if b is fixed to its parent (no joint, or locked)."""
+    """The hinge or slide joint that moves body b, None if b is fixed to its parent (no joint, or
+    locked)."""
     joints = [j for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]) if j not in locked]
     if not joints:
         return None
@@ -311,13 +317,14 @@ def _joint_of(m: mujoco.MjModel, b: int, locked: set[int], path: Path) -> int | 
                              f"joint per link")
     j = joints[0]
     jname = _name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
-    if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
+    if int(m.jnt_type[j]) not in _JOINT_TYPE:
         raise RobotFileError(f"joint {jname!r} (link {body!r}) of {path.name} is "
                              f"{_JOINT_KIND[mujoco.mjtJoint(m.jnt_type[j])]}: an arm from a robot file takes revolute "
-                             f"joints only (lock it to hold it fixed)")
+                             f"and prismatic joints only (lock it to hold it fixed)")
     if m.qpos0[m.jnt_qposadr[j]] != 0.0:
-        raise RobotFileError(f"joint {jname!r} of {path.name} has a reference angle (ref) of "
-                             f"{m.qpos0[m.jnt_qposadr[j]]:g} rad: only 0 is supported")
+        what, unit = ("position", "m") if _JOINT_TYPE[int(m.jnt_type[j])] == PRISMATIC else ("angle", "rad")
+        raise RobotFileError(f"joint {jname!r} of {path.name} has a reference {what} (ref) of "
+                             f"{m.qpos0[m.jnt_qposadr[j]]:g} {unit}: only 0 is supported")
     return j
 
 
@@ -395,7 +402,8 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
                      np.array([P.R for P in placements]),
                      np.array([m.jnt_axis[j] / np.linalg.norm(m.jnt_axis[j]) for j in joints]),
                      np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), np.array([p[2] for p in parts]),
-                     np.zeros((len(joints), 3)), X.p.copy(), X.R.copy())
+                     np.zeros((len(joints), 3)), X.p.copy(), X.R.copy(),
+                     np.array([_JOINT_TYPE[int(m.jnt_type[j])] for j in joints]))
     return Chain(path, base, tip, names, links, np.array([_range(m, j) for j in joints]),
                  np.array([_effort(m, j) for j in joints]), np.array([velocity.get(name, np.inf) for name in names]))
 
@@ -405,7 +413,7 @@ def _range(m: mujoco.MjModel, j: int) -> tuple[float, float]:
 
 
 def _effort(m: mujoco.MjModel, j: int) -> float:
-    """The joint's torque limit (N·m): its actuatorfrcrange, else the forcerange × gear of a motor on it
+    """The joint's torque limit (N·m; a force limit, N, for a slide): its actuatorfrcrange, else the forcerange × gear of a motor on it
     (the smaller bound in magnitude); inf when the file gives none."""
     if m.jnt_actfrclimited[j]:
         return float(np.min(np.abs(m.jnt_actfrcrange[j])))

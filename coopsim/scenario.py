@@ -2,7 +2,10 @@
 
 This is an I/O edge: kernels never import it. Every rejected input raises `ScenarioError` with one
 line "FILE: FIELD: reason", FIELD a dotted path such as `arms[0].links[1].box.density`.
-Angles are in radians unless the key ends in `_deg`; every other quantity is SI.
+Angles are in radians unless the key ends in `_deg`; every other quantity is SI. A joint is revolute
+(default) or prismatic (`joint.type`): its coordinate, rate and effort are rad, rad/s, N·m or m, m/s, N,
+and the `_deg` forms of joint coordinates (`angles_deg`, `rates_deg`, `initial_guess_deg`) are refused
+where a prismatic joint would read them.
 
 Files are read defensively (README, "Scenario files"): UTF-8 text of at most MAX_FILE_BYTES; YAML
 without duplicate keys, nested at most MAX_DEPTH levels and at most MAX_NODES values with every alias
@@ -23,9 +26,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .joints import COORDINATE, joint_units
 from .kinematics import arm_pose, reach_check
-from .model import (ArmModel, CoopsimError, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
-                    ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
+from .model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, CoopsimError, IntegratorSettings, InverseSettings,
+                    Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
 from .spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
@@ -188,14 +192,18 @@ class _Section:
             return np.deg2rad(self.array(deg, shape))
         return self.array(key, shape, default=default)
 
-    def angles(self, key, shape, default=_REQUIRED) -> np.ndarray:
+    def angles(self, key, shape, default=_REQUIRED, is_angle=None) -> np.ndarray:
         """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
         degrees (|x| > 2π), are rejected (`rad_or_deg` for quantities that are not angles, such as
-        rates, which may exceed a turn)."""
+        rates, which may exceed a turn). is_angle (bool, shape): which values are angles (the others,
+        prismatic joints' coordinates in m, are not checked); default all."""
         deg = f"{key}_deg"
         a = self.rad_or_deg(key, shape, default)
-        if not self.has(deg) and np.any(np.abs(a) > 2 * np.pi + 1e-9):
-            self.fail(key, f"{np.max(np.abs(a)):g} rad is more than a turn: degrees? use {deg}")
+        big = np.abs(a) > 2 * np.pi + 1e-9
+        if is_angle is not None:
+            big &= is_angle
+        if not self.has(deg) and np.any(big):
+            self.fail(key, f"{np.max(np.abs(a[big])):g} rad is more than a turn: degrees? use {deg}")
         return a
 
     def section(self, key, default=_REQUIRED) -> "_Section | None":
@@ -286,7 +294,8 @@ def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=Non
 
 def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
     """One arm, from its `links` or from a robot file (`robot` or `file`, `robots.py`); returns the
-    model and its per-arm extras: n, joint_range (n, 2) rad, motor defaults stall (n,) and speed (n,)."""
+    model and its per-arm extras: n, joint_range (n, 2) rad (m for a prismatic joint), motor defaults
+    stall (n,) and speed (n,)."""
     name = sec.string("name", default=f"arm{index + 1}")
     base = sec.section("base", default={})
     base_pos = base.array("position", (3,), default=[0.0, 0.0, 0.0])
@@ -298,14 +307,15 @@ def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
     if kinds[0] != "links":
         return _robot_arm(sec, name, base_pos, base_rot, base_dir)
     links = sec.items("links", min_len=1)
-    jp, jr, ja, lm, lc, li, lb, rng = [], [], [], [], [], [], [], []
+    jp, jr, ja, jt, lm, lc, li, lb, rng = [], [], [], [], [], [], [], [], []
     prev_length = 0.0
     for link in links:
         joint = link.section("joint", default={})
+        jt.append(JOINT_TYPES[joint.string("type", tuple(JOINT_TYPES), "revolute")])
         jp.append(joint.array("position", (3,), default=[prev_length, 0.0, 0.0]))
         jr.append(_rotation(joint))
         ja.append(_unit(joint, "axis", [0.0, 0.0, 1.0]))
-        rng.append(_joint_range(joint))
+        rng.append(_joint_range(joint, jt[-1]))
         joint.done()
         m, c, I, box = _body(link, com_default="link")
         lm.append(m), lc.append(c), li.append(I), lb.append(box)
@@ -317,18 +327,25 @@ def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
     ee.done()
     n = len(links)
     arm = ArmModel(name, base_pos, base_rot, np.array(jp), np.array(jr), np.array(ja), np.array(lm),
-                   np.array(lc), np.array(li), np.array(lb), ee_pos, ee_rot)
+                   np.array(lc), np.array(li), np.array(lb), ee_pos, ee_rot, np.array(jt))
     return arm, {"n": n, "joint_range": np.array(rng), "stall": np.full(n, np.inf), "speed": np.full(n, np.inf),
                  "joint_names": None}
 
 
-def _joint_range(joint: _Section) -> np.ndarray:
-    """A hand-written joint's position limits `range` [lower, upper] rad (`range_deg`: deg); none by default."""
+def _joint_range(joint: _Section, joint_type: int) -> np.ndarray:
+    """A hand-written joint's position limits `range` [lower, upper]: rad (`range_deg`: deg) for a
+    revolute joint, m for a prismatic one (its `range_deg` refused); none by default."""
     if not (joint.has("range") or joint.has("range_deg")):
         return np.array([-np.inf, np.inf])
-    lo, hi = joint.angles("range", (2,))
+    unit = joint_units(joint_type)[COORDINATE]
+    if joint_type == PRISMATIC:
+        if joint.has("range_deg"):
+            joint.fail("range_deg", "the joint is prismatic (m): give range in m, not range_deg")
+        lo, hi = joint.array("range", (2,))
+    else:
+        lo, hi = joint.angles("range", (2,))
     if not lo < hi:
-        joint.fail("range", f"lower limit must be below the upper one, got [{lo:g}, {hi:g}] rad")
+        joint.fail("range", f"lower limit must be below the upper one, got [{lo:g}, {hi:g}] {unit}")
     return np.array([lo, hi])
 
 
@@ -366,18 +383,36 @@ def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> 
                  "joint_names": chain.joint_names}
 
 
-def _arm_state(sec: _Section, info: dict):
-    """Initial angles (within the joints' ranges) and rates of one arm."""
-    n = info["n"]
+def _joint_values(sec: _Section, key: str, types: np.ndarray, labels: list[str], rates: bool = False,
+                  default=_REQUIRED) -> np.ndarray:
+    """Joint coordinates (rates: joint rates) under `key`, per joint type: rad or m (rad/s or m/s); the
+    degree form `key_deg` only where no joint is prismatic (ScenarioError naming the field and the
+    first prismatic joint, labels[j]); a revolute angle over a turn is refused as in `angles`."""
+    deg, n = f"{key}_deg", len(types)
+    prismatic = np.flatnonzero(types == PRISMATIC)
+    if sec.has(deg) and prismatic.size:
+        unit = "m/s" if rates else "m"
+        sec.fail(deg, f"{labels[prismatic[0]]} is prismatic ({unit}): give {key} in {'rad/s' if rates else 'rad'} "
+                      f"and {unit}, not {deg}")
+    if rates:
+        return sec.rad_or_deg(key, (n,), default)
+    return sec.angles(key, (n,), default, is_angle=types == REVOLUTE)
+
+
+def _arm_state(sec: _Section, arm: ArmModel, info: dict):
+    """Initial coordinates (rad, m for a prismatic joint; within the joints' ranges) and rates of one
+    arm."""
+    n, types, names = info["n"], arm.joint_type, info["joint_names"]
+    labels = [f"joint {j + 1}" + ("" if names is None else f" ({names[j]})") for j in range(n)]
     init = sec.section("initial")
-    q0 = init.angles("angles", (n,))
-    qd0 = init.rad_or_deg("rates", (n,), default=np.zeros(n))   # rad/s (rates_deg: deg/s): no turn limit
+    q0 = _joint_values(init, "angles", types, labels)
+    qd0 = _joint_values(init, "rates", types, labels, rates=True, default=np.zeros(n))   # no turn limit
     lo, hi = info["joint_range"].T
     outside = np.flatnonzero((q0 < lo) | (q0 > hi))
     if outside.size:
         i = int(outside[0])
-        named = "" if info["joint_names"] is None else f" ({info['joint_names'][i]})"
-        init.fail("angles", f"joint {i + 1}{named} at {q0[i]:.6g} rad is outside its range [{lo[i]:.6g}, {hi[i]:.6g}] rad")
+        unit = joint_units(types[i])[COORDINATE]
+        init.fail("angles", f"{labels[i]} at {q0[i]:.6g} {unit} is outside its range [{lo[i]:.6g}, {hi[i]:.6g}] {unit}")
     init.done()
     return q0, qd0
 
@@ -561,9 +596,10 @@ def _validation(sec: _Section | None) -> ValidationThresholds:
     return s
 
 
-def _inverse(sec: _Section | None, n: int, r: int) -> InverseSettings:
+def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) -> InverseSettings:
     """The optional `inverse` section: trajectory to invert, object motion, non-squeezing virtual
-    masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion)."""
+    masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion); arms
+    give the joint types of the stacked initial guess."""
     if sec is None:
         return InverseSettings()
     trajectory = sec.string("trajectory", ("forward", "object_motion"), "forward")
@@ -572,7 +608,10 @@ def _inverse(sec: _Section | None, n: int, r: int) -> InverseSettings:
     if om is not None:
         law = om.string("time_law", ("quintic", "cubic"), "quintic")
         dt = om.number("output_dt", 1e-2, positive=True)
-        guess = om.angles("initial_guess", (n,)) if om.has("initial_guess") or om.has("initial_guess_deg") else None
+        types = np.concatenate([a.joint_type for a in arms]) if arms else np.full(n, REVOLUTE)
+        labels = [f"arm {a.name!r} joint {j + 1}" for a in arms for j in range(a.n)]
+        guess = _joint_values(om, "initial_guess", types, labels) \
+            if om.has("initial_guess") or om.has("initial_guess_deg") else None
         times, pos, rot = [], [], []
         for wp in om.items("waypoints", min_len=2):
             times.append(wp.number("time", nonneg=True))
@@ -828,7 +867,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     arms, q0, qd0, torques, motor_parts, ranges = [], [], [], [], [], []
     for i, sec in enumerate(arm_secs):
         arm, info = _arm(sec, i, base_dir)
-        q, qd = _arm_state(sec, info)
+        q, qd = _arm_state(sec, arm, info)
         torques.append(_torque(sec, info["n"], base_dir))
         motor_parts.append(_motors(sec, info))
         _check_passive_torque(sec, torques[-1], motor_parts[-1][3])
@@ -841,7 +880,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     integrator = _integrator(root.section("integrator", default=None))
     mujoco_settings = _mujoco(root.section("mujoco", default=None))
     validation = _validation(root.section("validation", default=None))
-    inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms))
+    inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms), arms)
     root.done()
     _check_work(where, duration, duration_field, integrator, mujoco_settings, inverse)
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
@@ -888,11 +927,16 @@ def _resolve_grasps(arms, q0, order, grasp, pose, where):
 
 
 def _plane(arms: list[ArmModel], q0: np.ndarray) -> np.ndarray | None:
-    """Rows (e1, e2, n) of the plane of motion if every joint axis is parallel to one n, else None.
-    Rotations about parallel axes keep them parallel, so checking one configuration suffices."""
+    """Rows (e1, e2, n) of the plane of motion if every revolute joint axis is parallel to one n and
+    every prismatic one perpendicular to it, else None (and None without a revolute joint).
+    Rotations about parallel axes and slides keep every axis's direction, so checking one configuration
+    suffices."""
     z = np.vstack([p.z for p in _arm_poses(arms, q0)])
-    nrm = z[0]
-    if np.max(np.linalg.norm(np.cross(z, nrm), axis=1)) > 1e-12:
+    rev = np.concatenate([a.joint_type for a in arms]) == REVOLUTE
+    if not rev.any():
+        return None
+    nrm = z[rev][0]
+    if np.max(np.linalg.norm(np.cross(z[rev], nrm), axis=1)) > 1e-12 or np.any(np.abs(z[~rev] @ nrm) > 1e-12):
         return None
     e2 = np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0])
     e2 /= np.linalg.norm(e2)

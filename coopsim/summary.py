@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .joints import COORDINATE, type_names, units_of
 from .simulate import SimResult
 
 
@@ -20,13 +21,15 @@ def kinetic_energy_summary(res: SimResult) -> dict:
 
 
 def simulation_summary(res: SimResult) -> dict:
-    """JSON-ready summary of a forward simulation (SI units; wall_time_s is the only
-    non-deterministic entry); `warnings`: the run's `coopsim.diagnostics.RunWarning`s."""
+    """JSON-ready summary of a forward simulation (SI units; a prismatic joint's entries of the `_rad`
+    joint vectors are in m; wall_time_s is the only non-deterministic entry); `warnings`: the run's
+    `coopsim.diagnostics.RunWarning`s."""
     m, init = res.model, res.initial
     return {
         "scenario": m.name,
         "arms": [a.name for a in m.arms],
         "joints": m.n_total,
+        "joint_types": type_names(m.joint_type),
         "constraint_rows": "planar" if m.plane is not None else "spatial",
         "duration_s": float(res.t[-1]),
         "samples": len(res.t),
@@ -73,13 +76,14 @@ def run_summary(cv, log_path, plots) -> dict:
 def format_simulation_summary(s: dict) -> str:
     """Short human-readable version of `simulation_summary`."""
     ic, ke = s["initial_correction"], s["kinetic_energy"]
+    unit = units_of(s.get("joint_types") or ["revolute"], COORDINATE, sep=", ")
     lines = [
         f"scenario        {s['scenario']}: {len(s['arms'])} arms, {s['joints']} joints, {s['constraint_rows']} constraint rows",
         f"initial state   loop-closure residual {ic['residual_before']:.3g} -> {ic['residual_after']:.3g} "
-        f"(max joint correction {ic['max_abs_dq_rad']:.3g} rad, {ic['iterations']} Gauss-Newton steps)",
+        f"(max joint correction {ic['max_abs_dq_rad']:.3g} {unit}, {ic['iterations']} Gauss-Newton steps)",
         f"integration     {s['integrator']} + {s['stabilization']}, {s['duration_s']:g} s, {s['steps_accepted']} steps "
         f"({s['steps_rejected']} rejected), {s['rhs_evaluations']} evaluations, {s['wall_time_s']:.2f} s wall",
-        f"final q (rad)   [{', '.join(f'{x:.6f}' for x in s['final_q_rad'])}]",
+        f"{f'final q ({unit})':<15} [{', '.join(f'{x:.6f}' for x in s['final_q_rad'])}]",
         f"final object    [{', '.join(f'{x:.6f}' for x in s['final_object_position_m'])}] m",
         f"constraints     max |phi| {s['max_constraint_residual']:.3g}, max |Lambda qd| {s['max_velocity_residual']:.3g}, "
         f"max cond {s['max_condition_number']:.3g}",

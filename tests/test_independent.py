@@ -171,10 +171,12 @@ def check_chain(model, S: PinocchioScene, states, report: Report):
         report.add("pinocchio solve (closure acceleration)", "all", label, acc_err / np.max(np.abs(qdd_ref)), TOL_CHAIN)
         report.add("pinocchio solve (equations of motion)", "all", label, kkt_err / max(1.0, np.max(np.abs(tau))),
                    TOL_CHAIN)
-        if S.normal is not None:       # planar: every joint axis stays along the normal
-            axes = [X.rotation @ link.axis for arm, Xs in zip(S.arms, S.link_poses(q)) for link, X in zip(arm.links, Xs)]
-            report.add("planar scene: joint axes along the normal", "all", label,
-                       max(np.linalg.norm(np.cross(a, S.normal)) for a in axes), 1e-12)
+        if S.normal is not None:       # planar: every revolute axis stays along the normal, prismatic across it
+            off = [abs(X.rotation @ link.axis @ S.normal) if link.prismatic else
+                   np.linalg.norm(np.cross(X.rotation @ link.axis, S.normal))
+                   for arm, Xs in zip(S.arms, S.link_poses(q)) for link, X in zip(arm.links, Xs)]
+            report.add("planar scene: joint axes along the normal (prismatic: in the plane)", "all", label,
+                       max(off), 1e-12)
         _, acc = forward(model, q, qd, tau)
         smp = api.evaluate_states(model, np.concatenate([q, qd])[None], tau[None], full=True, n_threads=1)
         qdd_scale, F_scale = np.max(np.abs(qdd_ref)), np.max(np.abs(F_ref))

@@ -73,15 +73,16 @@ def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
 def test_every_figure_names_its_scenario_and_settings(logs):
     """Titles carry the scenario's name and the integrator settings the log records (issue 10)."""
     from coopsim import plots
+    from coopsim.joints import COORDINATE
 
     both, native = logs
     labels = [f"j{i}" for i in range(6)]
-    figs = [plots._joint_figure(both, "angle", "angle", "rad", labels), plots._object_figure(both)]
+    figs = [plots._joint_figure(both, "angle", "angle", COORDINATE, labels), plots._object_figure(both)]
     titles = [f.get_suptitle() for f in figs] + [plots._constraint_figure(both).axes[0].get_title()]
     for title in titles:
         assert title.startswith("paper_planar_2x3 — ") and "native dop853 rtol 1e-12" in title, title
         assert "MuJoCo RK4 0.001 s" in title, title
-    alone = plots._joint_figure(native, "angle", "angle", "rad", labels).get_suptitle()
+    alone = plots._joint_figure(native, "angle", "angle", COORDINATE, labels).get_suptitle()
     assert alone == "paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12)", alone
 
 
@@ -135,13 +136,8 @@ def test_object_orientation_panel_against_the_heading_by_hand(logs):
     np.testing.assert_allclose(diff[drawn], want[drawn], rtol=1e-6, atol=1e-15)
 
 
-def test_joint_angles_are_drawn_unwrapped(logs):
-    """A log whose angles are wrapped into (−π, π] (joint 1 passing π mid-run) is drawn continuous, for
-    both models, with 'unwrapped' in the axis label, and its difference panel stays at the models'
-    difference (not 2π)."""
-    from coopsim import plots
-
-    both, _ = logs
+def _wrapped_log(both):
+    """`both` with its angles wrapped into (−π, π], joint 1 passing π between two samples mid-run."""
     q = both.topics["/native/joint_state"]["angle"]
     mid = len(q) // 2
     shift = np.pi - 0.5 * (q[mid, 0] + q[mid + 1, 0])     # joint 1 crosses π between two samples mid-run
@@ -155,8 +151,18 @@ def test_joint_angles_are_drawn_unwrapped(logs):
         topics[prefix + "/joint_state"] = dict(topics[prefix + "/joint_state"],
                                                angle=wrapped(topics[prefix + "/joint_state"]["angle"]))
     assert np.max(np.abs(np.diff(topics["/native/joint_state"]["angle"][:, 0]))) > 6, "the log jumps by 2π"
-    fig = plots._joint_figure(dataclasses.replace(both, topics=topics), "angle", "angle", "rad",
-                              [f"j{i}" for i in range(6)])
+    return dataclasses.replace(both, topics=topics)
+
+
+def test_joint_angles_are_drawn_unwrapped(logs):
+    """A log whose angles are wrapped into (−π, π] (joint 1 passing π mid-run) is drawn continuous, for
+    both models, with 'unwrapped' in the axis label, and its difference panel stays at the models'
+    difference (not 2π)."""
+    from coopsim import plots
+    from coopsim.joints import COORDINATE
+
+    both, _ = logs
+    fig = plots._joint_figure(_wrapped_log(both), "angle", "angle", COORDINATE, [f"j{i}" for i in range(6)])
     top = fig.axes[0]
     assert top.get_ylabel() == "angle (rad, unwrapped)"
     for line, prefix in zip(top.lines[:2], ("/native", "/mujoco")):   # joint 1, native and MuJoCo
@@ -164,3 +170,26 @@ def test_joint_angles_are_drawn_unwrapped(logs):
         np.testing.assert_allclose(y - y[0], logged - logged[0], rtol=0, atol=1e-12)
     diff = fig.axes[2].lines[0].get_ydata()      # arm 1's difference panel, joint 1
     assert np.nanmax(diff) < 1e-6
+
+
+def test_prismatic_coordinates_are_not_unwrapped(logs):
+    """The same wrapped log with joint 1 recorded as prismatic: its coordinate (m) is drawn exactly as
+    logged, jump included (unwrapping metres by 2π would invent motion), while arm 2's revolute angles
+    are still unwrapped; each arm's axis names its units."""
+    import json
+
+    from coopsim import plots
+    from coopsim.joints import COORDINATE
+
+    both, _ = logs
+    log = _wrapped_log(both)
+    types = ["prismatic"] + ["revolute"] * 5
+    log = dataclasses.replace(log, metadata=dict(log.metadata, model=dict(log.metadata["model"],
+                                                                         joint_types=json.dumps(types))))
+    fig = plots._joint_figure(log, "angle", "angle", COORDINATE, [f"j{i}" for i in range(6)])
+    arm1, arm2 = fig.axes[0], fig.axes[1]
+    assert arm1.get_ylabel() == "angle (m or rad, unwrapped)" and arm2.get_ylabel() == "angle (rad, unwrapped)"
+    for line, prefix in zip(arm1.lines[:2], ("/native", "/mujoco")):
+        np.testing.assert_array_equal(line.get_ydata(), log.topics[prefix + "/joint_state"]["angle"][:, 0])
+    wrapped_rev = log.topics["/native/joint_state"]["angle"][:, 3]
+    np.testing.assert_allclose(arm2.lines[0].get_ydata(), np.unwrap(wrapped_rev), rtol=0, atol=0)

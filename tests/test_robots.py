@@ -3,9 +3,10 @@
 Independent checks: each arm read from a URDF is compared with the same chain built by Pinocchio's own
 URDF parser (`independent.pinocchio_urdf`: buildModelFromUrdf, every joint off the chain locked by
 buildReducedModel): link and end-effector poses ≤ 1e-10, each arm's mass matrix and bias forces ≤ 1e-10
-relative (max |Δ| / max(1, max |reference|)), and for the bundled robot scenarios the closed-chain
-accelerations and grasp wrenches at 10 random consistent states (closed by Pinocchio-side Newton
-steps) ≤ 1e-9 relative (test_independent's checks). An MJCF file whose joints sit off their bodies'
+relative (max |Δ| / max(1, max |reference|)), and for the bundled robot scenarios and a pair of arms
+with a URDF prismatic joint (tests/data/robots/slide.urdf) the closed-chain accelerations and grasp
+wrenches at 10 random consistent states (closed by Pinocchio-side Newton steps) ≤ 1e-9 relative
+(test_independent's checks). An MJCF file whose joints sit off their bodies'
 origins reads the same as the URDF written with each link frame at its joint (≤ 1e-15). The bundled
 robot scenarios pass `coopsim validate`'s checks (their own thresholds) over their first 0.1 s. Every
 refused robot file or chain gets one line naming the scenario field and the element.
@@ -25,6 +26,7 @@ import yaml
 
 from coopsim import robots
 from coopsim.harness import cross_validate
+from coopsim.model import PRISMATIC, REVOLUTE
 from coopsim.robots import ROBOTS, read_chain, robot_file, robots_folder
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from conftest import ROOT, SCENARIOS, mutated
@@ -59,11 +61,17 @@ def test_bundled_scenario_against_pinocchio_urdf(robot_scenario):
     """Poses, arm dynamics and closed-chain accelerations and wrenches against Pinocchio's URDF parser."""
     model, S = load_scenario(robot_scenario), RobotScene(robot_scenario, bundled)
     assert S.n == model.n_total and S.normal is None and model.plane is None
+    assert_agrees_with_pinocchio(model, S, seed=11)
+
+
+def assert_agrees_with_pinocchio(model, S: RobotScene, seed: int):
+    """Poses and arm dynamics at the initial and 10 random states, closed-chain accelerations and
+    wrenches at 10 consistent states (seeds `seed`, `seed` + 1), within test_independent's tolerances."""
     report = Report(model.name)
-    open_states = [("initial", model.q0, model.qd0)] + random_states(S.n, 10, seed=11)
+    open_states = [("initial", model.q0, model.qd0)] + random_states(S.n, 10, seed=seed)
     check_poses(model, S, open_states, report)
     check_arm_dynamics(model, S, open_states, report)
-    check_chain(model, S, consistent_states(S, 10, seed=12), report)
+    check_chain(model, S, consistent_states(S, 10, seed=seed + 1), report)
     report.check()
     assert report.max("closed-chain accelerations (compiled)") <= 1e-9
 
@@ -158,6 +166,58 @@ def test_small_robot_against_pinocchio_urdf(tiny_dir):
     assert model.arms[0].link_mass.tolist() == pytest.approx([1.7, 1.4, 0.9], rel=0, abs=1e-15)
 
 
+SLIDE = {
+    "name": "slide_pair", "duration": 0.1,
+    "arms": [
+        {"name": "left", "file": "slide.urdf", "chain": {"base": "world", "tip": "tool"},
+         "initial": {"angles": [0.2, 0.1, 0.5, 0.1, 0.6, 0.0]}},
+        {"name": "right", "file": "slide.urdf", "chain": {"base": "world", "tip": "tool"},
+         "base": {"position": [0.9, 0.1, 0.0], "rpy_deg": [0, 0, 180]},
+         "end_effector": {"position": [0.0, 0.01, 0.02]}, "initial": {"angles": [-0.3, 0.05, 0.7, -0.2, 0.4, 0.1]}},
+    ],
+    "object": {"box": {"size": [0.2, 0.05, 0.05], "density": 500}, "grasps": "derive"},
+}
+
+
+def test_prismatic_joint_of_a_urdf_against_pinocchio(tmp_path):
+    """slide.urdf: a URDF prismatic joint on the chain (axis (0.6, 0, 0.8) behind an rpy origin, a turning
+    column before it, a fixed plate merged into its carriage) becomes a prismatic joint: poses, each
+    arm's mass matrix and bias forces (≤ 1e-10) and closed-chain accelerations at 10 consistent states
+    (≤ 1e-9 relative) as Pinocchio's buildModelFromUrdf reads the file (PrismaticUnaligned); its limits
+    come along in m, N and m/s; degrees and a position outside the range are refused naming it."""
+    shutil.copy(DATA / "slide.urdf", tmp_path / "slide.urdf")
+    path = _write(tmp_path, SLIDE)
+    model, S = load_scenario(path), RobotScene(path)
+    assert model.joint_type.tolist() == [REVOLUTE, PRISMATIC, REVOLUTE, REVOLUTE, REVOLUTE, REVOLUTE] * 2
+    assert [link.prismatic for arm in S.arms for link in arm.links] == [False, True, False, False, False, False] * 2
+    assert_agrees_with_pinocchio(model, S, seed=17)
+    assert model.joint_range[1].tolist() == [-0.1, 0.3]                        # m
+    assert model.motors.stall_torque[:6].tolist() == [80.0, 400.0, 40.0, 20.0, 12.0, 8.0]   # the lift's a force, N
+    assert model.motors.no_load_speed[:6].tolist() == [2.0, 0.6, 3.0, 4.0, 5.0, 6.0]        # the lift's m/s
+    for init, expected in (
+            ({"angles": [0.2, 0.4, 0.5, 0.1, 0.6, 0.0]},
+             "arms[0].initial.angles: joint 2 (lift) at 0.4 m is outside its range [-0.1, 0.3] m"),
+            ({"angles_deg": [10, 5, 30, 5, 30, 0]},
+             "arms[0].initial.angles_deg: joint 2 (lift) is prismatic (m): give angles in rad and m, not angles_deg")):
+        with pytest.raises(ScenarioError) as err:
+            model_from_dict(mutated(SLIDE, ["arms", 0, "initial"], init), where="s.yaml", base_dir=tmp_path)
+        assert str(err.value) == "s.yaml: " + expected
+
+
+def test_mjcf_slide_joint_is_prismatic(tmp_path):
+    """An MJCF `slide` joint on the chain is a prismatic joint too, its range (m) and actuatorfrcrange
+    (N) coming along."""
+    (tmp_path / "rail.xml").write_text(
+        '<mujoco><worldbody><body name="cart" pos="0 0 0.1"><joint name="rail" type="slide" axis="0 1 0" '
+        'range="-0.2 0.5" actuatorfrcrange="-300 250"/><inertial pos="0 0 0" mass="2" diaginertia="1 1 1"/>'
+        '<body name="arm"><joint name="hinge" axis="0 0 1"/><inertial pos="0.1 0 0" mass="1" diaginertia="1 1 1"/>'
+        '</body></body></worldbody></mujoco>')
+    chain = read_chain(tmp_path / "rail.xml", "world", "arm")
+    assert chain.links.joint_type.tolist() == [PRISMATIC, REVOLUTE] and chain.joint_names == ("rail", "hinge")
+    assert chain.joint_range.tolist() == [[-0.2, 0.5], [-np.inf, np.inf]] and chain.effort.tolist() == [250.0, np.inf]
+    assert chain.links.joint_axis[0].tolist() == [0.0, 1.0, 0.0]
+
+
 def test_motor_overrides(tiny_dir):
     data = mutated(TINY, ["arms", 0, "motors"], {"stall_torque": [5, 6, 7], "no_load_speed": [1, float("inf"), 2]})
     model = load_scenario(_write(tiny_dir, data))
@@ -187,6 +247,10 @@ TWO_JOINTS = """<mujoco><worldbody><body name="b"><joint name="h1" axis="0 0 1"/
 <inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
 REF = """<mujoco><compiler angle="radian"/><worldbody><body name="b"><joint name="h" axis="0 0 1" ref="0.3"/>
 <inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
+BALL = """<mujoco><worldbody><body name="b"><joint name="knuckle" type="ball"/>
+<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
+SLIDE_REF = """<mujoco><worldbody><body name="b"><joint name="s" type="slide" axis="1 0 0" ref="0.05"/>
+<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
 
 REFUSED = [
     # (what is changed in arm 0, extra file, the error's end)
@@ -204,9 +268,9 @@ REFUSED = [
     ({"chain": {"base": "world", "tip": "tool"}}, None,
      "arms[0].file: the chain branches at link 'flange': joint 'finger_joint' (link 'finger') of tiny.urdf moves a "
      "branch off the chain (lock it, or choose a tip past it)"),
-    ({"chain": {"base": "world", "tip": "finger"}}, None,
-     "arms[0].file: joint 'finger_joint' (link 'finger') of tiny.urdf is prismatic (slide): an arm from a robot file "
-     "takes revolute joints only (lock it to hold it fixed)"),
+    ({"file": "ball.xml", "chain": {"base": "world", "tip": "b"}}, ("ball.xml", BALL),
+     "arms[0].file: joint 'knuckle' (link 'b') of ball.xml is ball: an arm from a robot file takes revolute and "
+     "prismatic joints only (lock it to hold it fixed)"),
     ({"chain": {"base": "world", "tip": "tool", "lock": ["finger_joint", "nojoint"]}}, None,
      "arms[0].chain.lock: locked joint 'nojoint' is not in tiny.urdf (joints: j1, j2, j3, finger_joint, ghost_joint)"),
     ({"chain": {"base": "base_link", "tip": "ghost"}, "initial": {"angles": [0.0]}}, None,
@@ -218,11 +282,13 @@ REFUSED = [
      "arms[0].initial.angles: joint 1 (j1) at 2.6 rad is outside its range [-2, 2.5] rad"),
     ({"file": "floating.urdf", "chain": {"base": "world", "tip": "arm"}}, ("floating.urdf", FLOATING),
      "arms[0].file: joint 'float' (link 'body') of floating.urdf is free (floating): an arm from a robot file takes "
-     "revolute joints only (lock it to hold it fixed)"),
+     "revolute and prismatic joints only (lock it to hold it fixed)"),
     ({"file": "two.xml", "chain": {"base": "world", "tip": "b"}}, ("two.xml", TWO_JOINTS),
      "arms[0].file: link 'b' of two.xml has 2 joints ('h1', 'h2'): an arm takes one joint per link"),
     ({"file": "ref.xml", "chain": {"base": "world", "tip": "b"}}, ("ref.xml", REF),
      "arms[0].file: joint 'h' of ref.xml has a reference angle (ref) of 0.3 rad: only 0 is supported"),
+    ({"file": "slide_ref.xml", "chain": {"base": "world", "tip": "b"}}, ("slide_ref.xml", SLIDE_REF),
+     "arms[0].file: joint 's' of slide_ref.xml has a reference position (ref) of 0.05 m: only 0 is supported"),
     ({"file": "broken.urdf"}, ("broken.urdf", "<robot name='x'><link name='a'>"), "arms[0].file: MuJoCo cannot read broken.urdf: "),
     ({"file": "missing.urdf"}, None, "arms[0].file: file not found: "),
     ({"chain": None}, None, "arms[0].chain: missing required field"),

@@ -251,12 +251,16 @@ class PinocchioSystem:
                                       self.constraint_data, self.settings).copy()
 
 
-def _joint_model(pin, axis: np.ndarray):
-    """JointModelRX/RY/RZ where the axis is +x, +y or +z exactly, else RevoluteUnaligned(axis)."""
-    for k, jm in enumerate((pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ)):
+def _joint_model(pin, axis: np.ndarray, prismatic: bool = False):
+    """JointModelRX/RY/RZ (PX/PY/PZ for a prismatic joint) where the axis is +x, +y or +z exactly, else
+    RevoluteUnaligned(axis) (PrismaticUnaligned)."""
+    aligned = (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ) if prismatic else \
+        (pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ)
+    for k, jm in enumerate(aligned):
         if np.array_equal(axis, np.eye(3)[k]):
             return jm()
-    return pin.JointModelRevoluteUnaligned(np.asarray(axis, dtype=float))
+    unaligned = pin.JointModelPrismaticUnaligned if prismatic else pin.JointModelRevoluteUnaligned
+    return unaligned(np.asarray(axis, dtype=float))
 
 
 def _add_arm(pin, pm, arm, m: int) -> int:
@@ -267,7 +271,7 @@ def _add_arm(pin, pm, arm, m: int) -> int:
         R, p = arm.joint_rot[i], arm.joint_pos[i]
         if i == 0:
             R, p = arm.base_rot @ R, arm.base_pos + arm.base_rot @ p
-        parent = pm.addJoint(parent, _joint_model(pin, arm.joint_axis[i]), pin.SE3(R, p), f"a{m}_j{i}")
+        parent = pm.addJoint(parent, _joint_model(pin, arm.joint_axis[i], bool(arm.prismatic[i])), pin.SE3(R, p), f"a{m}_j{i}")
         inertia = pin.Inertia(float(arm.link_mass[i]), np.asarray(arm.link_com[i], float), arm.link_inertia[i])
         pm.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
     return parent

@@ -10,6 +10,10 @@ into the buffers of a `Workspace` (world axes, SI). Two algorithmic differences,
     I_m[j, l] = z_j · (n − p_j × f) for j ≤ l — the same entries ∂²S/∂θ̈_j∂θ̈_l;
   * 𝐈 is block diagonal (one block per arm, the object in the carrier's), factored block by block,
     and Λ𝐈⁻¹Λᵀ is formed as YᵀY with Y = L⁻¹Λᵀ (`chain_solve`).
+Joints are revolute or prismatic (P.joint_type, the joint model of `coopsim.joints`): each kernel
+below branches on the type where a prismatic joint differs — its frame slides θ z along its axis
+instead of turning, its Jacobian column is [z; 0], its link motion gains z θ̈ + 2ω × z θ̇ in place of
+an angular term, its bias and mass-matrix rows are z · (force) instead of z · (moment).
 As in the reference, every lever arm is formed from positions relative to the arm's base point
 (W.p_rel, W.c_rel, W.p_ee_rel), never from world positions (W.p, W.c, W.p_ee, W.p_C are outputs).
 Return codes of `chain_forward`: OK, NOT_PD (a mass-matrix block is not positive definite),
@@ -22,6 +26,7 @@ import numpy as np
 from .jit import kernel
 
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from ..model import PRISMATIC
 from .packing import STAB_BAUMGARTE
 from .spatial import rot_log
 from .structs import borrow
@@ -40,8 +45,9 @@ def arm_kinematics(P, W, m, q):
     Rot(a, θ) = 1 + sinθ [a×] + (1 − cosθ)[a×]², R0_i Rot(a_i, θ_i) = R0_i + sinθ K1_i + (1 − cosθ) K2_i
     (K1 = R0[a×], K2 = R0[a×]² packed), z_i = R_i a_i = R_{i−1} (R0_i a_i) (Rot(a, θ) a = a), and
     I_i = R_i I_link R_iᵀ formed as a symmetric matrix. The parent frame is carried in scalars. Positions
-    are accumulated from the base point (W.p_rel, c_rel, p_ee_rel); the world ones add base_pos."""
-    dof = P.dof
+    are accumulated from the base point (W.p_rel, c_rel, p_ee_rel); the world ones add base_pos.
+    A prismatic joint keeps R_i = R_{i−1} R0_i and moves p_i by θ_i z_i (θ_i in m)."""
+    dof, jt = P.dof, P.joint_type
     bp, br, jp, jr, k1, k2, jz = P.base_pos, P.base_rot, P.joint_pos, P.joint_rot, P.joint_k1, P.joint_k2, P.joint_z
     lc, li, eep, eer = P.link_com, P.link_inertia, P.ee_pos, P.ee_rot
     p, R, z, cw, Iw, p_ee, R_ee = W.p, W.R, W.z, W.c, W.I, W.p_ee, W.R_ee
@@ -57,11 +63,16 @@ def arm_kinematics(P, W, m, q):
         x0, x1, x2 = (x0 + a00 * d0 + a01 * d1 + a02 * d2, x1 + a10 * d0 + a11 * d1 + a12 * d2,
                       x2 + a20 * d0 + a21 * d1 + a22 * d2)
         u0, u1, u2 = jz[j, 0], jz[j, 1], jz[j, 2]
-        z[j, 0] = a00 * u0 + a01 * u1 + a02 * u2
-        z[j, 1] = a10 * u0 + a11 * u1 + a12 * u2
-        z[j, 2] = a20 * u0 + a21 * u1 + a22 * u2
+        zz0 = a00 * u0 + a01 * u1 + a02 * u2
+        zz1 = a10 * u0 + a11 * u1 + a12 * u2
+        zz2 = a20 * u0 + a21 * u1 + a22 * u2
+        z[j, 0], z[j, 1], z[j, 2] = zz0, zz1, zz2
         th = q[j]
-        sn, cs = np.sin(th), 1.0 - np.cos(th)
+        if jt[j] == PRISMATIC:
+            sn = cs = 0.0
+            x0, x1, x2 = x0 + th * zz0, x1 + th * zz1, x2 + th * zz2
+        else:
+            sn, cs = np.sin(th), 1.0 - np.cos(th)
         t00 = jr[j, 0, 0] + sn * k1[j, 0, 0] + cs * k2[j, 0, 0]
         t01 = jr[j, 0, 1] + sn * k1[j, 0, 1] + cs * k2[j, 0, 1]
         t02 = jr[j, 0, 2] + sn * k1[j, 0, 2] + cs * k2[j, 0, 2]
@@ -128,16 +139,20 @@ def arm_kinematics(P, W, m, q):
 
 @kernel
 def arm_jacobian(P, W, m):
-    """End-effector Jacobian J_m (6, n_m): columns [z_j × (p_EE − p_j); z_j] (world axes; positions
-    relative to the base point)."""
-    dof = P.dof
+    """End-effector Jacobian J_m (6, n_m): columns [z_j × (p_EE − p_j); z_j] (revolute) or [z_j; 0]
+    (prismatic) (world axes; positions relative to the base point)."""
+    dof, jt = P.dof, P.joint_type
     p, z, p_ee, J = W.p_rel, W.z, W.p_ee_rel, W.J
     o, e = dof[m], dof[m + 1]
     e0, e1, e2 = p_ee[m, 0], p_ee[m, 1], p_ee[m, 2]
     for j in range(o, e):
         z0, z1, z2 = z[j, 0], z[j, 1], z[j, 2]
-        d0, d1, d2 = e0 - p[j, 0], e1 - p[j, 1], e2 - p[j, 2]
         col = j - o
+        if jt[j] == PRISMATIC:
+            J[m, 0, col], J[m, 1, col], J[m, 2, col] = z0, z1, z2
+            J[m, 3, col], J[m, 4, col], J[m, 5, col] = 0.0, 0.0, 0.0
+            continue
+        d0, d1, d2 = e0 - p[j, 0], e1 - p[j, 1], e2 - p[j, 2]
         J[m, 0, col] = z1 * d2 - z2 * d1
         J[m, 1, col] = z2 * d0 - z0 * d2
         J[m, 2, col] = z0 * d1 - z1 * d0
@@ -156,8 +171,9 @@ def arm_bias(P, W, m, qd):
     with base acceleration −g (eq. 9) and the backward recursion of ∂S/∂θ̈ (`gibbs_gradient_of_motion`):
     ω_i = ω_{i−1} + z_i θ̇_i, ω̇_i = ω̇_{i−1} + ω_{i−1} × z_i θ̇_i, a_{i+1} = a_i + ω̇_i × d + ω_i × (ω_i × d);
     F_j = m_j a_cj + F_{j+1}, N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1}
-    + (p_{j+1} − p_j) × F_{j+1}, h_j = z_j · N_j."""
-    dof, g, lm = P.dof, P.gravity, P.link_mass
+    + (p_{j+1} − p_j) × F_{j+1}, h_j = z_j · N_j. A prismatic joint j leaves ω, ω̇ and adds
+    2 ω_{j−1} × z_j θ̇_j to a_j (`coopsim.kinematics.link_motion`); its h_j = z_j · F_j."""
+    dof, g, lm, jt = P.dof, P.gravity, P.link_mass, P.joint_type
     p, z, cw, Iw, Ww, DW, Aw = W.p_rel, W.z, W.c_rel, W.I, W.w, W.dw, W.a
     h, h_arm, Jd_qd, p_ee = W.h, W.h_arm, W.Jd_qd, W.p_ee_rel
     o, e = dof[m], dof[m + 1]
@@ -177,12 +193,17 @@ def arm_bias(P, W, m, qd):
             a2 += dw0 * d1 - dw1 * d0 + w0 * x1 - w1 * x0
         t = qd[j]
         zq0, zq1, zq2 = z[j, 0] * t, z[j, 1] * t, z[j, 2] * t
-        dw0 += w1 * zq2 - w2 * zq1
-        dw1 += w2 * zq0 - w0 * zq2
-        dw2 += w0 * zq1 - w1 * zq0
-        w0 += zq0
-        w1 += zq1
-        w2 += zq2
+        if jt[j] == PRISMATIC:
+            a0 += 2.0 * (w1 * zq2 - w2 * zq1)
+            a1 += 2.0 * (w2 * zq0 - w0 * zq2)
+            a2 += 2.0 * (w0 * zq1 - w1 * zq0)
+        else:
+            dw0 += w1 * zq2 - w2 * zq1
+            dw1 += w2 * zq0 - w0 * zq2
+            dw2 += w0 * zq1 - w1 * zq0
+            w0 += zq0
+            w1 += zq1
+            w2 += zq2
         Ww[j, 0], Ww[j, 1], Ww[j, 2] = w0, w1, w2
         DW[j, 0], DW[j, 1], DW[j, 2] = dw0, dw1, dw2
         Aw[j, 0], Aw[j, 1], Aw[j, 2] = a0, a1, a2
@@ -224,7 +245,10 @@ def arm_bias(P, W, m, qd):
         F0 += ma0
         F1 += ma1
         F2 += ma2
-        hj = z[j, 0] * N0 + z[j, 1] * N1 + z[j, 2] * N2
+        if jt[j] == PRISMATIC:
+            hj = z[j, 0] * F0 + z[j, 1] * F1 + z[j, 2] * F2
+        else:
+            hj = z[j, 0] * N0 + z[j, 1] * N1 + z[j, 2] * N2
         h_arm[j] = hj
         h[j] = hj
 
@@ -232,8 +256,10 @@ def arm_bias(P, W, m, qd):
 @kernel
 def arm_mass_matrix(P, W, m):
     """I_m (n_m, n_m) of arm m by the composite-rigid-body recursion (module docstring), positions
-    taken relative to the arm's base point, into W.Mb rows dof[m]:dof[m+1]."""
-    dof, lm = P.dof, P.link_mass
+    taken relative to the arm's base point, into W.Mb rows dof[m]:dof[m+1]. A unit θ̈_l of a prismatic
+    joint l moves the composite C_l by z_l: force f = m_C z_l, moment (base point) n = h_C × z_l; a
+    prismatic row j takes I_m[j, l] = z_j · f."""
+    dof, lm, jt = P.dof, P.link_mass, P.joint_type
     cw, Iw, z, p, Mb = W.c_rel, W.I, W.z, W.p_rel, W.Mb
     o, e = dof[m], dof[m + 1]
     mc = 0.0
@@ -255,18 +281,25 @@ def arm_mass_matrix(P, W, m):
         hc2 += mi * c2
         z0, z1, z2 = z[l, 0], z[l, 1], z[l, 2]
         p0, p1, p2 = p[l, 0], p[l, 1], p[l, 2]
-        u0, u1, u2 = hc0 - mc * p0, hc1 - mc * p1, hc2 - mc * p2
-        f0, f1, f2 = z1 * u2 - z2 * u1, z2 * u0 - z0 * u2, z0 * u1 - z1 * u0
-        v0, v1, v2 = z1 * p2 - z2 * p1, z2 * p0 - z0 * p2, z0 * p1 - z1 * p0
-        n0 = c00 * z0 + c01 * z1 + c02 * z2 - (hc1 * v2 - hc2 * v1)
-        n1 = c01 * z0 + c11 * z1 + c12 * z2 - (hc2 * v0 - hc0 * v2)
-        n2 = c02 * z0 + c12 * z1 + c22 * z2 - (hc0 * v1 - hc1 * v0)
+        if jt[l] == PRISMATIC:
+            f0, f1, f2 = mc * z0, mc * z1, mc * z2
+            n0, n1, n2 = hc1 * z2 - hc2 * z1, hc2 * z0 - hc0 * z2, hc0 * z1 - hc1 * z0
+        else:
+            u0, u1, u2 = hc0 - mc * p0, hc1 - mc * p1, hc2 - mc * p2
+            f0, f1, f2 = z1 * u2 - z2 * u1, z2 * u0 - z0 * u2, z0 * u1 - z1 * u0
+            v0, v1, v2 = z1 * p2 - z2 * p1, z2 * p0 - z0 * p2, z0 * p1 - z1 * p0
+            n0 = c00 * z0 + c01 * z1 + c02 * z2 - (hc1 * v2 - hc2 * v1)
+            n1 = c01 * z0 + c11 * z1 + c12 * z2 - (hc2 * v0 - hc0 * v2)
+            n2 = c02 * z0 + c12 * z1 + c22 * z2 - (hc0 * v1 - hc1 * v0)
         for j in range(o, l + 1):
-            q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
-            m0 = n0 - (q1 * f2 - q2 * f1)
-            m1 = n1 - (q2 * f0 - q0 * f2)
-            m2 = n2 - (q0 * f1 - q1 * f0)
-            v = z[j, 0] * m0 + z[j, 1] * m1 + z[j, 2] * m2
+            if jt[j] == PRISMATIC:
+                v = z[j, 0] * f0 + z[j, 1] * f1 + z[j, 2] * f2
+            else:
+                q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
+                m0 = n0 - (q1 * f2 - q2 * f1)
+                m1 = n1 - (q2 * f0 - q0 * f2)
+                m2 = n2 - (q0 * f1 - q1 * f0)
+                v = z[j, 0] * m0 + z[j, 1] * m1 + z[j, 2] * m2
             Mb[j, l - o] = v
             Mb[l, j - o] = v
 

@@ -24,7 +24,9 @@ class PackedModel(NamedTuple):
     dof (r+1,) int: arm m's joints are dof[m]:dof[m+1]; base_pos (r, 3), base_rot (r, 3, 3) world←base;
     joint_pos (N, 3) in the parent frame; joint_rot (N, 3, 3) parent←joint frame at θ = 0;
     joint_axis (N, 3) unit, joint frame; joint_k1, joint_k2 (N, 3, 3) R0[a×] and R0[a×]² (so that
-    R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2), joint_z (N, 3) R0 a (parent frame); link_mass (N,) kg; link_com (N, 3) link frame;
+    R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2), joint_z (N, 3) R0 a (parent frame); joint_type (N,)
+    int: REVOLUTE or PRISMATIC (`coopsim.model`; a prismatic joint slides its frame θ m along a, and
+    its rows of the kernels are a force, N); link_mass (N,) kg; link_com (N, 3) link frame;
     link_inertia (N, 3, 3) about the centre of mass, link axes; ee_pos (r, 3), ee_rot (r, 3, 3)
     end-effector frame in the last link frame; obj_mass kg; obj_inertia (3, 3) about C, object axes;
     grasp_pos (r, 3), grasp_rot (r, 3, 3) EE frame m in the object frame; carrier: arm index;
@@ -43,6 +45,7 @@ class PackedModel(NamedTuple):
     joint_k1: np.ndarray
     joint_k2: np.ndarray
     joint_z: np.ndarray
+    joint_type: np.ndarray
     link_mass: np.ndarray
     link_com: np.ndarray
     link_inertia: np.ndarray
@@ -179,6 +182,7 @@ def pack(model: Model) -> PackedModel:
     return PackedModel(
         dof, stack("base_pos"), stack("base_rot"), cat("joint_pos"), R0, a,
         _f(K1), _f(K1 @ ax), _f(np.einsum("nij,nj->ni", R0, a)),
+        np.ascontiguousarray(model.joint_type, dtype=np.int64),
         cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
         float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
         _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],

@@ -107,6 +107,7 @@ PACKED_FIELDS = (
     ("joint_k1", _f3),
     ("joint_k2", _f3),
     ("joint_z", _f2),
+    ("joint_type", _i1),
     ("link_mass", _f1),
     ("link_com", _f2),
     ("link_inertia", _f3),
@@ -234,6 +235,7 @@ def _new_packed(r):
     s.joint_k1 = r.joint_k1
     s.joint_k2 = r.joint_k2
     s.joint_z = r.joint_z
+    s.joint_type = r.joint_type
     s.link_mass = r.link_mass
     s.link_com = r.link_com
     s.link_inertia = r.link_inertia

@@ -21,8 +21,9 @@ cheap to build, so that a test can prove the comparison notices it):
 - `cross_section` [a, b] = the box's sizes along local y and z; a `box` `size` is along x, y, z;
 - a link frame is the previous link frame (the base frame for the first joint) moved by the joint's
   `position`, turned by its `rpy`/`quat`, then by θ about `axis` (given in that turned frame,
-  normalised, default +z); the joint position default for the first joint (no previous box) and after an
-  `inertial` link is the frame origin;
+  normalised, default +z) — or, for a joint of `type: prismatic`, slid θ (m) along that axis; the joint
+  position default for the first joint (no previous box) and after an `inertial` link is the frame
+  origin;
 - a link box's centre of mass is at (length/2, 0, 0), inertia that of a solid box; an `inertial`
   block's `com` is in the link frame (default 0) and its `inertia` is about the centre of mass in
   link axes, a 3×3 matrix or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz];
@@ -135,6 +136,7 @@ class _Link:
     placement: pin.SE3        # joint frame at θ = 0 in the previous link frame
     axis: np.ndarray          # unit, joint frame
     inertia: pin.Inertia      # link frame (= joint frame)
+    prismatic: bool = False   # joint `type: prismatic` (slides along axis), else revolute
 
 
 @dataclass
@@ -186,7 +188,8 @@ def _read_arm(arm: dict, index: int, folder: Path, conv: Conventions) -> ArmSpec
             inertia = pin.Inertia(float(block["mass"]), np.asarray(block.get("com", [0.0, 0.0, 0.0]), dtype=float),
                                   _inertia_matrix(block["inertia"]))
             prev_length = 0.0
-        links.append(_Link(pin.SE3(_rotation(joint, conv), position), axis / np.linalg.norm(axis), inertia))
+        links.append(_Link(pin.SE3(_rotation(joint, conv), position), axis / np.linalg.norm(axis), inertia,
+                           joint.get("type", "revolute") == "prismatic"))
     ee = dict(arm.get("end_effector") or {})
     ee.setdefault("position", [prev_length, 0.0, 0.0])
     n = len(links)
@@ -195,11 +198,15 @@ def _read_arm(arm: dict, index: int, folder: Path, conv: Conventions) -> ArmSpec
                    _angles(init, "angles"), _angles(init, "rates", np.zeros(n)), _torque_table(arm, n, folder))
 
 
-def _joint_model(axis: np.ndarray):
-    for k, jm in enumerate((pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ)):
-        if np.array_equal(axis, np.eye(3)[k]):
+def _joint_model(link: _Link):
+    """Pinocchio's revolute (RX/RY/RZ, RevoluteUnaligned) or prismatic (PX/PY/PZ, PrismaticUnaligned)
+    joint about/along the link's axis."""
+    aligned = (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ) if link.prismatic else \
+        (pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ)
+    for k, jm in enumerate(aligned):
+        if np.array_equal(link.axis, np.eye(3)[k]):
             return jm()
-    return pin.JointModelRevoluteUnaligned(axis)
+    return (pin.JointModelPrismaticUnaligned if link.prismatic else pin.JointModelRevoluteUnaligned)(link.axis)
 
 
 def _add_arms(pm: pin.Model, arms: list[ArmSpec]) -> list[list[int]]:
@@ -210,7 +217,7 @@ def _add_arms(pm: pin.Model, arms: list[ArmSpec]) -> list[list[int]]:
         parent, own = 0, []
         for i, link in enumerate(arm.links):
             placement = arm.base * link.placement if i == 0 else link.placement
-            parent = pm.addJoint(parent, _joint_model(link.axis), placement, f"{arm.name}_j{i}")
+            parent = pm.addJoint(parent, _joint_model(link), placement, f"{arm.name}_j{i}")
             pm.appendBodyToJoint(parent, link.inertia, pin.SE3.Identity())
             own.append(parent)
         pm.addFrame(pin.Frame(f"{arm.name}_ee", parent, arm.ee, pin.FrameType.OP_FRAME))
@@ -311,15 +318,19 @@ class PinocchioScene:
         return order[0], grasps
 
     def _plane_normal(self) -> np.ndarray | None:
-        """The common direction of every joint axis (world) at the initial angles if they are all
-        parallel (a planar scene; rotations about parallel axes keep them so), else None."""
+        """The common direction of every revolute joint axis (world) at the initial angles if they are
+        all parallel and every prismatic axis is perpendicular to it (a planar scene; rotations about
+        parallel axes and slides keep them so), else None."""
         pin.forwardKinematics(self.open, self.open_data, self.q0)
-        axes = []
+        turn, slide = [], []
         for arm, ids in zip(self.arms, self.joint_ids):
             for link, j in zip(arm.links, ids):
-                axes.append(self.open_data.oMi[j].rotation @ link.axis)
-        nrm = axes[0]
-        return nrm if all(np.linalg.norm(np.cross(a, nrm)) < 1e-12 for a in axes) else None
+                (slide if link.prismatic else turn).append(self.open_data.oMi[j].rotation @ link.axis)
+        if not turn:
+            return None
+        nrm = turn[0]
+        planar = all(np.linalg.norm(np.cross(a, nrm)) < 1e-12 for a in turn) and all(abs(a @ nrm) < 1e-12 for a in slide)
+        return nrm if planar else None
 
     # ---------------------------------------------------------------- open arms
     def link_poses(self, q) -> list[list[pin.SE3]]:

@@ -10,7 +10,8 @@ link's frame placed at the scenario's base pose; its end-effector the tip link's
 scenario's `end_effector`. Nothing here imports coopsim: a bundled robot's file and default chain
 come from the `robots` callable the test passes in (name -> (file, base, tip, lock)).
 
-What the README states and this follows: a robot arm's joints, frames and inertials come from the file;
+What the README states and this follows: a robot arm's joints, frames and inertials come from the file
+(a URDF prismatic joint is a prismatic joint of the arm);
 fixed joints are merged into their parent link; `chain` {base, tip, lock} names the chain, defaulting
 to the bundled robot's; `base` places the base link's frame in the world; `end_effector` is given in
 the tip link's frame (default: that frame).
@@ -27,10 +28,15 @@ import pinocchio as pin
 from .pinocchio_scene import README, ArmSpec, Conventions, PinocchioScene, _Link, _angles, _pose, _torque_table
 
 
+PRISMATIC_JOINTS = ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")   # URDF prismatic
+
+
 def urdf_chain(path: Path, base: str, tip: str, lock=()) -> tuple[list[_Link], pin.SE3, pin.SE3]:
     """(links, X_root_base, X_last_tip): the chain from link `base` to link `tip` of a URDF as links
     (joint placement in the previous joint's frame, the first in the URDF's root frame; unit axis;
-    inertia), the base link's frame in the root frame and the tip link's frame in the last joint's."""
+    inertia; prismatic for a URDF prismatic joint, whose axis is the linear part of Pinocchio's motion
+    subspace, else revolute), the base link's frame in the root frame and the tip link's frame in the
+    last joint's."""
     full = pin.buildModelFromUrdf(str(path))
     tip_frame = full.frames[full.getFrameId(tip, pin.FrameType.BODY)]
     base_frame = full.frames[full.getFrameId(base, pin.FrameType.BODY)]
@@ -43,12 +49,16 @@ def urdf_chain(path: Path, base: str, tip: str, lock=()) -> tuple[list[_Link], p
     links = []
     for j in range(1, model.njoints):
         jm = model.joints[j]
-        if jm.nv != 1 or not jm.shortname().startswith("JointModelR"):    # RX, RUBX, RevoluteUnaligned, ...
-            raise RuntimeError(f"{path.name}: joint {model.names[j]} is {jm.shortname()}, not a revolute joint")
+        kind = jm.shortname()
+        prismatic = kind in PRISMATIC_JOINTS
+        if jm.nv != 1 or not (prismatic or kind.startswith("JointModelR")):   # RX, RUBX, RevoluteUnaligned, ...
+            raise RuntimeError(f"{path.name}: joint {model.names[j]} is {kind}, not a revolute or prismatic joint")
         jd = jm.createData()
         jm.calc(jd, pin.neutral(model)[jm.idx_q:jm.idx_q + jm.nq])     # a continuous joint: nq = 2 (cos, sin)
-        axis = np.asarray(jd.S).reshape(6, -1)[3:, 0]
-        links.append(_Link(model.jointPlacements[j].copy(), axis / np.linalg.norm(axis), model.inertias[j].copy()))
+        S = np.asarray(jd.S).reshape(6, -1)[:, 0]                       # [v; ω] per unit rate, joint frame
+        axis = S[:3] if prismatic else S[3:]
+        links.append(_Link(model.jointPlacements[j].copy(), axis / np.linalg.norm(axis), model.inertias[j].copy(),
+                           prismatic))
     if [model.names[j] for j in range(1, model.njoints)] != [full.names[j] for j in chain]:
         raise RuntimeError(f"{path.name}: the reduced model's joints are not the chain's")
     X_root_base = data.oMf[model.getFrameId(base, pin.FrameType.BODY)].copy()
