@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .model import ArmModel
-from .spatial import axis_angle_to_rot, cross, rigid_acceleration
+from .spatial import axis_angle_rotations, cross, rigid_acceleration
 
 
 class ArmPose(NamedTuple):
@@ -57,10 +57,11 @@ def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
     n = arm.n
     p = np.empty((n, 3))
     R = np.empty((n, 3, 3))
+    turn = axis_angle_rotations(arm.joint_axis, np.asarray(q, dtype=float))
     p_prev, R_prev = np.zeros(3), arm.base_rot
     for i in range(n):
         p[i] = p_prev + R_prev @ arm.joint_pos[i]
-        R[i] = R_prev @ arm.joint_rot[i] @ axis_angle_to_rot(arm.joint_axis[i], q[i])
+        R[i] = R_prev @ arm.joint_rot[i] @ turn[i]
         p_prev, R_prev = p[i], R[i]
     z = np.einsum("nij,nj->ni", R, arm.joint_axis)
     c = p + np.einsum("nij,nj->ni", R, arm.link_com)
@@ -102,6 +103,21 @@ def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
     base point (pose.origin): columns [z_j × (P − p_j); z_j]."""
     Jv = cross(pose.z, point - pose.p_rel).T
     return np.vstack([Jv, pose.z.T])
+
+
+def point_jacobian_rate(pose: ArmPose, point: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Time derivative J̇ (6, n) of `point_jacobian` at rates qd (n,) rad/s (P fixed in the last link,
+    relative to the base point): columns [ż_j × (P − p_j) + z_j × (v_P − v_j); ż_j] with ż_j = ω_{j−1} × z_j,
+    v_P = J_v θ̇ and v_j the velocity of joint origin j (fixed in link j−1): v_0 = 0,
+    v_j = v_{j−1} + ω_{j−1} × (p_j − p_{j−1}). J̇ θ̇ is `ee_bias_acceleration` for P = p_EE."""
+    z, p = pose.z, pose.p_rel
+    w = np.cumsum(z * qd[:, None], axis=0)
+    w_prev = np.vstack([np.zeros(3), w[:-1]])
+    v_joint = np.vstack([np.zeros(3), np.cumsum(cross(w_prev[1:], p[1:] - p[:-1]), axis=0)])
+    dz = cross(w_prev, z)
+    v_point = point_jacobian(pose, point)[:3] @ qd
+    dJv = cross(dz, point - p) + cross(z, v_point - v_joint)
+    return np.vstack([dJv.T, dz.T])
 
 
 def ee_jacobian(pose: ArmPose) -> np.ndarray:

@@ -180,7 +180,9 @@ class ObjectMotion:
     rotation with the time law `time_law` ('quintic': s = 10u³ − 15u⁴ + 6u⁵, zero rate and
     acceleration at both ends; 'cubic': s = 3u² − 2u³, zero rate only); sampled every output_dt s.
     initial_guess (n_total,) rad: joint angles that pick the inverse-kinematics branch at the first
-    waypoint (None: the scenario's initial angles)."""
+    waypoint (None: the scenario's initial angles). Arms with more joints than constraint rows
+    (redundant) move by least joint-velocity norm plus a null-space pull toward rest_posture (n_total,)
+    rad (None: the scenario's initial angles) with gain rest_gain 1/s (`coopsim.trajectory.redundant_rates`)."""
 
     times: np.ndarray
     positions: np.ndarray
@@ -188,6 +190,8 @@ class ObjectMotion:
     time_law: str = "quintic"
     output_dt: float = 1e-2
     initial_guess: np.ndarray | None = None
+    rest_posture: np.ndarray | None = None
+    rest_gain: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)

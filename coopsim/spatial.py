@@ -21,6 +21,14 @@ def axis_angle_to_rot(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
+def axis_angle_rotations(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """`axis_angle_to_rot` of n unit axes (n, 3) and angles (n,) at once: (n, 3, 3), the same numbers."""
+    K = np.zeros((len(axes), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axes[:, 2], -axes[:, 1], axes[:, 0]
+    return np.eye(3) + np.sin(angles)[:, None, None] * K + (1.0 - np.cos(angles))[:, None, None] * (K @ K)
+
+
 def rpy_to_rot(rpy: np.ndarray) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll) for rpy = (roll, pitch, yaw) in rad."""
     r, p, y = rpy
