@@ -220,7 +220,8 @@ class Model:
     spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
     state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
     limit of each stacked joint, rad (±inf: none; None: no joint has one), from a robot file or a
-    joint's `range`: checked at the initial state, not enforced by the dynamics."""
+    joint's `range`: checked at the initial state and along trajectories (object-motion IK stops, a
+    forward run warns), not enforced by the dynamics."""
 
     name: str
     arms: tuple[ArmModel, ...]

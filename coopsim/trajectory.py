@@ -7,7 +7,9 @@ Two sources (issue #4, paper sec. 3.2):
     law, turned into joint motions of every arm by closed-chain inverse kinematics. θ comes from
     Newton's method on the loop-closure rows, θ̇ and θ̈ from the differential kinematics
     S J_m θ̇_m = S v_EE,m and S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m) (the same rows S as the forward model),
-    so the three are consistent (no finite differences).
+    so the three are consistent (no finite differences). Arms with more joints than rows (redundant) are
+    resolved by least joint-velocity norm plus a null-space pull toward a rest posture, θ̈ its exact
+    derivative (`redundant_rates`, `redundant_motion`); joint limits are checked on the result.
 
 Between samples a trajectory is the quintic Hermite interpolant of (θ, θ̇, θ̈) at the two ends
 (`trajectory_at`): C², exact at the samples, error O(h⁶) in between. Twists [v; ω] and accelerations
@@ -27,7 +29,8 @@ from .spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 
 class TrajectoryError(CoopsimError):
-    """A prescribed motion cannot be turned into joint motions (out of reach, singular, redundant)."""
+    """A prescribed motion cannot be turned into joint motions (out of reach, singular, too few joints,
+    out of a joint's range)."""
 
 
 class SingularJacobian(ConstraintError):
@@ -311,8 +314,8 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
         p_C, R_o, tw, ac = object_motion_at(motion, t, origin)
         return grasp_targets(model, p_C, R_o, tw, ac, origin), origin + p_C
 
-    def rates(t, y, acc=False):
-        (tg, p_C), out = targets(t), []
+    def rates(t, y, tg, acc=False):
+        out = []
         for m, sl in zip(arms, slices):
             y_m = y[sl]
             rd, rdd, A = redundant_rates(model.arms[m], S, y_m, tg[m][2], tg[m][3] if acc else None,
@@ -329,23 +332,23 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
         (tg, p_C), y = targets(t), y.copy()
         for m, sl in zip(arms, slices):
             y[sl] = _redundant_ik(model, m, tg[m][0], tg[m][1], y[sl], t, p_C, plane_tol)
-        return y
+        return y, tg
 
     def rhs(t, x):
-        return np.concatenate([rd for rd, _ in rates(t, _stacked(model.n_total, slices, x))])
+        return np.concatenate([rd for rd, _ in rates(t, _stacked(model.n_total, slices, x), targets(t)[0])])
 
-    y = on_grasp(t_out[0], guess)
-    for ta, tb in zip(motion.times[:-1], motion.times[1:]):
-        inside = (t_out >= ta) & (t_out <= tb)
+    y = on_grasp(t_out[0], guess)[0]
+    last = len(motion.times) - 2
+    for k, (ta, tb) in enumerate(zip(motion.times[:-1], motion.times[1:])):
+        inside = (t_out >= ta) & ((t_out < tb) | (k == last))      # a waypoint's sample: in the segment it starts
         x0 = np.concatenate([y[sl] for sl in slices])
         sol = solve_ivp(rhs, (ta, tb), x0, method="DOP853", rtol=REDUNDANT_RTOL, atol=REDUNDANT_ATOL,
                         dense_output=True)
         for i in np.flatnonzero(inside):
-            y = _stacked(model.n_total, slices, sol.sol(t_out[i]))
-            q[i] = on_grasp(t_out[i], y)
-            for sl, (rd, rdd) in zip(slices, rates(t_out[i], q[i], acc=True)):
+            q[i], tg = on_grasp(t_out[i], _stacked(model.n_total, slices, sol.sol(t_out[i])))
+            for sl, (rd, rdd) in zip(slices, rates(t_out[i], q[i], tg, acc=True)):
                 qd[i, sl], qdd[i, sl] = rd, rdd
-        y = on_grasp(tb, _stacked(model.n_total, slices, sol.sol(tb)))
+        y = on_grasp(tb, _stacked(model.n_total, slices, sol.sol(tb)))[0]
     return q, qd, qdd
 
 
