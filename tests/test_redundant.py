@@ -120,3 +120,19 @@ def test_joint_limit_violations_name_arm_joint_and_time():
     assert w.kind == "joint_limit" and w.t == 0.2
     assert "arm 2 joint 2 at 1.25 rad is outside its range [0.9, 1.1] rad" in w.message()
     assert joint_limits(m, t, q) == []
+
+
+@needs_robots
+def test_panda_carry_capacities_as_measured():
+    """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant
+    density): 'paper' 5.032 kg (arm 1 joint 6, τ_max, t = 2.54 s), 'nonsqueezing' 18.12 kg (arm 1 joint
+    4, τ_max, t = 0.48 s); equal-weight minimum energy has none (arm 2 joint 6 crosses its τ_min line at
+    t = 0.34 s whatever the load). Regression pins: numbers produced by coopsim itself (README table)."""
+    from coopsim import capacity as cap
+
+    m, _, traj = run(CARRY)
+    P = inv.inverse_problem(m, traj)
+    got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
+    assert got["paper"].mass == pytest.approx(5.03188, rel=1e-4) and (got["paper"].joint, got["paper"].time) == (5, 2.54)
+    assert got["nonsqueezing"].mass == pytest.approx(18.1167, rel=1e-4) and got["nonsqueezing"].joint == 3
+    assert not got["min_energy"].feasible and (got["min_energy"].joint, got["min_energy"].time) == (12, 0.34)
