@@ -16,8 +16,8 @@ from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, poin
 from coopsim.model import ObjectMotion
 from coopsim.robots import robots_folder
 from coopsim.spatial import rot_log
-from coopsim.trajectory import (JointTrajectory, TrajectoryError, object_motion_at, object_motion_trajectory,
-                                object_pose_of, redundant_rates)
+from coopsim.trajectory import (JointTrajectory, TrajectoryError, grasp_targets, object_motion_at,
+                                object_motion_trajectory, object_pose_of)
 from inverse_cases import model, run
 
 CARRY = "robots/panda_pair_carry"
@@ -47,11 +47,12 @@ def _second_segment(m, gain: float, dt: float = 0.25) -> JointTrajectory:
 
 
 @needs_robots
-def test_panda_carry_holds_the_tray_on_its_path_within_limits():
-    """Two 7-joint Pandas carry the tray along 4 waypoints (3 s, 20 ms samples): the carried tray is on
-    the prescribed path to 1e-10 (m, rad), the loop closed to 1e-10, every joint inside its URDF range;
+def test_panda_carry_holds_the_tray_on_its_path_replays_and_has_its_capacities():
+    """(One test, so that the carry's inverse kinematics runs once per session.) Two 7-joint Pandas carry
+    the tray along 4 waypoints (3 s, 20 ms samples): the carried tray is on the prescribed path to 1e-10 (m, rad), the loop closed to 1e-10, every joint inside its URDF range;
     the rates are the resolution's, checked at a few samples against NumPy's pseudo-inverse:
-    θ̇ = pinv(A) S v_EE + (I − pinv(A) A) k (θ_rest − θ) to 1e-10 rad/s."""
+    θ̇ = pinv(A) S v_EE + (I − pinv(A) A) k (θ_rest − θ) to 1e-10 rad/s. Then `_replays` and
+    `_capacities_as_measured`."""
     m, _, traj = run(CARRY)
     mo = m.inverse.object_motion
     assert len(mo.times) >= 3 and len(traj.t) == 151 and min(a.n for a in m.arms) == 7
@@ -64,28 +65,39 @@ def test_panda_carry_holds_the_tray_on_its_path_within_limits():
     assert worst <= 1e-10
     lo, hi = m.joint_range.T
     assert np.all((traj.q >= lo) & (traj.q <= hi))
-    from coopsim.trajectory import grasp_targets
     for i in (10, 75, 140):
-        _, _, tw, ac = object_motion_at(mo, traj.t[i], mo.positions[0])
-        p_C = object_motion_at(mo, traj.t[i], mo.positions[0])[0]
-        targets = grasp_targets(m, p_C, object_motion_at(mo, traj.t[i])[1], tw, ac, mo.positions[0])
+        targets = grasp_targets(m, *object_motion_at(mo, traj.t[i], mo.positions[0]), mo.positions[0])
         for arm, sl, (_, _, tw_m, _) in zip(m.arms, m.dof_slices, targets):
             A = m.rows @ ee_jacobian(arm_pose(arm, traj.q[i, sl]))
             P = np.linalg.pinv(A)
             ref = P @ (m.rows @ tw_m) + (np.eye(arm.n) - P @ A) @ (mo.rest_gain * (m.q0[sl] - traj.q[i, sl]))
             assert np.max(np.abs(traj.qd[i, sl] - ref)) <= 1e-10
+    _replays(m, traj)
+    _capacities_as_measured(m, traj)
 
 
-@needs_robots
-def test_panda_carry_replays():
+def _replays(m, traj):
     """Acceptance: the minimum-energy torques of the carry, fed back through the forward dynamics from its
     first state, reproduce its first 0.5 s to 1e-8 rad and 1e-7 rad/s. (Open loop, the held posture is
     unstable: a disturbance grows about e-fold in 0.2 s, so a longer replay measures that growth, not
     the consistency of θ, θ̇, θ̈.)"""
-    m, _, traj = run(CARRY)
     sub = JointTrajectory(traj.t[:26], traj.q[:26], traj.qd[:26], traj.qdd[:26], traj.source)
     rep = inv.replay(m, sub, inv.resolution_for(m, "min_energy"))
     assert rep.max_angle_error <= 1e-8 and rep.max_rate_error <= 1e-7, (rep.max_angle_error, rep.max_rate_error)
+
+
+def _capacities_as_measured(m, traj):
+    """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant
+    density): 'paper' 5.032 kg (arm 1 joint 6, τ_max, t = 2.54 s), 'nonsqueezing' 18.12 kg (arm 1 joint
+    4, τ_max, t = 0.48 s); equal-weight minimum energy has none (arm 2 joint 6 crosses its τ_min line at
+    t = 0.34 s whatever the load). Regression pins: numbers produced by coopsim itself (README table)."""
+    from coopsim import capacity as cap
+
+    P = inv.inverse_problem(m, traj)
+    got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
+    assert got["paper"].mass == pytest.approx(5.03188, rel=1e-4) and (got["paper"].joint, got["paper"].time) == (5, 2.54)
+    assert got["nonsqueezing"].mass == pytest.approx(18.1167, rel=1e-4) and got["nonsqueezing"].joint == 3
+    assert not got["min_energy"].feasible and (got["min_energy"].joint, got["min_energy"].time) == (12, 0.34)
 
 
 @needs_robots
@@ -121,18 +133,3 @@ def test_joint_limit_violations_name_arm_joint_and_time():
     assert "arm 2 joint 2 at 1.25 rad is outside its range [0.9, 1.1] rad" in w.message()
     assert joint_limits(m, t, q) == []
 
-
-@needs_robots
-def test_panda_carry_capacities_as_measured():
-    """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant
-    density): 'paper' 5.032 kg (arm 1 joint 6, τ_max, t = 2.54 s), 'nonsqueezing' 18.12 kg (arm 1 joint
-    4, τ_max, t = 0.48 s); equal-weight minimum energy has none (arm 2 joint 6 crosses its τ_min line at
-    t = 0.34 s whatever the load). Regression pins: numbers produced by coopsim itself (README table)."""
-    from coopsim import capacity as cap
-
-    m, _, traj = run(CARRY)
-    P = inv.inverse_problem(m, traj)
-    got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
-    assert got["paper"].mass == pytest.approx(5.03188, rel=1e-4) and (got["paper"].joint, got["paper"].time) == (5, 2.54)
-    assert got["nonsqueezing"].mass == pytest.approx(18.1167, rel=1e-4) and got["nonsqueezing"].joint == 3
-    assert not got["min_energy"].feasible and (got["min_energy"].joint, got["min_energy"].time) == (12, 0.34)
