@@ -15,6 +15,8 @@ print them, `summary.json` and the run log's metadata record them):
   passing through one (det changes sign between two samples, square Jacobians);
 - `initial_correction`: closing the loop at t = 0 moved a joint by more than
   `integrator.initial_correction_warning` rad;
+- `joint_limit`: a joint outside its position range (`Model.joint_range`, from a robot file or a
+  joint's `range`) at some sample (the dynamics do not enforce the limits);
 - `step_too_large`: a fixed rk4 step whose local error, estimated by step doubling at up to
   `STEP_CHECK_SAMPLES` samples, exceeds the requested accuracy atol + rtol·|y|.
 
@@ -206,6 +208,35 @@ def initial_correction(model: Model, init) -> list[RunWarning]:
         f"stops the run)", max_correction_rad=worst, residual_before=init.residual_before)]
 
 
+def joint_limit_violation(model: Model, q: np.ndarray) -> tuple[int, int] | None:
+    """(sample i, stacked joint j) of the first sample (then the first joint) of q (S, n) rad outside
+    `Model.joint_range`, or None (also when the model has no ranges)."""
+    if model.joint_range is None:
+        return None
+    lo, hi = model.joint_range.T
+    bad = np.argwhere((q < lo) | (q > hi))
+    return None if len(bad) == 0 else (int(bad[0, 0]), int(bad[0, 1]))
+
+
+def joint_limit_reason(model: Model, j: int, value: float) -> str:
+    """'arm 1 (left) joint 4 at -3.1 rad is outside its range [-3.07, -0.07] rad' (stacked joint j)."""
+    from .labels import joint_labels
+
+    lo, hi = model.joint_range[j]
+    return (f"{joint_labels(model)[j]} at {value:.6g} rad is outside its range "
+            f"[{lo:.6g}, {hi:.6g}] rad")
+
+
+def joint_limits(model: Model, t, q) -> list[RunWarning]:
+    """A `joint_limit` warning at the first sample where a joint leaves its range."""
+    hit = joint_limit_violation(model, q)
+    if hit is None:
+        return []
+    i, j = hit
+    return [run_warning("joint_limit", t[i], q[i], joint_limit_reason(model, j, q[i, j]) +
+                        " (the dynamics do not enforce joint limits)", joint=j + 1, angle_rad=q[i, j])]
+
+
 def _torques(model: Model, t: np.ndarray) -> np.ndarray:
     if isinstance(model.torques, TorqueFunction):
         return np.array([torque_at(model.torques, ti) for ti in t])
@@ -266,5 +297,6 @@ def collect(res, terms: ArmTerms) -> tuple[RunWarning, ...]:
         found += conditioning(m, res.t, res.q, res.cond, res.internal_wrench)
     found += arm_singularities(m, res.t, res.q, terms.J)
     found += initial_correction(m, res.initial)
+    found += joint_limits(m, res.t, res.q)
     found += step_size(m, res.t, res.q, res.qd)
     return tuple(found)

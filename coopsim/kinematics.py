@@ -119,6 +119,21 @@ def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
     return np.vstack([Jv.T, Jw.T])
 
 
+def point_jacobian_rate(pose: ArmPose, point: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Time derivative J̇ (6, n) of `point_jacobian` at rates qd (n,) rad/s (P fixed in the last link,
+    relative to the base point): columns [ż_j × (P − p_j) + z_j × (v_P − v_j); ż_j] with ż_j = ω_{j−1} × z_j,
+    v_P = J_v θ̇ and v_j the velocity of joint origin j (fixed in link j−1): v_0 = 0,
+    v_j = v_{j−1} + ω_{j−1} × (p_j − p_{j−1}). J̇ θ̇ is `ee_bias_acceleration` for P = p_EE."""
+    z, p = pose.z, pose.p_rel
+    w = np.cumsum(z * qd[:, None], axis=0)
+    w_prev = np.vstack([np.zeros(3), w[:-1]])
+    v_joint = np.vstack([np.zeros(3), np.cumsum(cross(w_prev[1:], p[1:] - p[:-1]), axis=0)])
+    dz = cross(w_prev, z)
+    v_point = point_jacobian(pose, point)[:3] @ qd
+    dJv = cross(dz, point - p) + cross(z, v_point - v_joint)
+    return np.vstack([dJv.T, dz.T])
+
+
 def ee_jacobian(pose: ArmPose) -> np.ndarray:
     """End-effector Jacobian J_m (6, n): twist [v_EE; ω] = J_m θ̇ (world axes)."""
     return point_jacobian(pose, pose.p_ee_rel)

@@ -199,7 +199,9 @@ class ObjectMotion:
     rotation with the time law `time_law` ('quintic': s = 10u³ − 15u⁴ + 6u⁵, zero rate and
     acceleration at both ends; 'cubic': s = 3u² − 2u³, zero rate only); sampled every output_dt s.
     initial_guess (n_total,) rad: joint angles that pick the inverse-kinematics branch at the first
-    waypoint (None: the scenario's initial angles)."""
+    waypoint (None: the scenario's initial angles). Arms with more joints than constraint rows
+    (redundant) move by least joint-velocity norm plus a null-space pull toward rest_posture (n_total,)
+    rad (None: the scenario's initial angles) with gain rest_gain 1/s (`coopsim.trajectory.redundant_rates`)."""
 
     times: np.ndarray
     positions: np.ndarray
@@ -207,6 +209,8 @@ class ObjectMotion:
     time_law: str = "quintic"
     output_dt: float = 1e-2
     initial_guess: np.ndarray | None = None
+    rest_posture: np.ndarray | None = None
+    rest_gain: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,7 +239,8 @@ class Model:
     spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
     state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
     limit of each stacked joint, rad (m for a prismatic joint; ±inf: none; None: no joint has one),
-    from a robot file or a joint's `range`: checked at the initial state, not enforced by the dynamics."""
+    from a robot file or a joint's `range`: checked at the initial state and along trajectories
+    (object-motion IK stops, a forward run warns), not enforced by the dynamics."""
 
     name: str
     arms: tuple[ArmModel, ...]

@@ -610,8 +610,9 @@ def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) ->
         dt = om.number("output_dt", 1e-2, positive=True)
         types = np.concatenate([a.joint_type for a in arms]) if arms else np.full(n, REVOLUTE)
         labels = [f"arm {a.name!r} joint {j + 1}" for a in arms for j in range(a.n)]
-        guess = _joint_values(om, "initial_guess", types, labels) \
-            if om.has("initial_guess") or om.has("initial_guess_deg") else None
+        guess, rest = (_joint_values(om, key, types, labels) if om.has(key) or om.has(f"{key}_deg") else None
+                       for key in ("initial_guess", "rest_posture"))
+        gain = om.number("rest_gain", 1.0, nonneg=True)
         times, pos, rot = [], [], []
         for wp in om.items("waypoints", min_len=2):
             times.append(wp.number("time", nonneg=True))
@@ -621,7 +622,7 @@ def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) ->
         if np.any(np.diff(times) <= 0):
             om.fail("waypoints", f"times must be strictly increasing, got {times}")
         om.done()
-        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess)
+        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain)
     if trajectory == "object_motion" and motion is None:
         sec.fail("object_motion", "trajectory: object_motion needs an object_motion section")
     masses = sec.array("nonsqueezing_masses", (r,), positive=True) if sec.has("nonsqueezing_masses") else None

@@ -7,7 +7,9 @@ Two sources (issue #4, paper sec. 3.2):
     law, turned into joint motions of every arm by closed-chain inverse kinematics. θ comes from
     Newton's method on the loop-closure rows, θ̇ and θ̈ from the differential kinematics
     S J_m θ̇_m = S v_EE,m and S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m) (the same rows S as the forward model),
-    so the three are consistent (no finite differences).
+    so the three are consistent (no finite differences). Arms with more joints than rows (redundant) are
+    resolved by least joint-velocity norm plus a null-space pull toward a rest posture, θ̈ its exact
+    derivative (`redundant_rates`, `redundant_motion`); joint limits are checked on the result.
 
 Between samples a trajectory is the quintic Hermite interpolant of (θ, θ̇, θ̈) at the two ends
 (`trajectory_at`): C², exact at the samples, error O(h⁶) in between. Twists [v; ω] and accelerations
@@ -21,13 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .closed_chain import ConstraintError, arm_poses
-from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
+from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
 from .model import ArmModel, CoopsimError, Model, ObjectMotion
 from .spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 
 class TrajectoryError(CoopsimError):
-    """A prescribed motion cannot be turned into joint motions (out of reach, singular, redundant)."""
+    """A prescribed motion cannot be turned into joint motions (out of reach, singular, too few joints,
+    out of a joint's range)."""
 
 
 class SingularJacobian(ConstraintError):
@@ -146,7 +149,11 @@ def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndar
 def pose_error(arm: ArmModel, q: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     """[p_EE(θ) − p; log(R_EE(θ) Rᵀ)] (6,), m and rad, world axes, with the target p (3,) and p_EE both
     relative to the arm's base point (ArmPose.p_ee_rel): no world position enters the error."""
-    pose = arm_pose(arm, q)
+    return pose_error_at(arm_pose(arm, q), p, R)
+
+
+def pose_error_at(pose, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """`pose_error` of an ArmPose already computed."""
     return np.concatenate([pose.p_ee_rel - p, rot_log(pose.R_ee @ R.T)])
 
 
@@ -189,13 +196,15 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     from .simulate import output_times
 
     S = model.rows
-    _check_square(model, S)
+    redundant = _check_joint_counts(model, S)
     t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
     N, n = len(t_out), model.n_total
     q, qd, qdd = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, n))
     dets = np.zeros((N, model.r))
     origin = motion.positions[0]           # targets relative to the arm bases through it: no world position rounded
+    if redundant:
+        q[:], qd[:], qdd[:] = redundant_motion(model, motion, t_out, guess, redundant, plane_tol)
     for i, t in enumerate(t_out):
         p_C, R_o, tw, ac = object_motion_at(motion, t, origin)
         if i:
@@ -203,6 +212,8 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             guess = q[i - 1] + h * qd[i - 1] + 0.5 * h * h * qdd[i - 1]
         for m, (arm, sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.arms, model.dof_slices,
                                                              grasp_targets(model, p_C, R_o, tw, ac, origin))):
+            if m in redundant:
+                continue
             sol = _solve_arm(model, m, p, R, tw_m, ac_m, guess, t, origin + p_C)
             if sol.full_error > plane_tol:
                 raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
@@ -211,15 +222,162 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             if i and np.sign(dets[i, m]) != np.sign(dets[i - 1, m]):
                 raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} crosses a singularity between "
                                       f"t={t_out[i - 1]:.6g} s and t={t:.6g} s (det S J changes sign)")
+    _check_joint_limits(model, t_out, q)
     return JointTrajectory(t_out, q, qd, qdd, "object_motion")
 
 
-def _check_square(model: Model, S: np.ndarray):
+def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
+    """Indices of the redundant arms (more joints than rows); TrajectoryError for an arm with fewer."""
     for arm in model.arms:
-        if arm.n != S.shape[0]:
+        if arm.n < S.shape[0]:
             raise TrajectoryError(
                 f"inverse.object_motion: arm {arm.name!r} has {arm.n} joints for {S.shape[0]} constrained "
-                f"rows; closed-chain inverse kinematics needs as many joints as rows (no redundant arms)")
+                f"rows; closed-chain inverse kinematics needs at least as many joints as rows")
+    return [m for m, arm in enumerate(model.arms) if arm.n > S.shape[0]]
+
+
+def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
+    from .diagnostics import joint_limit_reason, joint_limit_violation
+
+    hit = joint_limit_violation(model, q)
+    if hit is not None:
+        i, j = hit
+        raise TrajectoryError(f"inverse.object_motion: at t={t[i]:.6g} s {joint_limit_reason(model, j, q[i, j])}")
+
+
+# ------------------------------------------------------------------------------------------------
+# redundant arms
+# ------------------------------------------------------------------------------------------------
+
+def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray | None,
+                    rest: np.ndarray, gain: float):
+    """Redundancy resolution of one arm with n joints for k < n rows S (k × 6), A = S J_m (k × n) of
+    full row rank: θ̇ = A⁺ S v_EE + (I − A⁺A) z, z = gain (θ_rest − θ), A⁺ = Aᵀ(AAᵀ)⁻¹ — the joint
+    velocity nearest z (least |θ̇ − z|) among those that move the end-effector as prescribed, i.e. least
+    |θ̇| plus a null-space pull toward the rest posture that does not move the end-effector. Written
+    θ̇ = z + Aᵀλ, AAᵀλ = b − Az (b = S v_EE). Its exact time derivative (for `acc` [a_EE; ω̇] (6,)):
+    θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = −gain θ̇, AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ (so A θ̈ = S a_EE − Ȧθ̇, the
+    differential kinematics of the square arms); Ȧ = S J̇ (`point_jacobian_rate`).
+    Returns (θ̇, θ̈ or None when acc is None, A)."""
+    pose = arm_pose(arm, q)
+    A = S @ ee_jacobian(pose)
+    AAt = A @ A.T
+    z = gain * (rest - q)
+    lam = np.linalg.solve(AAt, S @ twist - A @ z)
+    qd = z + A.T @ lam
+    if acc is None:
+        return qd, None, A
+    dA = S @ point_jacobian_rate(pose, pose.p_ee_rel, qd)
+    dz = -gain * qd
+    dlam = np.linalg.solve(AAt, S @ acc - dA @ qd - A @ dz - A @ (dA.T @ lam))
+    return qd, dz + dA.T @ lam + A.T @ dlam, A
+
+
+def min_norm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
+                tol: float = 1e-13, max_iter: int = 50) -> np.ndarray:
+    """Joint angles (n,) of a redundant arm putting its end-effector frame at (p, R) (p relative to its
+    base point) in the rows S (k × 6, k < n): least-norm Newton steps Δθ = −A⁺ S e(θ), A = S J, from
+    `guess` until max |S e| <= tol (the solution nearest the guess to first order)."""
+    q = guess.astype(float).copy()
+    for _ in range(max_iter):
+        pose = arm_pose(arm, q)
+        e = S @ pose_error_at(pose, p, R)
+        if np.max(np.abs(e)) <= tol:
+            return q
+        A = S @ ee_jacobian(pose)
+        q -= A.T @ np.linalg.solve(A @ A.T, e)
+    raise ConstraintError(f"Newton did not converge (max |error| {np.max(np.abs(e)):.3g} after {max_iter} steps)")
+
+
+REDUNDANT_RTOL = 1e-12   # DOP853 tolerances of the redundancy-resolution ODE (rad)
+REDUNDANT_ATOL = 1e-12
+
+
+def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, guess: np.ndarray,
+                     arms: list[int], plane_tol: float, sing_tol: float = 1e-7):
+    """(θ, θ̇, θ̈) (N, n_total) at the times t_out (N,) of the redundant arms `arms` (zeros elsewhere):
+    θ(t) solves the ODE θ̇ = `redundant_rates` (rest posture and gain from `motion`, default the
+    scenario's initial angles and 1/s) from the least-norm IK solution nearest `guess` at the first
+    sample, integrated by DOP853 (rtol = atol = 1e-12) segment by segment between waypoints (the time
+    law is smooth inside each). At every sample θ is then put exactly on the grasp by least-norm Newton
+    (`min_norm_ik`, a correction of the integration error only) and θ̇, θ̈ are evaluated there, so the
+    three are consistent as for the square arms. TrajectoryError when an arm nears a singularity
+    (σ_min/σ_max of S J below sing_tol), leaves its reach or the plane of motion."""
+    from scipy.integrate import solve_ivp
+
+    S, origin = model.rows, motion.positions[0]
+    slices = [model.dof_slices[m] for m in arms]
+    rest = model.q0 if motion.rest_posture is None else motion.rest_posture
+    q, qd, qdd = (np.zeros((len(t_out), model.n_total)) for _ in range(3))
+
+    def targets(t):
+        p_C, R_o, tw, ac = object_motion_at(motion, t, origin)
+        return grasp_targets(model, p_C, R_o, tw, ac, origin), origin + p_C
+
+    def rates(t, y, tg, acc=False):
+        out = []
+        for m, sl in zip(arms, slices):
+            y_m = y[sl]
+            rd, rdd, A = redundant_rates(model.arms[m], S, y_m, tg[m][2], tg[m][3] if acc else None,
+                                         rest[sl], motion.rest_gain)
+            sv = np.linalg.svd(A, compute_uv=False) if acc else np.ones(1)
+            if not sv[-1] >= sing_tol * sv[0]:
+                ratio = sv[-1] / sv[0]
+                raise TrajectoryError(f"inverse.object_motion: arm {model.arms[m].name!r} meets a singularity at "
+                                      f"t={t:.6g} s: singular Jacobian (σ_min/σ_max = {ratio:.2g})")
+            out.append((rd, rdd))
+        return out
+
+    def on_grasp(t, y):
+        (tg, p_C), y = targets(t), y.copy()
+        for m, sl in zip(arms, slices):
+            y[sl] = _redundant_ik(model, m, tg[m][0], tg[m][1], y[sl], t, p_C, plane_tol)
+        return y, tg
+
+    def rhs(t, x):
+        return np.concatenate([rd for rd, _ in rates(t, _stacked(model.n_total, slices, x), targets(t)[0])])
+
+    y = on_grasp(t_out[0], guess)[0]
+    last = len(motion.times) - 2
+    for k, (ta, tb) in enumerate(zip(motion.times[:-1], motion.times[1:])):
+        inside = (t_out >= ta) & ((t_out < tb) | (k == last))      # a waypoint's sample: in the segment it starts
+        x0 = np.concatenate([y[sl] for sl in slices])
+        sol = solve_ivp(rhs, (ta, tb), x0, method="DOP853", rtol=REDUNDANT_RTOL, atol=REDUNDANT_ATOL,
+                        dense_output=True)
+        for i in np.flatnonzero(inside):
+            q[i], tg = on_grasp(t_out[i], _stacked(model.n_total, slices, sol.sol(t_out[i])))
+            for sl, (rd, rdd) in zip(slices, rates(t_out[i], q[i], tg, acc=True)):
+                qd[i, sl], qdd[i, sl] = rd, rdd
+        y = on_grasp(tb, _stacked(model.n_total, slices, sol.sol(tb)))[0]
+    return q, qd, qdd
+
+
+def _stacked(n: int, slices: list[slice], x: np.ndarray) -> np.ndarray:
+    """x (the redundant arms' angles, one after the other) spread into a stacked (n,) vector."""
+    y = np.zeros(n)
+    for sl, xs in zip(slices, np.split(x, np.cumsum([s.stop - s.start for s in slices])[:-1])):
+        y[sl] = xs
+    return y
+
+
+def _redundant_ik(model: Model, m: int, p, R, guess, t, p_C, plane_tol):
+    """Least-norm IK of redundant arm m (`min_norm_ik`) with the one-line errors of `_solve_arm`."""
+    arm, S = model.arms[m], model.rows
+    dist, reach, ok = reach_check(arm, p)
+    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
+    if not ok:
+        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
+                              f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
+    try:
+        q = min_norm_ik(arm, S, p, R, guess)
+    except ConstraintError as e:
+        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
+                              f"no joint angles reach its grasp ({e})") from None
+    full = float(np.max(np.abs(pose_error(arm, q, p, R))))
+    if full > plane_tol:
+        raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
+                              f"leaves the plane of motion by {full:.3g} (m or rad)")
+    return q
 
 
 def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):

@@ -108,11 +108,12 @@ def test_out_of_reach_singular_and_off_plane_paths_are_reported():
         object_motion_trajectory(m, _motion([start, [0.75, 0.9, 0.05]], [0, 0]))
 
 
-def test_redundant_arms_are_refused():
-    """Six joints for three rows (the spatial arms forced onto planar rows): no IK branch is defined."""
-    sp, paper = model("spatial_6r_pair"), model(CARRY)
-    forced = replace(sp, rows=paper.rows)
-    with pytest.raises(TrajectoryError, match=r"arm 'left' has 6 joints for 3 constrained rows"):
+def test_arms_with_fewer_joints_than_rows_are_refused():
+    """Three joints for six rows (the planar arms forced onto spatial rows): the grasp cannot be held.
+    (Arms with more joints than rows are resolved: tests/test_redundant.py.)"""
+    paper = model(CARRY)
+    forced = replace(paper, rows=np.eye(6))
+    with pytest.raises(TrajectoryError, match=r"arm 'arm1' has 3 joints for 6 constrained rows; .*at least as many"):
         object_motion_trajectory(forced, paper.inverse.object_motion)
 
 
@@ -128,6 +129,8 @@ CARRY_YAML = yaml.safe_load((SCENARIOS / f"{CARRY}.yaml").read_text())
     (["inverse", "nonsqueezing_masses"], [1.0, -1.0], r"inverse\.nonsqueezing_masses: must be positive"),
     (["inverse", "payload"], {"position": [0, 0]}, r"inverse\.payload\.position: expected shape 3"),
     (["inverse", "internal_bound"], {"force": -1.0}, r"inverse\.internal_bound\.force: must be non-negative"),
+    (["inverse", "object_motion", "rest_gain"], -1.0, r"inverse\.object_motion\.rest_gain: must be non-negative"),
+    (["inverse", "object_motion", "rest_posture"], [0.0] * 5, r"inverse\.object_motion\.rest_posture: expected shape 6"),
 ])
 def test_inverse_section_errors_name_the_field(path, value, message):
     data = mutated(CARRY_YAML, path, value)
@@ -139,4 +142,9 @@ def test_inverse_section_defaults_and_values():
     m = model(CARRY)
     assert m.inverse.trajectory == "object_motion" and m.inverse.object_motion.output_dt == 0.02
     assert m.inverse.payload_position == pytest.approx([0.2, 0, 0])
+    assert m.inverse.object_motion.rest_posture is None and m.inverse.object_motion.rest_gain == 1.0
+    data = mutated(mutated(CARRY_YAML, ["inverse", "object_motion", "rest_gain"], 3.0),
+                   ["inverse", "object_motion", "rest_posture_deg"], [90.0] * 6)
+    om = model_from_dict(data, where="carry.yaml").inverse.object_motion
+    assert om.rest_gain == 3.0 and om.rest_posture == pytest.approx([np.pi / 2] * 6, rel=1e-15)
     assert model("paper_planar_2x3").inverse.trajectory == "forward"
