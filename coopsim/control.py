@@ -85,6 +85,21 @@ def pose_error(p_ref, R_ref, p, R) -> np.ndarray:
     return np.concatenate([p_ref - p, rot_log(R_ref @ R.T)])
 
 
+def joint_accelerations(rows: np.ndarray, J: np.ndarray, Jd_qd: np.ndarray, rho: np.ndarray, twist: np.ndarray,
+                        acc: np.ndarray, n: list[int]) -> np.ndarray:
+    """Stacked θ̈ of the arms that give the object the acceleration acc = [a_C; ω̇] (6,) at twist
+    [v_C; ω] (6,): each grasp point ρ_m (r, 3) from C accelerates as a_C + ω̇ × ρ + ω × (ω × ρ), and
+    S J_m θ̈_m = S (a_EE,m − J̇_m θ̇_m) in the rows S (k, 6) (square arms; J (r, 6, nmax), Jd_qd (r, 6),
+    n: joints per arm)."""
+    from .spatial import rigid_acceleration
+
+    out = []
+    for m, nm in enumerate(n):
+        a_ee = np.concatenate([rigid_acceleration(acc[:3], twist[3:], acc[3:], rho[m]), acc[3:]])
+        out.append(np.linalg.solve(rows @ J[m][:, :nm], rows @ (a_ee - Jd_qd[m])))
+    return np.concatenate(out)
+
+
 def squeeze_wrenches(grasp_offset: np.ndarray, rows: np.ndarray, A: np.ndarray, force: float) -> np.ndarray:
     """Grasp wrenches f (rk,) in the rows S of a squeeze: each grasp pushes `force` N towards the centre
     of mass along its grasp line (offset ρ_m = p_grasp − p_C (r, 3)), projected on the null space of
@@ -94,7 +109,7 @@ def squeeze_wrenches(grasp_offset: np.ndarray, rows: np.ndarray, A: np.ndarray, 
     u = grasp_offset / np.linalg.norm(grasp_offset, axis=1, keepdims=True)
     F = np.concatenate([-force * u, np.zeros_like(u)], axis=1) @ rows.T      # (r, k)
     f = F.reshape(-1)
-    return f - np.linalg.pinv(A) @ (A @ f)
+    return f - A.T @ np.linalg.solve(A @ A.T, A @ f)
 
 
 class Controller:
@@ -154,7 +169,7 @@ class Controller:
         from .trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
-        prob = inverse_problem(self.plant, traj, terms=self._terms(traj))
+        prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
         f = distribute(prob, prob.y, self.resolution)
         if squeeze:
             f = f + squeeze_wrenches(prob.grasp_offset[0], prob.rows, prob.A[0], squeeze)[None]
@@ -164,17 +179,21 @@ class Controller:
     def _kernel(self):
         from .compiled import api
 
-        P, _, Ps, _ = api.compiled(self.plant)
-        return Ps, api.fresh_workspace(P), int(P.dof[-1]), len(P.dof) - 1, int(np.max(np.diff(P.dof)))
+        from .compiled.packing import workspace
+        from .compiled.structs import to_struct
 
-    def _terms(self, traj):
-        """The compiled inverse-dynamics terms of one state on this controller's own workspace (as
-        `coopsim.compiled.api.inverse_terms`, without a workspace built per call)."""
+        P, _, Ps, _ = api.compiled(self.plant)
+        W = workspace(P)
+        return Ps, to_struct(W), W, int(P.dof[-1]), len(P.dof) - 1, int(np.max(np.diff(P.dof)))
+
+    def _terms(self, Q, QD, QDD):
+        """The compiled inverse-dynamics terms of one state (Q, QD, QDD (1, n)) on this controller's own
+        workspace (as `coopsim.compiled.api.inverse_terms`, without a workspace built per call)."""
         from .compiled import sample
 
-        Ps, ws, n, r, nmax = self._kernel
+        Ps, ws, _, n, r, nmax = self._kernel
         out = sample.new_inverse_terms(1, n, r, nmax)
-        sample.inverse_terms(Ps, ws, traj.q, traj.qd, traj.qdd, out)
+        sample.inverse_terms(Ps, ws, Q, QD, QDD, out)
         return out
 
     def command(self, t: float, q: np.ndarray, qd: np.ndarray) -> Command:
@@ -195,17 +214,17 @@ class Controller:
         return Command(q_ref, qd_ref, e, ed, raw, tau)
 
     def _computed_torque(self, t, q, qd):
-        from .trajectory import arm_rates, grasp_targets, object_motion_at
+        from .trajectory import object_motion_at
 
         s, m = self.settings, self.plant
-        _, state = self.inverse_dynamics(q, qd, np.zeros(len(q)))
+        state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
+        W = self._kernel[2]                      # J, J̇θ̇ of every arm at (q, qd), from that evaluation
         p, R, v = state.p_C[0], state.R_o[0], state.twist[0]
         motion = m.inverse.object_motion
         p_r, R_r, v_r, a_r = object_motion_at(motion, motion.times[0] + t)
         e, ed = pose_error(p_r, R_r, p, R), v_r - v
         a = object_acceleration(s.object_kp, s.object_kd, e, ed, a_r)
-        qdd = np.concatenate([arm_rates(arm, m.rows, q[sl], tw, ac)[1] for arm, sl, (_, _, tw, ac) in
-                              zip(m.arms, m.dof_slices, grasp_targets(m, p, R, v, a))])
+        qdd = joint_accelerations(m.rows, W.J, W.Jd_qd, -state.s[0], v, a, [sl.stop - sl.start for sl in m.dof_slices])
         return self.inverse_dynamics(q, qd, qdd, s.squeeze)[0], e, ed
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
