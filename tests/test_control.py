@@ -37,17 +37,17 @@ def _at_setpoint(model, duration, **control):
 
 def test_pd_with_gravity_compensation_holds_the_spatial_pair(hold):
     """Started at rest at a set-point 0.18 rad from the hanging equilibrium, the spatial pair stays there
-    within 1e-6 rad under PD + gravity compensation (measured 2.7e-15 rad over 0.25 s); without the
-    compensation the same PD sags by more than 1e-3 rad (measured 3.7e-3 rad), so the bound can fail.
+    within 1e-6 rad under PD + gravity compensation (measured 2.7e-15 rad over 0.1 s); without the
+    compensation the same PD sags by more than 1e-3 rad (measured 2.6e-3 rad), so the bound can fail.
     (Convergence to the set-point from the hanging equilibrium 0.18 rad away: the bundled scenario,
     README.)"""
-    model, sp = _at_setpoint(hold, 0.25)
+    model, sp = _at_setpoint(hold, 0.1)
     res = simulate(model)
     held = float(np.max(np.abs(res.q - sp)))
     assert held <= 1e-6, f"PD + gravity compensation drifted {held:.3g} rad from the set-point"
     assert float(np.max(np.abs(hold.q0 - sp))) > 0.1, "the set-point is the hanging equilibrium: nothing to hold"
 
-    sag_model, _ = _at_setpoint(hold, 0.25, compensation="none")
+    sag_model, _ = _at_setpoint(hold, 0.1, compensation="none")
     sag = float(np.max(np.abs(simulate(sag_model).q[-1] - sp)))
     assert sag > 1e-3, f"PD without compensation stayed within {sag:.3g} rad: the hold test proves nothing"
 
@@ -114,10 +114,10 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
 
 def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
     """The same controller in the loop of the native model and of the MuJoCo twin (fed the twin's own
-    state at every RK4 stage) agree within the scenario's thresholds while the pair is pulled 0.18 rad
-    to its set-point (measured 1.7e-7 rad over 0.1 s, the pair moving 0.12 rad); the twin's controller
-    with the position gain's sign flipped fails the comparison by name (measured 0.41 rad)."""
-    model = replace(hold, duration=0.1, integrator=replace(hold.integrator, output_dt=0.05))
+    state at every RK4 stage) agree within the scenario's thresholds while the pair is pulled towards
+    its set-point 0.18 rad away (measured 1.6e-7 rad over 0.05 s, the pair moving 0.071 rad); the twin's controller
+    with the position gain's sign flipped fails the comparison by name (measured 0.18 rad)."""
+    model = replace(hold, duration=0.05, integrator=replace(hold.integrator, output_dt=0.025))
     cv = cross_validate(model)
     assert cv.comparison.passed, cv.comparison.failures()
     moved = float(np.max(np.abs(cv.native.q[-1] - cv.native.q[0])))
@@ -146,7 +146,8 @@ def carry():
 
     model = load_scenario(CARRY)
     om = model.inverse.object_motion
-    first = replace(om, times=om.times[:2], positions=om.positions[:2], rotations=om.rotations[:2], output_dt=0.05)
+    first = replace(om, times=np.array([0.0, 5.0]), positions=om.positions[:2], rotations=om.rotations[:2],
+                    output_dt=0.05)
     traj = object_motion_trajectory(model, first)
     zero = tuple(replace(tab, times=np.zeros(1), values=np.zeros((1, tab.values.shape[1]))) for tab in model.torques)
     perfect = replace(model, torques=zero, q0=traj.q[0], qd0=traj.qd[0], duration=CT_DURATION,
@@ -201,7 +202,8 @@ def test_computed_torque_with_a_mass_error_recovers_from_a_pulse(carry):
     after the pulse to at most half its peak (measured 6.7e-6 m at 0.6 s: the mass error's own share)."""
     model, perfect, _ = carry
     pulse = (replace(model.torques[0], times=np.array([0.0, 0.05, 0.1, 0.15, 0.6])),) + model.torques[1:]
-    hit = replace(perfect, torques=pulse, duration=0.6, control=model.control)
+    hit = replace(perfect, torques=pulse, duration=0.6, control=model.control,
+                  integrator=replace(perfect.integrator, output_dt=0.1))
     pos, _ = _object_errors(model, simulate(hit))
     peak = int(np.argmax(pos))
     assert pos.max() <= 5e-5, f"tracking error {pos.max():.3g} m"
