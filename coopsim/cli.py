@@ -80,7 +80,7 @@ def _cmd_run(args) -> int:
     from pathlib import Path
 
     from .compare import format_comparison
-    from .harness import cross_validate
+    from .harness import control_series, cross_validate
     from .log import file_sha256, run_log
     from .plots import comparison_plots
     from .progress import ProgressBar
@@ -94,7 +94,7 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
+        streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
         summary: dict = {}

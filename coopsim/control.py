@@ -255,10 +255,11 @@ def controller_of(model: Model) -> Controller | None:
 
 @dataclass(frozen=True, eq=False)
 class ControlRecord:
-    """The controller along a sampled run (N samples): q_ref, qd_ref (N, n) (nan for computed_torque);
-    object_error, object_rate_error (N, 6) (nan for joint_pd); raw, tau (N, n) N·m; saturated (N, n)
-    bool; saturation_events: the number of (sample, joint) pairs clipped by the motor lines."""
+    """The controller along a sampled run (N samples): q_ref, qd_ref (N, n) and angle_error = q_ref − q
+    (N, n) (nan for computed_torque); object_error, object_rate_error (N, 6) (nan for joint_pd); raw, tau
+    (N, n) N·m; saturated (N, n) bool; saturation_events: the (sample, joint) pairs the motor lines clipped."""
 
+    angle_error: np.ndarray
     q_ref: np.ndarray
     qd_ref: np.ndarray
     object_error: np.ndarray
@@ -277,4 +278,4 @@ def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray)
     cmds = [controller.command(float(ti), qi, qdi) for ti, qi, qdi in zip(t, q, qd)]
     stack = {k: np.array([getattr(c, k) for c in cmds]) for k in
              ("q_ref", "qd_ref", "object_error", "object_rate_error", "raw", "tau")}
-    return ControlRecord(saturated=stack["raw"] != stack["tau"], **stack)
+    return ControlRecord(angle_error=stack["q_ref"] - q, saturated=stack["raw"] != stack["tau"], **stack)

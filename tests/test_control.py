@@ -12,7 +12,9 @@ import yaml
 
 from coopsim.control import Controller, closed_loop, controller_of, record
 from coopsim.compare import compare
-from coopsim.harness import cross_validate
+from coopsim.harness import control_series, cross_validate
+from coopsim.log import log_data
+from coopsim.summary import control_summary
 from coopsim.mujoco_run import run_twin
 from coopsim.model import CoopsimError, TorqueFeedback
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
@@ -122,6 +124,19 @@ def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
     assert cv.comparison.passed, cv.comparison.failures()
     moved = float(np.max(np.abs(cv.native.q[-1] - cv.native.q[0])))
     assert moved > 0.01, f"the closed loop moved only {moved:.3g} rad"
+
+    # The log's /native/control and /mujoco/control channels: the reference is the projected set-point,
+    # the error is that minus each model's own angles, and the torque is what each model applied.
+    sp = Controller(model).setpoint
+    log = log_data(control_series(cv)).topics
+    for prefix, res in (("/native", cv.native), ("/mujoco", cv.twin)):
+        ch = log[f"{prefix}/control"]
+        np.testing.assert_array_equal(ch["reference_angle"], np.broadcast_to(sp, res.q.shape))
+        np.testing.assert_allclose(ch["angle_error"], sp - res.q, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(ch["torque"], res.tau, rtol=1e-12, atol=1e-12)
+        assert not ch["saturated"].any()
+    summary = control_summary(cv)
+    assert summary["native"]["final_error"]["angle_rad"] == pytest.approx(float(np.max(np.abs(sp - cv.native.q[-1]))))
     c = model.control
     wrong = replace(model, control=replace(c, kp=-c.kp))
     bad = compare(cv.native, run_twin(wrong, cv.native.initial.q, cv.native.initial.qd, cv.native.t))
