@@ -178,7 +178,6 @@ class Controller:
     @cached_property
     def _kernel(self):
         from .compiled import api
-
         from .compiled.packing import workspace
         from .compiled.structs import to_struct
 

@@ -175,8 +175,8 @@ def _constraint_figure(log: LogData) -> Figure:
 
 def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None,
                      workers: FigureWorkers | None = None) -> list[Path]:
-    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png into
-    out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
+    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for
+    a closed loop, `coopsim.plots_control`'s tracking_error.png and internal_force.png) into out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
     (n,) labels the joints (default: `coopsim.labels` of the log's model metadata, else joint 1, joint 2,
     …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
     out = Path(out_dir)
@@ -185,4 +185,7 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     labels = _joint_labels(log, n, joint_names)
     jobs = [(_joint_figure, (log, "angle", "angle", "rad", labels)), (_joint_figure, (log, "rate", "rate", "rad/s", labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
-    return render_figures([(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)], workers)
+    from .plots_control import control_jobs   # a closed loop adds tracking_error.png, internal_force.png
+
+    figures = [(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)]
+    return render_figures(figures + [(fn, args, out / name) for fn, args, name in control_jobs(log)], workers)

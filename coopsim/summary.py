@@ -72,7 +72,8 @@ def run_summary(cv, log_path, plots) -> dict:
 
 def control_summary(cv) -> dict:
     """The controller along both runs: law, peak tracking error (joint angles rad, or object position m
-    and orientation rad) at the last sample and over the run, and saturation events (sample × joint)."""
+    and orientation rad) at the last sample and over the run, saturation events (sample × joint), and the
+    largest differences of the open-loop replay (`coopsim.harness.CrossValidation.replay`)."""
     out = {"law": cv.native.model.control.law}
     for who, rec in zip(("native", "mujoco"), cv.control):
         if out["law"] == "joint_pd":
@@ -83,6 +84,7 @@ def control_summary(cv) -> dict:
         out[who] = {"max_error": {k: float(v.max()) for k, v in err.items()},
                     "final_error": {k: float(v[-1]) for k, v in err.items()},
                     "saturation_events": rec.saturation_events}
+    out["open_loop_replay_max"] = {m.name: m.max for m in cv.replay.metrics[:4]}
     return out
 
 
