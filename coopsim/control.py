@@ -23,7 +23,7 @@ the MuJoCo twin, through the control callback at every RK4 stage (`coopsim.mujoc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from functools import cached_property
 
 import numpy as np
@@ -39,15 +39,17 @@ class ControlError(CoopsimError):
     """A controller cannot be built for this scene (one line naming the field)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Command:
-    """One evaluation of a controller: reference q_r, qd_r (n,) rad, rad/s (joint_pd; nan for
-    computed_torque); object reference pose error e (6,) [m; rad] and twist error (6,) [m/s; rad/s]
-    (computed_torque; nan for joint_pd); raw (n,) N·m the command before saturation (disturbance
-    tables included); tau (n,) N·m what the motors apply."""
+    """A controller's evaluation at one state (arrays as below) or along a run (each with a leading
+    sample axis N, `record`): reference q_ref, qd_ref (n,) rad, rad/s and angle_error = q_ref − q (n,)
+    rad (joint_pd; nan for computed_torque); object pose error (6,) [m; rad] and twist error (6,)
+    [m/s; rad/s] against the reference (computed_torque; nan for joint_pd); raw (n,) N·m the command
+    before saturation (disturbance tables included); tau (n,) N·m what the motors apply."""
 
     q_ref: np.ndarray
     qd_ref: np.ndarray
+    angle_error: np.ndarray
     object_error: np.ndarray
     object_rate_error: np.ndarray
     raw: np.ndarray
@@ -55,8 +57,13 @@ class Command:
 
     @property
     def saturated(self) -> np.ndarray:
-        """(n,) bool: the joints whose command the motor lines clipped."""
+        """bool, shaped as tau: the joints whose command the motor lines clipped."""
         return self.raw != self.tau
+
+    @property
+    def saturation_events(self) -> int:
+        """How many (sample, joint) pairs the motor lines clipped."""
+        return int(np.count_nonzero(self.saturated))
 
 
 def saturate(motors, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
@@ -210,7 +217,7 @@ class Controller:
             u, e, ed = self._computed_torque(t, q, qd)
         raw = u + torque_at(self.model.torques, t)
         tau = saturate(self.model.motors, raw, qd) if s.saturate else raw
-        return Command(q_ref, qd_ref, e, ed, raw, tau)
+        return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
 
     def _computed_torque(self, t, q, qd):
         from .trajectory import object_motion_at
@@ -252,29 +259,8 @@ def controller_of(model: Model) -> Controller | None:
     return fn if isinstance(fn, Controller) else None
 
 
-@dataclass(frozen=True, eq=False)
-class ControlRecord:
-    """The controller along a sampled run (N samples): q_ref, qd_ref (N, n) and angle_error = q_ref − q
-    (N, n) (nan for computed_torque); object_error, object_rate_error (N, 6) (nan for joint_pd); raw, tau
-    (N, n) N·m; saturated (N, n) bool; saturation_events: the (sample, joint) pairs the motor lines clipped."""
-
-    angle_error: np.ndarray
-    q_ref: np.ndarray
-    qd_ref: np.ndarray
-    object_error: np.ndarray
-    object_rate_error: np.ndarray
-    raw: np.ndarray
-    tau: np.ndarray
-    saturated: np.ndarray
-
-    @property
-    def saturation_events(self) -> int:
-        return int(np.count_nonzero(self.saturated))
-
-
-def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> ControlRecord:
-    """Evaluate the controller at every sample (t (N,), q, qd (N, n)) of a run."""
+def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
+    """The controller evaluated at every sample (t (N,), q, qd (N, n)) of a run: a Command of (N, …)
+    arrays."""
     cmds = [controller.command(float(ti), qi, qdi) for ti, qi, qdi in zip(t, q, qd)]
-    stack = {k: np.array([getattr(c, k) for c in cmds]) for k in
-             ("q_ref", "qd_ref", "object_error", "object_rate_error", "raw", "tau")}
-    return ControlRecord(angle_error=stack["q_ref"] - q, saturated=stack["raw"] != stack["tau"], **stack)
+    return Command(**{f.name: np.array([getattr(c, f.name) for c in cmds]) for f in fields(Command)})

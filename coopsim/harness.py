@@ -19,7 +19,7 @@ from .simulate import SimResult, simulate
 @dataclass(frozen=True, eq=False)
 class CrossValidation:
     """Both runs and their comparison; control: the controller along the native and the twin run
-    (`coopsim.control.ControlRecord`, native first), None without a controller; replay: with a
+    (`coopsim.control.Command` along the run, native first), None without a controller; replay: with a
     controller, the twin driven open-loop by the native closed loop's torques (piecewise linear between
     the native samples) compared with the native run — information, no thresholds (its error is the
     tabulation's, and an unstable open loop, such as a pose held against gravity, drifts)."""
