@@ -12,7 +12,9 @@
 Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the whole time loop in
 compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.integrate`, which lands on
 every output time; used for torques given as a Python function, and as the readable reference the
-compiled engine is tested against).
+compiled engine is tested against). A controller in the loop (`coopsim.control`, torques that read the
+state) runs on a third, 'stages': the reference time loop over the compiled stage kernels — the
+compiled time loop does not take controllers yet.
 """
 
 from __future__ import annotations

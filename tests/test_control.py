@@ -98,10 +98,11 @@ def test_a_notebook_callable_runs_in_the_loop_like_the_scenario_controller(hold)
     ("reference", "object_motion", "control.setpoint: only with reference: setpoint"),
     ("saturate", "yes", "control.saturate: expected true or false"),
     ("squeeze", 1.0, "control.squeeze: unknown field"),
+    ("passive", [True] + [False] * 5, "control.law: a controller needs every joint actuated"),
 ])
 def test_control_fields_are_validated_with_one_line_errors(field, value, message):
     data = yaml.safe_load(HOLD.read_text())
-    data["control"][field] = value
+    (data["arms"][0] if field == "passive" else data["control"])[field] = value
     with pytest.raises(ScenarioError) as err:
         model_from_dict(data, where="s.yaml")
     assert message in str(err.value) and "\n" not in str(err.value)
