@@ -226,3 +226,24 @@ def test_computed_torque_with_a_mass_error_recovers_from_a_pulse(carry):
     assert pos.max() <= 5e-5, f"tracking error {pos.max():.3g} m"
     assert 0 < peak < len(pos) - 1 and np.all(np.diff(pos[peak:]) < 0) and pos[-1] <= 0.5 * pos[peak], \
         f"no decay after the pulse: {pos}"
+
+
+def test_joint_pd_reference_follows_the_object_motion(carry):
+    """reference: object_motion — the PD's joint reference at time t is the closed-chain IK of the
+    prescribed motion: the object pose it carries (`object_pose_of`, forward kinematics) is the
+    prescribed one to 1e-12 m, at a sample of the IK trajectory and between samples (its quintic
+    Hermite interpolant; measured 3e-16 to 4e-15 m), and its rates start at zero (rest at waypoint 1)."""
+    from coopsim.model import ControlSettings
+    from coopsim.trajectory import object_motion_at, object_pose_of
+
+    model, perfect, traj = carry
+    first = replace(model.inverse.object_motion, times=traj.t[[0, -1]], output_dt=0.05)
+    pd = replace(perfect, inverse=replace(model.inverse, object_motion=first),
+                 control=ControlSettings("joint_pd", np.ones(6), np.ones(6), reference="object_motion"))
+    ctrl = Controller(pd)
+    for t in (0.25, 0.27, 2.33):
+        q_ref, _ = ctrl.reference(t)
+        off = np.linalg.norm(object_pose_of(pd, q_ref)[0] - object_motion_at(first, t)[0])
+        assert off <= 1e-12, f"t={t} s: the reference carries the object {off:.3g} m off the prescribed motion"
+    np.testing.assert_array_equal(ctrl.reference(0.0)[1], traj.qd[0])
+    assert np.all(traj.qd[0] == 0)
