@@ -118,9 +118,9 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
 def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
     """The same controller in the loop of the native model and of the MuJoCo twin (fed the twin's own
     state at every RK4 stage) agree within the scenario's thresholds while the pair is pulled towards
-    its set-point 0.18 rad away (measured 1.6e-7 rad over 0.05 s, the pair moving 0.071 rad); the twin's controller
-    with the position gain's sign flipped fails the comparison by name (measured 0.18 rad)."""
-    model = replace(hold, duration=0.05, integrator=replace(hold.integrator, output_dt=0.025))
+    its set-point 0.18 rad away (measured 1.5e-7 rad over 0.03 s, the pair moving 0.045 rad); the twin's controller
+    with the position gain's sign flipped fails the comparison by name (measured 0.10 rad)."""
+    model = replace(hold, duration=0.03, integrator=replace(hold.integrator, output_dt=0.015))
     cv = cross_validate(model)
     assert cv.comparison.passed, cv.comparison.failures()
     moved = float(np.max(np.abs(cv.native.q[-1] - cv.native.q[0])))
@@ -129,13 +129,25 @@ def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
     # The log's /native/control and /mujoco/control channels: the reference is the projected set-point,
     # the error is that minus each model's own angles, and the torque is what each model applied.
     sp = Controller(model).setpoint
-    log = log_data(control_series(cv)).topics
+    topics = log_data(control_series(cv)).topics
     for prefix, res in (("/native", cv.native), ("/mujoco", cv.twin)):
-        ch = log[f"{prefix}/control"]
+        ch = topics[f"{prefix}/control"]
         np.testing.assert_array_equal(ch["reference_angle"], np.broadcast_to(sp, res.q.shape))
         np.testing.assert_allclose(ch["angle_error"], sp - res.q, rtol=0, atol=1e-15)
         np.testing.assert_allclose(ch["torque"], res.tau, rtol=1e-12, atol=1e-12)
         assert not ch["saturated"].any()
+    # The tracking-error figure's curves are exactly those errors (per arm, the largest joint's).
+    from coopsim.log import run_metadata
+    from coopsim.plots import _arm_groups
+    from coopsim.plots_control import _errors, control_jobs
+
+    log = log_data(control_series(cv), run_metadata(model))
+    assert [name for _, _, name in control_jobs(log)] == ["tracking_error.png", "internal_force.png"]
+    for prefix, res in (("/native", cv.native), ("/mujoco", cv.twin)):
+        curves = _errors(log.topics[f"{prefix}/control"], _arm_groups(log, model.n_total))
+        assert [c[0] for c in curves] == ["arm 1 (left)", "arm 2 (right)"]
+        for (_, unit, y), sl in zip(curves, model.dof_slices):
+            np.testing.assert_allclose(y, np.max(np.abs(sp - res.q)[:, sl], axis=1), rtol=1e-12)
     summary = control_summary(cv)
     assert summary["native"]["final_error"]["angle_rad"] == pytest.approx(float(np.max(np.abs(sp - cv.native.q[-1]))))
     c = model.control
