@@ -77,9 +77,9 @@ def test_saturation_clips_at_the_motor_lines_and_counts_events(hold):
 def test_a_notebook_callable_runs_in_the_loop_like_the_scenario_controller(hold):
     """τ = u(t, q, q̇) written by hand (PD, no compensation) gives the trajectory of the scenario's
     `joint_pd` with compensation: none, to round-off; and the 'stages' engine (compiled evaluations in
-    the Python time loop) matches the plain-NumPy reference engine on it (≤ 1e-9 rad; measured 2.3e-14
-    rad, the chain moving 1.3e-3 rad in 0.04 s)."""
-    model, sp = _at_setpoint(hold, 0.04, compensation="none")
+    the Python time loop) matches the plain-NumPy reference engine on it (≤ 1e-9 rad; measured 8.9e-16
+    rad, the chain moving 6.6e-4 rad in 0.02 s)."""
+    model, sp = _at_setpoint(hold, 0.02, compensation="none")
     kp, kd = model.control.kp, model.control.kd
     notebook = replace(model, control=None, torques=TorqueFeedback(lambda t, q, qd: kp * (sp - q) - kd * qd))
     a, b = simulate(model), simulate(notebook)
@@ -162,7 +162,7 @@ def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
 # ------------------------------------------------------------------------------------------------
 
 CARRY = SCENARIOS / "control" / "control_paper_carry.yaml"
-CT_DURATION = 0.2
+CT_DURATION = 0.1
 
 
 @pytest.fixture(scope="module")
@@ -198,9 +198,9 @@ def _object_errors(model, res):
 
 def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforward(carry):
     """Perfect model, zero initial error: the bar follows the prescribed motion to ≤ 1e-8 m and rad
-    (measured 6e-16 m, 1.2e-15 rad), and the torques are the minimum-energy inverse-dynamics torques of
-    the closed-chain IK trajectory (`coopsim.inverse.stage_torques` at its knots) to ≤ 1e-8 N·m
-    (measured 1e-11 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 8e-16 m)
+    (measured 4.6e-16 m, 8.9e-16 rad), and the torques are the minimum-energy inverse-dynamics torques
+    of the closed-chain IK trajectory (`coopsim.inverse.stage_torques` at its knots) to ≤ 1e-8 N·m
+    (measured 7e-13 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 4.4e-16 m)
     and the internal force changes by exactly the command along each grasp line (≤ 1e-6 N)."""
     from coopsim import inverse as inv
     from coopsim.spatial import quat_to_rot
@@ -209,8 +209,8 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     res = simulate(perfect)
     pos, ang = _object_errors(model, res)
     assert pos.max() <= 1e-8 and ang.max() <= 1e-8, f"tracking error {pos.max():.3g} m, {ang.max():.3g} rad"
-    # A controller that held the bar still would be off by its motion (measured 4.3e-5 m by 0.2 s).
-    assert float(np.max(np.linalg.norm(res.object_pos - res.object_pos[0], axis=1))) > 1e-5, "the bar did not move"
+    # A controller that held the bar still would be off by its motion (measured 5.6e-6 m by 0.1 s).
+    assert float(np.max(np.linalg.norm(res.object_pos - res.object_pos[0], axis=1))) > 1e-6, "the bar did not move"
     ff = inv.stage_torques(model, traj, inv.resolution_for(model, "min_energy"), res.t)
     assert float(np.max(np.abs(res.tau - ff))) <= 1e-8
 
