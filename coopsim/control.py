@@ -113,7 +113,8 @@ def squeeze_wrenches(grasp_offset: np.ndarray, rows: np.ndarray, A: np.ndarray, 
     A (k × rk, the net object wrench of f) so that the net wrench is zero."""
     if force == 0.0:
         return np.zeros(A.shape[1])
-    u = grasp_offset / np.linalg.norm(grasp_offset, axis=1, keepdims=True)
+    norm = np.linalg.norm(grasp_offset, axis=1, keepdims=True)
+    u = grasp_offset / np.where(norm > 0, norm, 1.0)                         # a grasp at C: no line, no push
     F = np.concatenate([-force * u, np.zeros_like(u)], axis=1) @ rows.T      # (r, k)
     f = F.reshape(-1)
     return f - A.T @ np.linalg.solve(A @ A.T, A @ f)
@@ -127,6 +128,11 @@ class Controller:
     def __init__(self, model: Model):
         self.model, self.settings = model, model.control
         self.plant = _controller_model(model, model.control.mass_scale)
+        k = model.rows.shape[0]
+        if self.settings.law == "computed_torque" and any(arm.n != k for arm in model.arms):
+            arm = next(a for a in model.arms if a.n != k)
+            raise ControlError(f"control.law: computed_torque needs as many joints per arm as constrained rows "
+                               f"(arm {arm.name!r} has {arm.n} joints for {k} rows)")
 
     @cached_property
     def resolution(self):

@@ -115,6 +115,17 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
         simulate(model)
 
 
+def test_computed_torque_on_redundant_arms_is_refused_by_name():
+    """Differential kinematics per arm needs square arms: a 4-joint arm in a 3-row planar scene is named."""
+    from coopsim.control import ControlError
+    from coopsim.model import ControlSettings
+
+    m = load_scenario(SCENARIOS / "hard" / "planar_4arm_mixed.yaml")
+    with pytest.raises(ControlError, match=r"^control\.law: computed_torque needs as many joints per arm as "
+                                           r"constrained rows \(arm 'south' has 4 joints for 3 rows\)$"):
+        simulate(replace(m, control=ControlSettings("computed_torque", np.zeros(m.n_total), np.zeros(m.n_total))))
+
+
 def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
     """The same controller in the loop of the native model and of the MuJoCo twin (fed the twin's own
     state at every RK4 stage) agree within the scenario's thresholds while the pair is pulled towards
