@@ -167,6 +167,8 @@ def _cmd_inverse(args) -> int:
 
     model = load_scenario(args.scenario, duration=args.duration)
     methods = METHODS if args.method == "all" else (args.method,)
+    if args.torques_csv is not None and args.method == "all":
+        raise CoopsimError("--torques-csv: name the resolution to export with --method")
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         study = inverse_study(model, methods, duration=args.duration, with_replay=args.replay,
@@ -182,6 +184,12 @@ def _cmd_inverse(args) -> int:
                                      lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
+    if args.torques_csv is not None:
+        from .torque_csv import write_torque_csvs
+
+        res = study.results[args.method]
+        paths = write_torque_csvs(args.torques_csv, model, res.t - res.t[0], res.tau)
+        print(f"wrote {', '.join(map(str, paths))}", file=sys.stderr if args.json else sys.stdout)
     return 0 if summary.get("complete", True) else 1
 
 
@@ -396,6 +404,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--replay", action="store_true",
                    help="feed each resolution's torques back through the forward dynamics and report the error")
     p.add_argument("--no-curve", action="store_true", help="skip the energy-against-bound sweep")
+    p.add_argument("--torques-csv", default=None, metavar="PREFIX",
+                   help="also write the torques of --method (one resolution) at the trajectory's samples as "
+                        "PREFIX_ARM.csv per arm, the files a scenario's torque: {csv: ...} reads")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
