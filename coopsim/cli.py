@@ -94,7 +94,7 @@ def _cmd_run(args) -> int:
     from pathlib import Path
 
     from .compare import format_comparison
-    from .harness import cross_validate
+    from .harness import control_series, cross_validate
     from .log import file_sha256, run_log
     from .plots import comparison_plots
     from .progress import ProgressBar
@@ -108,7 +108,7 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        streams, meta = run_log(model, cv.native, cv.twin, metadata_extra={
+        streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
         summary: dict = {}
@@ -189,6 +189,8 @@ def _cmd_inverse(args) -> int:
 
     model = load_scenario(args.scenario, duration=args.duration)
     methods = METHODS if args.method == "all" else (args.method,)
+    if args.torques_csv is not None and args.method == "all":
+        raise CoopsimError("--torques-csv: name the resolution to export with --method")
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         study = solve_study(model, methods, duration=args.duration, bounds=(args.bound_force, args.bound_moment),
@@ -209,6 +211,12 @@ def _cmd_inverse(args) -> int:
                                      during=checks)
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
+    if args.torques_csv is not None:
+        from .torque_csv import write_torque_csvs
+
+        res = study.results[args.method]
+        paths = write_torque_csvs(args.torques_csv, model, res.t - res.t[0], res.tau)
+        print(f"wrote {', '.join(map(str, paths))}", file=sys.stderr if args.json else sys.stdout)
     return 0 if summary.get("complete", True) else 1
 
 
@@ -430,6 +438,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--replay", action="store_true",
                    help="feed each resolution's torques back through the forward dynamics and report the error")
     p.add_argument("--no-curve", action="store_true", help="skip the energy-against-bound sweep")
+    p.add_argument("--torques-csv", default=None, metavar="PREFIX",
+                   help="also write the torques of --method (one resolution) at the trajectory's samples as "
+                        "PREFIX_ARM.csv per arm, the files a scenario's torque: {csv: ...} reads")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .labels import arm_label
-from .model import Model, TorqueFunction, torque_at
+from .model import Model, TorqueFunction, applied_torque
 
 STEP_CHECK_SAMPLES = 64   # states at which a fixed rk4 step is checked by step doubling
 
@@ -237,9 +237,11 @@ def joint_limits(model: Model, t, q) -> list[RunWarning]:
                         " (the dynamics do not enforce joint limits)", joint=j + 1, angle_rad=q[i, j])]
 
 
-def _torques(model: Model, t: np.ndarray) -> np.ndarray:
+def _torques(model: Model, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """τ (S, n) at times t (S,) and states Y (S, 2n) (a controller in the loop reads the state)."""
     if isinstance(model.torques, TorqueFunction):
-        return np.array([torque_at(model.torques, ti) for ti in t])
+        n = model.n_total
+        return np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t, Y)])
     from .compiled.api import compiled, tabulated_torques
 
     return tabulated_torques(compiled(model).P, t)
@@ -253,7 +255,7 @@ def rk4_local_error(model: Model, t: np.ndarray, Y: np.ndarray, h: float) -> np.
     n = model.n_total
 
     def f(ts, Ys):
-        return np.hstack([Ys[:, n:], api.evaluate_states(model, Ys, _torques(model, ts)).qdd])
+        return np.hstack([Ys[:, n:], api.evaluate_states(model, Ys, _torques(model, ts, Ys)).qdd])
 
     def step(ts, Ys, dt):
         k1 = f(ts, Ys)

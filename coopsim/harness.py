@@ -1,22 +1,34 @@
 """Cross-validation harness: the native model and the MuJoCo twin, same scenario, same torques,
-same consistent initial state, same time grid; then the agreement metrics."""
+same consistent initial state, same time grid; then the agreement metrics. With a controller in the
+loop (scenario `control:`) each model runs its own closed loop (the controller fed its own state) and
+the controller's references, errors and torques are recorded along both runs."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Callable
 
+import numpy as np
+
 from .compare import Comparison, compare
-from .model import Model
+from .model import Model, TorqueTable, ValidationThresholds
 from .mujoco_run import TwinResult, run_twin
 from .simulate import SimResult, simulate
 
 
 @dataclass(frozen=True, eq=False)
 class CrossValidation:
+    """Both runs and their comparison; control: the controller along the native and the twin run
+    (`coopsim.control.Command` along the run, native first), None without a controller; replay: with a
+    controller, the twin driven open-loop by the native closed loop's torques (piecewise linear between
+    the native samples) compared with the native run — information, no thresholds (its error is the
+    tabulation's, and an unstable open loop, such as a pose held against gravity, drifts)."""
+
     native: SimResult
     twin: TwinResult
     comparison: Comparison
+    control: tuple | None = None
+    replay: Comparison | None = None
 
 
 def cross_validate(model: Model, duration: float | None = None, twin_model: Model | None = None,
@@ -28,4 +40,38 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
     native = simulate(model, progress=None if progress is None else lambda f: progress("native", f))
     twin = run_twin(twin_model or model, native.initial.q, native.initial.qd, native.t,
                     progress=None if progress is None else lambda f: progress("mujoco", f))
-    return CrossValidation(native, twin, compare(native, twin))
+    records = _control_records(native, twin, twin_model or model)
+    replay = None if records is None else _open_loop_replay(native, twin_model or model)
+    return CrossValidation(native, twin, compare(native, twin), records, replay)
+
+
+def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:
+    """The twin without its controller, fed the native closed loop's sampled torques, against the native
+    run (every threshold infinite: reported, never judged)."""
+    tables = tuple(TorqueTable(native.t, native.tau[:, sl]) for sl in twin_model.dof_slices)
+    open_loop = replace(twin_model, control=None, torques=tables)
+    twin = run_twin(open_loop, native.initial.q, native.initial.qd, native.t)
+    return compare(native, twin, ValidationThresholds(*(np.inf,) * len(fields(ValidationThresholds))))
+
+
+def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> tuple | None:
+    """The controllers of both runs evaluated at their samples (None without a controller)."""
+    from .control import closed_loop, controller_of, record
+
+    ctrl = controller_of(native.model)
+    if ctrl is None:
+        return None
+    twin_ctrl = controller_of(closed_loop(twin_model))
+    return record(ctrl, native.t, native.q, native.qd), record(twin_ctrl, twin.t, twin.q, twin.qd)
+
+
+def control_series(cv: CrossValidation) -> list:
+    """The log channels of the controllers (`coopsim.log.control_series`): /native/control and
+    /mujoco/control; none without a controller."""
+    from .log import control_series as series
+
+    if cv.control is None:
+        return []
+    law = cv.native.model.control.law
+    return [series(rec, res.t, prefix, law) for rec, res, prefix in
+            zip(cv.control, (cv.native, cv.twin), ("/native", "/mujoco"))]

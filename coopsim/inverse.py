@@ -169,15 +169,16 @@ class InverseResult:
     failures: tuple = ()
 
 
-def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.ndarray | None = None) -> InverseProblem:
+def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.ndarray | None = None,
+                    terms=None) -> InverseProblem:
     """Evaluate the terms of eqs. 28–32 at every sample of `traj`: the per-sample kinematics and arm
-    dynamics from the compiled kernel (`coopsim.compiled.api.inverse_terms`, batched over threads),
-    assembled here with array operations."""
+    dynamics from the compiled kernel (`coopsim.compiled.api.inverse_terms`, batched over threads, or
+    `terms` when the caller has them), assembled here with array operations."""
     from .compiled import api
 
     S, g = model.rows, model.gravity
     N, r, k = len(traj.t), model.r, model.rows.shape[0]
-    T = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
+    T = api.inverse_terms(model, traj.q, traj.qd, traj.qdd) if terms is None else terms
     JT = np.zeros((N, model.n_total, r * k))
     for m, sl in enumerate(model.dof_slices):
         JT[:, sl, m * k:(m + 1) * k] = np.swapaxes(S @ T.J[:, m, :, :sl.stop - sl.start], 1, 2)

@@ -630,6 +630,21 @@ def twin_series(tw, prefix: str = "/mujoco") -> list[Series]:
     ]
 
 
+def control_series(rec, t, prefix: str, law: str) -> Series:
+    """{prefix}/control of a controller along a run (`coopsim.control.Command` along the run): joint_pd
+    (coopsim.JointControl): reference_angle, reference_rate (N, n) rad, rad/s, angle_error (N, n) rad;
+    computed_torque (coopsim.ObjectControl): pose_error (N, 6) [m; rad], twist_error (N, 6) [m/s; rad/s]
+    world axes; both: command (N, n) N·m before saturation, torque (N, n) N·m applied, saturated (N, n)
+    bool."""
+    common = {"command": rec.raw, "torque": rec.tau, "saturated": rec.saturated}
+    if law == "joint_pd":
+        return Series(f"{prefix}/control", "coopsim.JointControl", t,
+                      {"reference_angle": rec.q_ref, "reference_rate": rec.qd_ref,
+                       "angle_error": rec.angle_error, **common})
+    return Series(f"{prefix}/control", "coopsim.ObjectControl", t,
+                  {"pose_error": rec.object_error, "twist_error": rec.object_rate_error, **common})
+
+
 def link_frame_names(model: Model, root: str) -> list[str]:
     """Frame names of every link, arm after arm: f"{root}/{arm.name}/l{i}" (joints stacked as q)."""
     return [f"{root}/{arm.name}/l{i}" for arm in model.arms for i in range(arm.n)]

@@ -21,7 +21,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .model import PRISMATIC, ArmModel, Model, MujocoSettings, torque_at
+from .control import closed_loop
+from .model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
 from .spatial import axis_angle_to_rot, rot_to_quat
 
 
@@ -96,13 +97,14 @@ KEYFRAME = "initial"
 
 
 def _add_keyframe(spec: mujoco.MjSpec, model: Model, q: np.ndarray, qd: np.ndarray):
-    """Keyframe `initial`: time 0, (q, qd) placed at the twin's qpos/dof addresses, ctrl τ(0)."""
+    """Keyframe `initial`: time 0, (q, qd) placed at the twin's qpos/dof addresses, ctrl τ(0) (a
+    controller's command there)."""
     m = spec.compile()
     qpos, qvel = m.qpos0.copy(), np.zeros(m.nv)
     qpos[qpos_address(m, model)], qvel[dof_address(m, model)] = q, qd
     ctrl = np.zeros(m.nu)
     ctrl[[m.actuator(f"a{a}_m{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)]] = \
-        torque_at(model.torques, 0.0)
+        applied_torque(closed_loop(model).torques, 0.0, q, qd)
     spec.add_key(name=KEYFRAME, time=0.0, qpos=qpos.tolist(), qvel=qvel.tolist(), ctrl=ctrl.tolist())
 
 

@@ -11,7 +11,7 @@ rate and effort are rad, rad/s, N·m (revolute) or m, m/s, N (prismatic).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable
 
@@ -99,6 +99,47 @@ class TorqueFunction:
     inverse-dynamics torques of a trajectory, replayed through the forward dynamics)."""
 
     fn: Callable[[float], np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueFeedback(TorqueFunction):
+    """Joint torques of a controller in the loop: fn(t, q, qd) -> stacked τ (n_total,) N·m from the time s
+    and the state the integrator is evaluating (every stage of the native reference engine, every RK4
+    stage of the MuJoCo twin). A notebook passes its own τ = u(t, q, q̇) as
+    `replace(model, torques=TorqueFeedback(u))`; a scenario's `control:` section builds one
+    (`coopsim.control.closed_loop`)."""
+
+    fn: Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class ControlSettings:
+    """A controller in the loop (scenario `control:`), added to the scenario's torque tables (which then
+    act as a disturbance). law: 'joint_pd' | 'computed_torque'.
+    joint_pd: τ = τ_comp + Kp (θ_r − θ) + Kd (θ̇_r − θ̇) with kp (n,) N·m/rad, kd (n,) N·m·s/rad;
+    compensation 'none' | 'gravity' (closed-chain inverse dynamics at (θ, 0, 0)) | 'bias' (at (θ, θ̇, 0)),
+    the object's share distributed by the resolution `distribution`; reference 'setpoint' (setpoint (n,)
+    rad, None: the consistent initial state) or 'object_motion' (the joint trajectory of
+    inverse.object_motion).
+    computed_torque: track inverse.object_motion with the object acceleration
+    a = a_r + Kd (v_r − v) + Kp e (object_kp, object_kd (2,): [linear, angular], 1/s² and 1/s), the
+    closed-chain inverse dynamics of that acceleration distributed by `distribution`, plus a squeeze
+    force (N, along each grasp line towards the centre of mass, in the null space of the grasp matrix).
+    mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =
+    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.capacity.torque_limits`)."""
+
+    law: str
+    kp: np.ndarray
+    kd: np.ndarray
+    compensation: str = "gravity"
+    distribution: str = "paper"
+    reference: str = "setpoint"
+    setpoint: np.ndarray | None = None
+    object_kp: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    object_kd: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    squeeze: float = 0.0
+    mass_scale: float = 1.0
+    saturate: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -258,6 +299,7 @@ class Model:
     validation: ValidationThresholds = ValidationThresholds()
     inverse: InverseSettings = InverseSettings()
     joint_range: np.ndarray | None = None
+    control: ControlSettings | None = None
 
     @property
     def r(self) -> int:
@@ -280,7 +322,9 @@ class Model:
 
 def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> np.ndarray:
     """Stacked joint torques τ(t) (n_total,) N·m, linear between table rows, held outside (or the
-    value of a TorqueFunction at t)."""
+    value of a TorqueFunction at t; a TorqueFeedback needs the state: `applied_torque`)."""
+    if isinstance(tables, TorqueFeedback):
+        raise ValueError("torques fed back from the state need it: use applied_torque(torques, t, q, qd)")
     if isinstance(tables, TorqueFunction):
         return np.asarray(tables.fn(t), dtype=float)
     parts = []
@@ -290,3 +334,12 @@ def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> n
         else:
             parts.append(np.array([np.interp(t, tab.times, col) for col in tab.values.T]))
     return np.concatenate(parts)
+
+
+def applied_torque(torques: "tuple[TorqueTable, ...] | TorqueFunction", t: float, q: np.ndarray,
+                   qd: np.ndarray) -> np.ndarray:
+    """Stacked joint torques (n_total,) N·m applied at time t in the state (q, qd): a TorqueFeedback's
+    value there, otherwise τ(t) (`torque_at`)."""
+    if isinstance(torques, TorqueFeedback):
+        return np.asarray(torques.fn(t, q, qd), dtype=float)
+    return torque_at(torques, t)

@@ -1,4 +1,4 @@
-"""Run the MuJoCo twin: replay the scenario's torques through MuJoCo from a given state.
+"""Run the MuJoCo twin: replay the scenario's torques (or its controller) through MuJoCo from a given state.
 
 MuJoCo's RK4 evaluates the control callback at every stage with the stage's time, so the twin sees
 the same continuous torque τ(t) as the native model (no zero-order hold).
@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from .mjcf import build_spec, dof_address, qpos_address
-from .model import CoopsimError, Model, TorqueFunction, torque_at
+from .model import CoopsimError, Model, TorqueFunction, applied_torque, torque_at
 from .results import SampledMotion
 
 
@@ -33,8 +33,9 @@ class TwinResult(SampledMotion):
 
 
 @contextlib.contextmanager
-def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray):
-    """Drive the twin's motors with τ(d.time): constant torques (every table a single row) are written
+def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.ndarray, dadr: np.ndarray):
+    """Drive the twin's motors with τ(d.time) (a controller in the loop: τ(d.time, q, q̇) from the twin's
+    own state at qpos/dof addresses qadr, dadr): constant torques (every table a single row) are written
     into d.ctrl once; otherwise a MuJoCo control callback writes them at every stage (restored on exit)."""
     if not isinstance(model.torques, TorqueFunction) and all(len(tab.times) == 1 for tab in model.torques):
         d.ctrl[ctrl_index] = torque_at(model.torques, 0.0)
@@ -42,7 +43,7 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray):
         return
 
     def callback(m, d):
-        d.ctrl[ctrl_index] = torque_at(model.torques, d.time)
+        d.ctrl[ctrl_index] = applied_torque(model.torques, d.time, d.qpos[qadr], d.qvel[dadr])
 
     mujoco.set_mjcb_control(callback)
     try:
@@ -61,7 +62,11 @@ def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
 
 def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
-    model.mujoco.timestep); `progress(fraction)` is called after each sample."""
+    model.mujoco.timestep); `progress(fraction)` is called after each sample. A `control:` section runs
+    its controller in the loop (`coopsim.control.closed_loop`), fed the twin's state at every RK4 stage."""
+    from .control import closed_loop
+
+    model = closed_loop(model)
     m = build_spec(model).compile()
     d = mujoco.MjData(m)
     qadr, dadr = qpos_address(m, model), dof_address(m, model)
@@ -78,7 +83,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     d.qpos[qadr], d.qvel[dadr], d.time = q0, qd0, t_out[0]
     start = time.perf_counter()
     vel = np.zeros(6)
-    with _control(model, d, ctrl):
+    with _control(model, d, ctrl, qadr, dadr):
         for i in range(N):
             if i:
                 mujoco.mj_step(m, d, int(steps[i - 1]))

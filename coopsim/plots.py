@@ -283,18 +283,24 @@ def _constraint_figure(log: LogData) -> Figure:
 
 
 def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[tuple]:
-    """The figures of `comparison_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
+    """The figures of `comparison_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE); a closed
+    loop's log adds `coopsim.plots_control`'s tracking_error.png and internal_force.png."""
+    from .plots_control import control_jobs
+
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
     jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)), (_joint_figure, (log, "rate", "rate", RATE, labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
-    return [(fn, args, Path(out_dir) / name) for (fn, args), name in zip(jobs, FILES)]
+    out = Path(out_dir)
+    return [(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)] + \
+        [(fn, args, out / name) for fn, args, name in control_jobs(log)]
 
 
 def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None,
                      workers: FigureWorkers | None = None) -> list[Path]:
-    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png into
-    out_dir (created if missing; each file replaced atomically) and return their paths. joint_names
+    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for
+    a closed loop, `coopsim.plots_control`'s tracking_error.png and internal_force.png) into out_dir
+    (created if missing; each file replaced atomically) and return their paths. joint_names
     (n,) labels the joints (default: `coopsim.labels` of the log's model metadata, else joint 1, joint 2,
     …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
     jobs = comparison_jobs(log, out_dir, joint_names)

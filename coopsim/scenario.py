@@ -28,8 +28,9 @@ import yaml
 
 from .joints import COORDINATE, joint_units
 from .kinematics import arm_pose, reach_check
-from .model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, CoopsimError, IntegratorSettings, InverseSettings,
-                    Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
+from .model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
+                    InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable,
+                    ValidationThresholds)
 from .spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
@@ -641,6 +642,51 @@ def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) ->
     return InverseSettings(trajectory, motion, masses, payload_pos, force, moment)
 
 
+def _gains(sec: _Section, key: str, n: int) -> np.ndarray:
+    """Non-negative gains (n,): one number for every joint, or one per joint."""
+    if isinstance(sec.raw(key), (int, float)) and not isinstance(sec.raw(key), bool):
+        return np.full(n, sec.number(key, nonneg=True))
+    return sec.array(key, (n,), nonneg=True)
+
+
+def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np.ndarray) -> ControlSettings | None:
+    """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
+    if sec is None:
+        return None
+    from .control import COMPENSATIONS, LAWS, REFERENCES
+    from .resolutions import METHODS
+
+    law = sec.string("law", LAWS)
+    if np.any(passive):
+        sec.fail("law", "a controller needs every joint actuated (arms[].passive has a passive joint)")
+    opts = dict(distribution=sec.string("distribution", METHODS, "paper"),
+                mass_scale=sec.number("mass_scale", 1.0, positive=True))
+    saturate = sec.raw("saturate", default=False)
+    if not isinstance(saturate, bool):
+        sec.fail("saturate", f"expected true or false, got {_show(saturate)}")
+    if law == "joint_pd":
+        kp, kd = _gains(sec, "kp", n), _gains(sec, "kd", n)
+        reference = sec.string("reference", REFERENCES, "setpoint")
+        setpoint = None
+        if sec.has("setpoint") or sec.has("setpoint_deg"):
+            if reference != "setpoint":
+                sec.fail("setpoint", "only with reference: setpoint")
+            setpoint = sec.angles("setpoint", (n,))
+        opts.update(compensation=sec.string("compensation", COMPENSATIONS, "gravity"), reference=reference,
+                    setpoint=setpoint)
+    else:
+        kp = kd = np.zeros(n)
+        reference = "object_motion"
+        opts.update(object_kp=sec.array("object_kp", (2,), nonneg=True),
+                    object_kd=sec.array("object_kd", (2,), nonneg=True),
+                    squeeze=sec.number("squeeze", 0.0), reference=reference)
+    if reference == "object_motion" and inverse.object_motion is None:
+        sec.fail("reference" if law == "joint_pd" else "law",
+                 "tracking an object motion needs the inverse.object_motion section")
+    sec.done()
+    return ControlSettings(law, kp, kd, saturate=saturate, **opts)
+
+
 def _object(sec: _Section, arms: list[ArmModel]):
     """Object inertia and grasps; grasps given explicitly or `derive` (from the initial state)."""
     mass, com, inertia, box = _body(sec)
@@ -882,16 +928,17 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     mujoco_settings = _mujoco(root.section("mujoco", default=None))
     validation = _validation(root.section("validation", default=None))
     inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms), arms)
+    motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
+    control = _control(root.section("control", default=None), sum(a.n for a in arms), inverse, motors.passive)
     root.done()
     _check_work(where, duration, duration_field, integrator, mujoco_settings, inverse)
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
     grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
     obj = ObjectModel(mass, inertia, box, grasp_pos, grasp_rot, carrier=order[0])
-    motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
     planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
     return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
                  tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse,
-                 joint_range=np.concatenate(ranges))
+                 joint_range=np.concatenate(ranges), control=control)
 
 
 def _arm_poses(arms: list[ArmModel], q: np.ndarray):

@@ -12,7 +12,9 @@
 Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the whole time loop in
 compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.integrate`, which lands on
 every output time; used for torques given as a Python function, and as the readable reference the
-compiled engine is tested against).
+compiled engine is tested against). A controller in the loop (`coopsim.control`, torques that read the
+state) runs on a third, 'stages': the reference time loop over the compiled stage kernels — the
+compiled time loop does not take controllers yet.
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ from .diagnostics import RunWarning, describe_state, run_warning
 from .grasp import grasp_matrix, internal_wrench
 from .integrate import IntegrationError, IntegratorStats, integrate
 from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
-from .model import CoopsimError, IntegratorSettings, Model, TorqueFunction, torque_at
+from .model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
+                    torque_at)
 from .results import SampledMotion
 from .spatial import rot_to_quat
 
@@ -138,7 +141,7 @@ def _rhs(model: Model, progress=None, warned: list | None = None):
         q, qd = y[:n], y[n:]
         if progress is not None:
             progress(min(1.0, t / model.duration) if model.duration > 0 else 1.0)
-        tau = torque_at(model.torques, t)
+        tau = applied_torque(model.torques, t, q, qd)
         try:
             with np.errstate(invalid="ignore", over="ignore"):
                 _, acc = forward(model, q, qd, tau)
@@ -177,7 +180,7 @@ def output_times(duration: float, dt: float) -> np.ndarray:
     return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)
 
 
-ENGINES = ("compiled", "reference")
+ENGINES = ("compiled", "reference", "stages")
 
 
 def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None,
@@ -185,7 +188,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
     scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
     called as the run advances. engine: 'compiled' or 'reference' (module docstring); torques given
-    as a TorqueFunction always run on the reference engine. fixed_step (s, compiled engine): run the
+    as a TorqueFunction (a controller in the loop too: `coopsim.control`) always run on the reference engine. fixed_step (s, compiled engine): run the
     method (DOP853 or DOPRI5 too) at fixed steps of at most this size, landing on every output time —
     for torques tabulated at exactly those steps' stage times (`coopsim.compiled.integrate.stage_times`)."""
     if settings is not None:
@@ -195,14 +198,19 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    if isinstance(model.torques, TorqueFunction):
+    from .control import closed_loop
+
+    model = closed_loop(model)
+    if isinstance(model.torques, TorqueFeedback) and engine == "compiled":
+        engine = "stages"
+    elif isinstance(model.torques, TorqueFunction) and engine != "stages":
         engine = "reference"
     init = initial_state(model, engine)
     t_out = output_times(model.duration, model.integrator.output_dt)
-    if engine == "reference":
+    if engine != "compiled":
         if fixed_step is not None:
             raise ValueError("fixed_step needs the compiled engine and tabulated torques")
-        res = _simulate_reference(model, init, t_out, progress, start)
+        res = _simulate_reference(model, init, t_out, progress, start, stages=engine == "stages")
     else:
         res = _simulate_compiled(model, init, t_out, progress, start, fixed_step)
     _check_conditioning(res)
@@ -244,11 +252,17 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
     smp = api.sample_states(model, t_out, run.Y)
     stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
                             n_projections=run.counts[3])
-    return SimResult(model=model, t=t_out, q=run.Y[:, :n], qd=run.Y[:, n:], qdd=smp.qdd, tau=smp.tau,
+    return _sampled_result(model, t_out, run.Y, smp, init, stats, start, events)
+
+
+def _sampled_result(model: Model, t_out, Y, smp, init: Projection, stats, start: float, events) -> SimResult:
+    """The SimResult of states Y (N, 2n) at t_out sampled by the compiled sampler (`smp`)."""
+    n = model.n_total
+    return SimResult(model=model, t=t_out, q=Y[:, :n], qd=Y[:, n:], qdd=smp.qdd, tau=smp.tau,
                      object_pos=smp.object_pos, object_quat=smp.object_quat, object_twist=smp.object_twist,
                      object_acc=smp.object_acc, grasp_wrench=smp.grasp_wrench, internal_wrench=smp.internal_wrench,
                      residual_pos=smp.residual_pos, residual_vel=smp.residual_vel, cond=smp.cond, initial=init,
-                     stats=stats, wall_time=time.perf_counter() - start, events=events)
+                     stats=stats, wall_time=time.perf_counter() - start, events=tuple(events))
 
 
 def _compiled_reason(model: Model, run) -> str:
@@ -267,9 +281,13 @@ def _compiled_reason(model: Model, run) -> str:
     return reason
 
 
-def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
-    """The reference engine: `coopsim.integrate` over the plain-NumPy stages, landing on every output."""
+def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
+                        stages: bool = False) -> SimResult:
+    """The reference engine: `coopsim.integrate` over the plain-NumPy stages, landing on every output
+    (stages: over the compiled stage kernels, sampled by the compiled sampler — the 'stages' engine)."""
     s = model.integrator
+    if stages:
+        return _simulate_stages(model, init, t_out, progress, start)
     project = _projector(model) if s.stabilization == "projection" else None
     step = s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
     events: list = []
@@ -282,6 +300,44 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
     return replace(_sample(model, t_out, Y, init, stats, time.perf_counter() - start), events=tuple(events))
 
 
+def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
+    """The 'stages' engine: the reference time loop (`coopsim.integrate`, landing on every output) with
+    the compiled closed-chain evaluation (`coopsim.compiled.api.forward`) and projection at each stage,
+    the torques evaluated in Python there (a controller in the loop); the compiled sampler reports."""
+    from .compiled import api
+
+    s, n = model.integrator, model.n_total
+    events: list = []
+
+    def rhs(t, y):
+        q, qd = y[:n], y[n:]
+        if progress is not None:
+            progress(min(1.0, t / model.duration) if model.duration > 0 else 1.0)
+        ev = api.forward(model, q, qd, applied_torque(model.torques, t, q, qd))
+        if ev.status == api.chain.RANK_DEFICIENT and model.integrator.on_rank_deficiency != "error":
+            if not events:
+                events.append(_rank_event(t, q, ev.rank, float(api.compiled(model).W.cond[0]), stacklevel=2))
+        elif ev.status:
+            raise SimulationError(f"simulation failed at {describe_state(t, q)}: {api.REASONS[ev.status]}")
+        return np.concatenate([qd, ev.qdd])
+
+    def project(t, y):
+        try:
+            p = api.consistent_state(model, y[:n], y[n:])
+        except ConstraintError as exc:
+            raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
+        return np.concatenate([p.q, p.qd])
+
+    step = s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
+    try:
+        Y, stats = integrate(rhs, np.concatenate([init.q, init.qd]), t_out, method=s.method, rtol=s.rtol,
+                             atol=s.atol, step=step, project=project if s.stabilization == "projection" else None)
+    except IntegrationError as exc:
+        raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+    tau = np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
+    return _sampled_result(model, t_out, Y, api.sample_states(model, t_out, Y, tau), init, stats, start, events)
+
+
 def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:
     """Evaluate every reported quantity at the output samples."""
     n, N, r = model.n_total, len(t), model.r
@@ -291,7 +347,7 @@ def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats,
         ("residual_vel", ()), ("cond", ())]}
     for i, (ti, y) in enumerate(zip(t, Y)):
         q, qd = y[:n], y[n:]
-        tau = torque_at(model.torques, ti)
+        tau = applied_torque(model.torques, ti, q, qd)
         terms, acc = forward(model, q, qd, tau)
         W = [grasp_matrix(s) for s in terms.s]
         out["qdd"][i], out["tau"][i] = acc.qdd, tau

@@ -70,7 +70,25 @@ def run_summary(cv, log_path, plots) -> dict:
         "mujoco": {"timestep_s": cv.native.model.mujoco.timestep, "integrator": cv.native.model.mujoco.integrator,
                    "weld_solref": list(cv.native.model.mujoco.solref())},
         "files": {"log": str(log_path), "plots": [str(p) for p in plots]},
-    }
+    } | ({} if cv.control is None else {"control": control_summary(cv)})
+
+
+def control_summary(cv) -> dict:
+    """The controller along both runs: law, peak tracking error (joint angles rad, or object position m
+    and orientation rad) at the last sample and over the run, saturation events (sample × joint), and the
+    largest differences of the open-loop replay (`coopsim.harness.CrossValidation.replay`)."""
+    out = {"law": cv.native.model.control.law}
+    for who, rec in zip(("native", "mujoco"), cv.control):
+        if out["law"] == "joint_pd":
+            err = {"angle_rad": np.max(np.abs(rec.angle_error), axis=1)}
+        else:
+            err = {"position_m": np.linalg.norm(rec.object_error[:, :3], axis=1),
+                   "orientation_rad": np.linalg.norm(rec.object_error[:, 3:], axis=1)}
+        out[who] = {"max_error": {k: float(v.max()) for k, v in err.items()},
+                    "final_error": {k: float(v[-1]) for k, v in err.items()},
+                    "saturation_events": rec.saturation_events}
+    out["open_loop_replay_max"] = {m.name: m.max for m in cv.replay.metrics[:4]}
+    return out
 
 
 def format_simulation_summary(s: dict) -> str:

@@ -1,0 +1,272 @@
+"""Controllers in the loop (scenario `control:`, `coopsim.model.ControlSettings`).
+
+Each law is a pure function of the time and the state the integrator evaluates, τ = u(t, θ, θ̇); the
+scenario's torque tables are added to it (they act as a disturbance), then the motor lines of eq. 36
+clip it when `saturate` is set:
+
+  * joint_pd:  τ = τ_comp(θ, θ̇) + Kp (θ_r − θ) + Kd (θ̇_r − θ̇), with τ_comp the closed-chain inverse
+    dynamics (`coopsim.inverse`) at (θ, 0, 0) ('gravity') or (θ, θ̇, 0) ('bias'), the object's share
+    distributed by a redundancy resolution (`coopsim.resolutions`); θ_r a set-point on the loop-closure
+    manifold or the joint trajectory of a prescribed object motion.
+  * computed_torque: the object acceleration a = a_r + Kd (v_r − v) + Kp e (pose error e = [p_r − p;
+    log(R_r Rᵀ)], world axes) is turned into the arms' joint accelerations by differential kinematics
+    (`coopsim.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
+    the resolution gives τ; a squeeze force f_s along each grasp line (towards the centre of mass) is
+    added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion.
+    With a perfect model and zero initial error this is the inverse-dynamics feedforward of the
+    prescribed motion.
+
+The compiled time loop (`coopsim.compiled.integrate`) does not take controllers: a model with a
+controller runs on the reference engine (`simulate(…, engine="reference")`, chosen by itself) and, in
+the MuJoCo twin, through the control callback at every RK4 stage (`coopsim.mujoco_run`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from functools import cached_property
+
+import numpy as np
+
+from .model import CoopsimError, ControlSettings, Model, TorqueFeedback, torque_at
+
+LAWS = ("joint_pd", "computed_torque")
+COMPENSATIONS = ("none", "gravity", "bias")
+REFERENCES = ("setpoint", "object_motion")
+
+
+class ControlError(CoopsimError):
+    """A controller cannot be built for this scene (one line naming the field)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Command:
+    """A controller's evaluation at one state (arrays as below) or along a run (each with a leading
+    sample axis N, `record`): reference q_ref, qd_ref (n,) rad, rad/s and angle_error = q_ref − q (n,)
+    rad (joint_pd; nan for computed_torque); object pose error (6,) [m; rad] and twist error (6,)
+    [m/s; rad/s] against the reference (computed_torque; nan for joint_pd); raw (n,) N·m the command
+    before saturation (disturbance tables included); tau (n,) N·m what the motors apply."""
+
+    q_ref: np.ndarray
+    qd_ref: np.ndarray
+    angle_error: np.ndarray
+    object_error: np.ndarray
+    object_rate_error: np.ndarray
+    raw: np.ndarray
+    tau: np.ndarray
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """bool, shaped as tau: the joints whose command the motor lines clipped."""
+        return self.raw != self.tau
+
+    @property
+    def saturation_events(self) -> int:
+        """How many (sample, joint) pairs the motor lines clipped."""
+        return int(np.count_nonzero(self.saturated))
+
+
+def saturate(motors, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.capacity.torque_limits`)."""
+    from .capacity import torque_limits
+
+    lo, hi = torque_limits(motors, qd)
+    return np.minimum(np.maximum(tau, lo), hi)
+
+
+def pd_torque(kp: np.ndarray, kd: np.ndarray, q_ref, qd_ref, q, qd) -> np.ndarray:
+    """Kp (θ_r − θ) + Kd (θ̇_r − θ̇) (n,) N·m with diagonal gains kp, kd (n,)."""
+    return kp * (q_ref - q) + kd * (qd_ref - qd)
+
+
+def object_acceleration(kp: np.ndarray, kd: np.ndarray, err: np.ndarray, rate_err: np.ndarray,
+                        acc_ref: np.ndarray) -> np.ndarray:
+    """a = a_r + Kd ė + Kp e (6,) [v̇; ω̇] with gains [linear, angular] kp (2,) 1/s², kd (2,) 1/s."""
+    return acc_ref + np.repeat(kd, 3) * rate_err + np.repeat(kp, 3) * err
+
+
+def pose_error(p_ref, R_ref, p, R) -> np.ndarray:
+    """[p_r − p; log(R_r Rᵀ)] (6,) m and rad, world axes."""
+    from .spatial import rot_log
+
+    return np.concatenate([p_ref - p, rot_log(R_ref @ R.T)])
+
+
+def joint_accelerations(rows: np.ndarray, J: np.ndarray, Jd_qd: np.ndarray, rho: np.ndarray, twist: np.ndarray,
+                        acc: np.ndarray, n: list[int]) -> np.ndarray:
+    """Stacked θ̈ of the arms that give the object the acceleration acc = [a_C; ω̇] (6,) at twist
+    [v_C; ω] (6,): each grasp point ρ_m (r, 3) from C accelerates as a_C + ω̇ × ρ + ω × (ω × ρ), and
+    S J_m θ̈_m = S (a_EE,m − J̇_m θ̇_m) in the rows S (k, 6) (square arms; J (r, 6, nmax), Jd_qd (r, 6),
+    n: joints per arm)."""
+    from .spatial import rigid_acceleration
+
+    out = []
+    for m, nm in enumerate(n):
+        a_ee = np.concatenate([rigid_acceleration(acc[:3], twist[3:], acc[3:], rho[m]), acc[3:]])
+        out.append(np.linalg.solve(rows @ J[m][:, :nm], rows @ (a_ee - Jd_qd[m])))
+    return np.concatenate(out)
+
+
+def squeeze_wrenches(grasp_offset: np.ndarray, rows: np.ndarray, A: np.ndarray, force: float) -> np.ndarray:
+    """Grasp wrenches f (rk,) in the rows S of a squeeze: each grasp pushes `force` N towards the centre
+    of mass along its grasp line (offset ρ_m = p_grasp − p_C (r, 3)), projected on the null space of
+    A (k × rk, the net object wrench of f) so that the net wrench is zero."""
+    if force == 0.0:
+        return np.zeros(A.shape[1])
+    norm = np.linalg.norm(grasp_offset, axis=1, keepdims=True)
+    u = grasp_offset / np.where(norm > 0, norm, 1.0)                         # a grasp at C: no line, no push
+    F = np.concatenate([-force * u, np.zeros_like(u)], axis=1) @ rows.T      # (r, k)
+    f = F.reshape(-1)
+    return f - A.T @ np.linalg.solve(A @ A.T, A @ f)
+
+
+class Controller:
+    """The controller of `settings` over the controller's own model `plant` (the scene, its object mass
+    scaled by settings.mass_scale), with the scene's torque tables added. Built lazily: the set-point
+    projection and the reference trajectory are computed on first use. Call it as u(t, q, qd) -> τ."""
+
+    def __init__(self, model: Model):
+        self.model, self.settings = model, model.control
+        self.plant = _controller_model(model, model.control.mass_scale)
+        k = model.rows.shape[0]
+        if self.settings.law == "computed_torque" and any(arm.n != k for arm in model.arms):
+            arm = next(a for a in model.arms if a.n != k)
+            raise ControlError(f"control.law: computed_torque needs as many joints per arm as constrained rows "
+                               f"(arm {arm.name!r} has {arm.n} joints for {k} rows)")
+
+    @cached_property
+    def resolution(self):
+        from .inverse import resolution_for
+
+        return resolution_for(self.plant, self.settings.distribution)
+
+    @cached_property
+    def setpoint(self) -> np.ndarray:
+        """The set-point on the loop-closure manifold: control.setpoint (default the scenario's initial
+        angles) projected as the initial state is; ControlError when that moves it by more than
+        integrator.max_initial_correction."""
+        from .closed_chain import ConstraintError
+        from .compiled.api import consistent_state
+
+        s = self.settings
+        field, q = ("arms[].initial", self.model.q0) if s.setpoint is None else ("control.setpoint", s.setpoint)
+        try:
+            proj = consistent_state(self.model, q, np.zeros_like(q))
+        except ConstraintError as exc:
+            raise ControlError(f"{field}: the arms cannot close the loop at the set-point: {exc}") from None
+        worst, limit = float(np.max(np.abs(proj.dq))), self.model.integrator.max_initial_correction
+        if worst > limit:
+            raise ControlError(f"{field}: closing the loop at the set-point needs a joint correction of {worst:.4g} "
+                               f"rad (> integrator.max_initial_correction = {limit:g} rad)")
+        return proj.q
+
+    @cached_property
+    def trajectory(self):
+        from .trajectory import object_motion_trajectory
+
+        return object_motion_trajectory(self.model, self.model.inverse.object_motion)
+
+    def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(θ_r, θ̇_r) (n,) of joint_pd at time t."""
+        if self.settings.reference == "setpoint":
+            return self.setpoint, np.zeros_like(self.setpoint)
+        from .trajectory import trajectory_at
+
+        q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
+        return q, qd
+
+    def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0):
+        """(τ (n,), problem) of the closed-chain inverse dynamics at one state, the object's wrench
+        distributed by the resolution, a squeeze added in the null space of the grasp matrix."""
+        from .inverse import distribute, inverse_problem, torques_of
+        from .trajectory import JointTrajectory
+
+        traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
+        prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
+        f = distribute(prob, prob.y, self.resolution)
+        if squeeze:
+            f = f + squeeze_wrenches(prob.grasp_offset[0], prob.rows, prob.A[0], squeeze)[None]
+        return torques_of(prob, f)[0], prob
+
+    @cached_property
+    def _kernel(self):
+        from .compiled import api
+        from .compiled.packing import workspace
+        from .compiled.structs import to_struct
+
+        P, _, Ps, _ = api.compiled(self.plant)
+        W = workspace(P)
+        return Ps, to_struct(W), W, int(P.dof[-1]), len(P.dof) - 1, int(np.max(np.diff(P.dof)))
+
+    def _terms(self, Q, QD, QDD):
+        """The compiled inverse-dynamics terms of one state (Q, QD, QDD (1, n)) on this controller's own
+        workspace (as `coopsim.compiled.api.inverse_terms`, without a workspace built per call)."""
+        from .compiled import sample
+
+        Ps, ws, _, n, r, nmax = self._kernel
+        out = sample.new_inverse_terms(1, n, r, nmax)
+        sample.inverse_terms(Ps, ws, Q, QD, QDD, out)
+        return out
+
+    def command(self, t: float, q: np.ndarray, qd: np.ndarray) -> Command:
+        """The whole evaluation at (t, q, qd) (`Command`)."""
+        s, n = self.settings, len(q)
+        nan6, nan_n = np.full(6, np.nan), np.full(n, np.nan)
+        if s.law == "joint_pd":
+            q_ref, qd_ref = self.reference(t)
+            u = pd_torque(s.kp, s.kd, q_ref, qd_ref, q, qd)
+            if s.compensation != "none":
+                u = u + self.inverse_dynamics(q, qd if s.compensation == "bias" else np.zeros(n), np.zeros(n))[0]
+            e, ed = nan6, nan6
+        else:
+            q_ref, qd_ref = nan_n, nan_n
+            u, e, ed = self._computed_torque(t, q, qd)
+        raw = u + torque_at(self.model.torques, t)
+        tau = saturate(self.model.motors, raw, qd) if s.saturate else raw
+        return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
+
+    def _computed_torque(self, t, q, qd):
+        from .trajectory import object_motion_at
+
+        s, m = self.settings, self.plant
+        state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
+        W = self._kernel[2]                      # J, J̇θ̇ of every arm at (q, qd), from that evaluation
+        p, R, v = state.p_C[0], state.R_o[0], state.twist[0]
+        motion = m.inverse.object_motion
+        p_r, R_r, v_r, a_r = object_motion_at(motion, motion.times[0] + t)
+        e, ed = pose_error(p_r, R_r, p, R), v_r - v
+        a = object_acceleration(s.object_kp, s.object_kd, e, ed, a_r)
+        qdd = joint_accelerations(m.rows, W.J, W.Jd_qd, -state.s[0], v, a, [sl.stop - sl.start for sl in m.dof_slices])
+        return self.inverse_dynamics(q, qd, qdd, s.squeeze)[0], e, ed
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        return self.command(t, q, qd).tau
+
+
+def _controller_model(model: Model, mass_scale: float) -> Model:
+    """The model the controller believes in: the object's mass and inertia times mass_scale."""
+    if mass_scale == 1.0:
+        return model
+    obj = model.object
+    return replace(model, object=replace(obj, mass=obj.mass * mass_scale, inertia=obj.inertia * mass_scale))
+
+
+def closed_loop(model: Model) -> Model:
+    """The model with its `control:` section in the loop: torques a TorqueFeedback of its Controller
+    (the model itself when it has no controller or already feeds back)."""
+    if model.control is None or isinstance(model.torques, TorqueFeedback):
+        return model
+    return replace(model, torques=TorqueFeedback(Controller(model)))
+
+
+def controller_of(model: Model) -> Controller | None:
+    """The Controller a closed-loop model feeds back through (None for any other torque)."""
+    fn = getattr(model.torques, "fn", None)
+    return fn if isinstance(fn, Controller) else None
+
+
+def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
+    """The controller evaluated at every sample (t (N,), q, qd (N, n)) of a run: a Command of (N, …)
+    arrays."""
+    cmds = [controller.command(float(ti), qi, qdi) for ti, qi, qdi in zip(t, q, qd)]
+    return Command(**{f.name: np.array([getattr(c, f.name) for c in cmds]) for f in fields(Command)})
