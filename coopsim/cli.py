@@ -63,7 +63,8 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
         return write_mcap(stage / log_name, streams, meta)
 
     with staged_folder(out, replaces=_previous_set(index)) as stage:
-        plots, log_path = render_while(lambda: draw(log_data(streams, meta), stage, workers=workers), work)
+        plots, log_path = render_while(lambda: draw(log_data(streams, meta, messages=False), stage, workers=workers),
+                                       work)
         log_path, plots = out / log_path.name, [out / p.name for p in plots]
         write_text_atomic(stage / index, summarize(log_path, plots))
     return log_path, plots

@@ -293,21 +293,23 @@ def write_mcap(path: str | Path, series: Sequence[Series | JsonTopic],
     return Path(path)
 
 
-def log_data(streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str, str]] | None = None) -> LogData:
+def log_data(streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str, str]] | None = None,
+             messages: bool = True) -> LogData:
     """The LogData that `read_mcap` gives back for a log written by `write_mcap(path, streams, metadata)`,
     built in memory (what the commands draw their figures from while the file is written): series as
-    float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them. Checked as `write_mcap`
-    checks them; tests/test_log.py compares it with the file read back."""
-    topics, schemas, messages = {}, {}, {}
+    float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them (`messages` False: left
+    out, e.g. the thousands of /tf transforms no figure draws). Checked as `write_mcap` checks them;
+    tests/test_log.py compares it with the file read back."""
+    topics, schemas, decoded = {}, {}, {}
     for st in streams:
         if isinstance(st, Series):
             _check_series(st)
             topics[st.topic] = {"t": np.array(st.t, dtype=np.float64)} | {
                 k: np.array(a, dtype=_DTYPE[_LEAF[a.dtype.kind]]) for k, a in st.fields.items()}
-        else:
-            messages[st.topic] = [json.loads(m) for m in _stream_parts(st)[2]]
+        elif messages:
+            decoded[st.topic] = [json.loads(m) for m in _stream_parts(st)[2]]
         schemas[st.topic] = st.schema_name
-    return LogData({k: dict(v) for k, v in (metadata or {}).items()}, topics, schemas, messages)
+    return LogData({k: dict(v) for k, v in (metadata or {}).items()}, topics, schemas, decoded)
 
 
 def _unwrap_rows(v: Any, depth: int) -> Any:

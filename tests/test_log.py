@@ -136,6 +136,9 @@ def test_log_data_in_memory_equals_the_file_read_back(run, logged):
     path, data = logged
     streams, meta = L.run_log(model, res, tw, metadata_extra={"scenario_file": SCENARIO_FILE, "note": "test"})
     _assert_same_log(L.log_data(streams, meta), data)
+    bare = L.log_data(streams, meta, messages=False)          # what the commands draw from: no /tf, /scene
+    assert bare.messages == {} and bare.schemas == data.schemas
+    _assert_same_log(dataclasses.replace(bare, messages=data.messages), data)
 
 
 def test_log_data_of_edge_cases_equals_the_file_read_back(tmp_path):
