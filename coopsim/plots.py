@@ -305,4 +305,4 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
     jobs = comparison_jobs(log, out_dir, joint_names)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
-    return render_figures(jobs, workers)
+    return render_figures(jobs, workers, first=(FILES.index("object_motion.png"),))   # six panels: twice the others' time

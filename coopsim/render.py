@@ -99,11 +99,15 @@ class FigureWorkers:
                                             initializer=_warm_up if warm else None)
             self.pool.submit(int)   # a fork-context pool starts all its workers at the first submit
 
-    def render(self, jobs: list) -> list[Path]:
-        """Write every job's figure; returns the paths in job order. A builder's error is raised here."""
+    def render(self, jobs: list, first: tuple[int, ...] = ()) -> list[Path]:
+        """Write every job's figure; returns the paths in job order. The jobs numbered in `first` (the
+        costliest) are handed out before the others, so that the workers finish together. A builder's
+        error is raised here."""
         if self.pool is None or len(jobs) < 2:
             return [Path(_render(job)) for job in jobs]
-        return [Path(p) for p in self.pool.map(_render, jobs)]
+        order = [i for i in first if i < len(jobs)] + [i for i in range(len(jobs)) if i not in first]
+        done = {i: self.pool.submit(_render, jobs[i]) for i in order}
+        return [Path(done[i].result()) for i in range(len(jobs))]
 
     def close(self, stop: bool = False) -> None:
         """Shut the workers down: after their jobs, or (stop) at once, e.g. when the command failed."""
@@ -132,9 +136,10 @@ def render_while(draw: Callable[[], list[Path]], work: Callable[[], T]) -> tuple
         return figures.result(), done
 
 
-def render_figures(jobs: list, workers: FigureWorkers | None = None) -> list[Path]:
-    """Write the figures of `jobs` on `workers` (default: workers started for this call only)."""
+def render_figures(jobs: list, workers: FigureWorkers | None = None, first: tuple[int, ...] = ()) -> list[Path]:
+    """Write the figures of `jobs` on `workers` (default: workers started for this call only), the jobs
+    numbered in `first` handed out first (`FigureWorkers.render`); paths in job order."""
     if workers is not None:
-        return workers.render(jobs)
+        return workers.render(jobs, first)
     with FigureWorkers(min(2, len(jobs)), warm=False) as own:
-        return own.render(jobs)
+        return own.render(jobs, first)

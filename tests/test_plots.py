@@ -193,3 +193,27 @@ def test_prismatic_coordinates_are_not_unwrapped(logs):
         np.testing.assert_array_equal(line.get_ydata(), log.topics[prefix + "/joint_state"]["angle"][:, 0])
     wrapped_rev = log.topics["/native/joint_state"]["angle"][:, 3]
     np.testing.assert_allclose(arm2.lines[0].get_ydata(), np.unwrap(wrapped_rev), rtol=0, atol=0)
+
+
+def test_costly_figures_are_handed_out_first_and_paths_keep_job_order():
+    """`FigureWorkers.render(jobs, first)`: the jobs in `first` go to the workers before the others (a
+    recording pool stands in for the processes); the paths come back in job order."""
+    from concurrent.futures import Future
+
+    from coopsim.render import FigureWorkers
+
+    submitted = []
+
+    class Pool:
+        def submit(self, fn, job):
+            submitted.append(job[2])
+            done = Future()
+            done.set_result(job[2])
+            return done
+
+    workers = FigureWorkers(n=0)
+    workers.pool = Pool()
+    jobs = [(None, (), f"{name}.png") for name in ("angles", "rates", "object", "constraint")]
+    assert [p.name for p in workers.render(jobs, first=(2,))] == ["angles.png", "rates.png", "object.png", "constraint.png"]
+    assert submitted == ["object.png", "angles.png", "rates.png", "constraint.png"]
+    workers.pool = None
