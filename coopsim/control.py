@@ -28,7 +28,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .model import CoopsimError, ControlSettings, Model, TorqueFeedback, torque_at
+from .model import CoopsimError, Model, TorqueFeedback, torque_at
 
 LAWS = ("joint_pd", "computed_torque")
 COMPENSATIONS = ("none", "gravity", "bias")

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from coopsim.log import read_mcap
-from conftest import SCENARIOS, run_cli
+from conftest import run_cli
 
 
 

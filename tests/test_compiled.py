@@ -18,7 +18,7 @@ from coopsim.compiled.structs import PACKED_FIELDS, LOOP_FIELDS, TABLEAU_FIELDS,
 from coopsim.compiled.packing import PackedModel, Workspace
 from coopsim import integrate as ref_integrate
 from coopsim.model import TorqueTable, torque_at
-from coopsim.simulate import SimulationError, initial_state, simulate
+from coopsim.simulate import SimulationError, simulate
 from conftest import SCENARIOS, consistent_states, rel_err
 from coopsim.scenario import load_scenario
 

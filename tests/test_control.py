@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.control import Controller, closed_loop, controller_of, record
+from coopsim.control import Controller, record
 from coopsim.compare import compare
 from coopsim.harness import control_series, cross_validate
 from coopsim.log import log_data

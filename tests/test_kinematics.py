@@ -1,6 +1,5 @@
 """Stage 1 — kinematics against MuJoCo's forward kinematics and Jacobians (mj_jac, mj_jacDot)."""
 
-import numpy as np
 import pytest
 
 from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian
