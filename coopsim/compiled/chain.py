@@ -28,10 +28,12 @@ from .jit import kernel
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from ..model import PRISMATIC
 from .packing import STAB_BAUMGARTE
+from .schur import constraint_trace, group_arm, schur_factor, schur_solve
 from .spatial import rot_log
 from .structs import borrow
 
 OK, NOT_PD, RANK_DEFICIENT, NON_FINITE = 0, 1, 2, 3
+EIGEN, DENSE, SCHUR = 0, 1, 2   # the constraint solve's paths (`chain_solve`)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -519,9 +521,53 @@ def loop_residual(P, W):
 
 
 @kernel
+def constraint_rhs(P, W, stab):
+    """b = Λ̇θ̇ + stab + Yᵀz (K,) into W.b (W.X = Yᵀ, W.x0 = z of `chain_solve`): row group g over
+    the columns of its arm and the carrier's only."""
+    dof, c, k = P.dof, P.carrier, P.rows.shape[0]
+    Yt, z, b, Ldq = W.X, W.x0, W.b, W.Lam_dot_qd
+    oc, ec = dof[c], dof[c + 1]
+    for g in range(len(dof) - 2):
+        m = group_arm(g, c)
+        om, em = dof[m], dof[m + 1]
+        for i in range(g * k, g * k + k):
+            v = Ldq[i] + stab[i]
+            for j in range(oc, ec):
+                v += Yt[i, j] * z[j]
+            for j in range(om, em):
+                v += Yt[i, j] * z[j]
+            b[i] = v
+
+
+@kernel
+def constraint_matrix(P, W):
+    """A = Λ𝐈⁻¹Λᵀ = YᵀY (K, K) into W.A, from W.X = Yᵀ: the dense path of `chain_solve` (when the
+    `schur` path is not certified) and the reported condition number. Rows g·k + i and l share the
+    carrier's columns, and the arm's when l is in the same group."""
+    dof, c, k = P.dof, P.carrier, P.rows.shape[0]
+    Yt, A = W.X, W.A
+    K = A.shape[0]
+    oc, ec = dof[c], dof[c + 1]
+    for g in range(len(dof) - 2):
+        m = group_arm(g, c)
+        om, em, i0 = dof[m], dof[m + 1], g * k
+        for i in range(i0, i0 + k):
+            for l in range(i, K):
+                a = 0.0
+                for j in range(oc, ec):
+                    a += Yt[i, j] * Yt[l, j]
+                if l < i0 + k:
+                    for j in range(om, em):
+                        a += Yt[i, j] * Yt[l, j]
+                A[i, l] = a
+                A[l, i] = a
+
+
+@kernel
 def solve_constraints(P, W, K):
     """F ← (Λ𝐈⁻¹Λᵀ)⁻¹ b (W.A, W.b): pivoted Cholesky when the pivots prove full rank, else the
-    minimum-norm eigen solution. Sets W.rank, W.cond (−1: not computed on the fast path)."""
+    minimum-norm eigen solution. Sets W.rank, W.cond (−1: not computed on the fast path). Returns
+    whether the Cholesky path was taken."""
     rank_tol = P.rank_tol
     A, A_f, perm, b, yK, F, rank_, cond_ = W.A, W.A_f, W.perm, W.b, W.yK, W.F, W.rank, W.cond
     ratio = pivoted_cholesky(A, A_f, perm, K)
@@ -547,7 +593,9 @@ def chain_solve(P, W, tau, stab):
     With 𝐈 = L Lᵀ (block by block: W.Lb, the reciprocals of its diagonal in W.Lb_inv, so that the
     substitutions multiply), Yᵀ = Λ L⁻ᵀ (W.X, K × N) and z = L⁻¹(τ − h) (W.x0):
         (Λ𝐈⁻¹Λᵀ) F = YᵀY F = Λ̇θ̇ + stab + Yᵀz,   θ̈ = 𝐈⁻¹(τ − h − ΛᵀF) = L⁻ᵀ(z − Y F);
-    refinement: F += (YᵀY)⁻¹ (Λθ̈ + Λ̇θ̇ + stab), and θ̈ again from the refined F. Row group g of Λ
+    refinement: F += (YᵀY)⁻¹ (Λθ̈ + Λ̇θ̇ + stab), and θ̈ again from the refined F. YᵀY is solved in
+    O(r) by its block structure (`schur`) for three arms or more where that is certified, else formed (`constraint_matrix`)
+    and solved densely (`solve_constraints`), which also decides the rank. Row group g of Λ
     (rows g·k … g·k + k − 1, arm m_g = the g-th arm other than the carrier c) is zero outside the
     columns of m_g and c, and so is row g·k + i of Yᵀ: every product runs over those blocks only.
     The factor is formed row by row (the same entries and sums as column by column), each row
@@ -595,29 +643,14 @@ def chain_solve(P, W, tau, stab):
                 for t in range(j):
                     v -= L[j, t] * Ym[i, t]
                 Ym[i, j] = v * inv
-    # A = YᵀY (the arm's columns only within a row group), b = Λ̇θ̇ + stab + Yᵀz
-    Yc, zc = Yt[:, oc:ec], z[oc:ec]
-    for g in range(r - 1):
-        mg = g + 1 if g >= c else g
-        om, em, i0 = dof[mg], dof[mg + 1], g * k
-        Ym, zm = Yt[:, om:em], z[om:em]
-        for i in range(i0, i0 + k):
-            v = Ldq[i] + stab[i]
-            for j in range(ec - oc):
-                v += Yc[i, j] * zc[j]
-            for j in range(em - om):
-                v += Ym[i, j] * zm[j]
-            b[i] = v
-            for l in range(i, K):
-                a = 0.0
-                for j in range(ec - oc):
-                    a += Yc[i, j] * Yc[l, j]
-                if l < i0 + k:
-                    for j in range(em - om):
-                        a += Ym[i, j] * Ym[l, j]
-                A[i, l] = a
-                A[l, i] = a
-    fast = solve_constraints(P, W, K)
+    constraint_rhs(P, W, stab)
+    if r > 2 and schur_factor(P, W, Yt, constraint_trace(P, Yt)):
+        path = SCHUR
+        schur_solve(P, W, b, F)
+        rank[0], W.cond[0] = K, -1.0
+    else:
+        constraint_matrix(P, W)
+        path = DENSE if solve_constraints(P, W, K) else EIGEN
     for it in range(2):
         # θ̈ = L⁻ᵀ(z − Y F), block by block
         for m in range(r):
@@ -650,7 +683,9 @@ def chain_solve(P, W, tau, stab):
                 for j in range(em - om):
                     v += Lm[i, j] * qm[j]
                 res[i] = v
-        if fast:
+        if path == SCHUR:
+            schur_solve(P, W, res, dF)
+        elif path == DENSE:
             pivoted_solve(A_f, perm, K, res, yK, dF)
         else:
             eig_solve(A, res, dF, K, rank_tol)

@@ -396,7 +396,6 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
     This is the only function that evaluates the right-hand side (every stage, probe and dense-output
     stage is evaluated here): each compiled function that calls the closed-chain kernel compiles it
     again, so the helpers above only prepare stage inputs and combine stage values."""
-    n = len(L.y)
     if L.k_next[0] == 0:
         if project(P, W, L, t_out[0], L.y) != OK:
             return

@@ -1,7 +1,8 @@
 """Compiled stage 5: the loop-closure manifold (as `coopsim.manifold`).
 
 Positions are projected by Gauss–Newton steps of minimum norm, Δθ = −Λ⁺Φ(θ) with
-Λ⁺ = Λᵀ(ΛΛᵀ)⁺ (pivoted Cholesky of ΛΛᵀ, or its eigen-decomposition when rank is lost), until
+Λ⁺ = Λᵀ(ΛΛᵀ)⁺ (ΛΛᵀ solved by its block structure in O(r) (`schur`), or by a pivoted Cholesky, or
+by its eigen-decomposition when rank is lost), until
 max |Φ| ≤ tol; rates by θ̇ ← θ̇ − Λ⁺Λθ̇, applied twice (the second pass removes what rounding in the
 normal equations left).
 """
@@ -13,6 +14,7 @@ import numpy as np
 from .chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
 from .jit import entry, kernel
 from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from .schur import constraint_trace, schur_factor, schur_solve
 from .structs import borrow
 
 PROJECTION_FAILED = 7
@@ -31,21 +33,27 @@ def closure_kinematics(P, W, q):
 
 @kernel
 def min_norm_step(P, W, rhs, out):
-    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam."""
+    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam: ΛΛᵀ solved in O(r) by its
+    block structure (`schur`) for three arms or more where that is certified, else formed and solved
+    densely."""
     Lam, A, A_f, perm, b, yK, dF, rank_tol = W.Lam, W.A, W.A_f, W.perm, W.b, W.yK, W.dF, P.rank_tol
     K, N = Lam.shape
     for i in range(K):
-        for l in range(i, K):
-            v = 0.0
-            for j in range(N):
-                v += Lam[i, j] * Lam[l, j]
-            A[i, l] = v
-            A[l, i] = v
         b[i] = rhs[i]
-    if pivoted_cholesky(A, A_f, perm, K) > safe_pivot_ratio(K, rank_tol):
-        pivoted_solve(A_f, perm, K, b, yK, dF)
+    if len(P.dof) > 3 and schur_factor(P, W, Lam, constraint_trace(P, Lam)):
+        schur_solve(P, W, b, dF)
     else:
-        eig_solve(A, b, dF, K, rank_tol)
+        for i in range(K):
+            for l in range(i, K):
+                v = 0.0
+                for j in range(N):
+                    v += Lam[i, j] * Lam[l, j]
+                A[i, l] = v
+                A[l, i] = v
+        if pivoted_cholesky(A, A_f, perm, K) > safe_pivot_ratio(K, rank_tol):
+            pivoted_solve(A_f, perm, K, b, yK, dF)
+        else:
+            eig_solve(A, b, dF, K, rank_tol)
     for j in range(N):
         v = 0.0
         for i in range(K):

@@ -85,7 +85,10 @@ class Workspace(NamedTuple):
     Lam (K, N), Lam_dot_qd (K,), X (K, N) Λ L⁻ᵀ, x0 (N,) L⁻¹(τ − h) (𝐈 = L Lᵀ), A (K, K) Λ𝐈⁻¹Λᵀ,
     A_f (K, K) its factor, b (K,), F (K,), res (K,), perm (K,) int, yK (K,) scratch, phi (K,) loop
     residual Φ; out: qdd (N,), tau (N,), cond (1,) and rank (1,) int. dF (K,) refinement step;
-    vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch."""
+    vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch. The O(r) constraint solve (`schur`; n_c ≤ nmax the
+    carrier's joints): d_inv (K,) reciprocals of the diagonals of the k × k factors L_g (kept in A_f's
+    diagonal blocks), V (K, nmax) L_D⁻¹U, S (nmax, nmax) and S_inv (nmax,) the factor of I + VᵀV and
+    its diagonal's reciprocals, yN (nmax,) scratch."""
 
     p: np.ndarray
     R: np.ndarray
@@ -135,6 +138,11 @@ class Workspace(NamedTuple):
     vec6: np.ndarray
     v3: np.ndarray
     m3: np.ndarray
+    d_inv: np.ndarray
+    V: np.ndarray
+    S: np.ndarray
+    S_inv: np.ndarray
+    yN: np.ndarray
 
 
 def _f(x) -> np.ndarray:
@@ -202,4 +210,5 @@ def workspace(P: PackedModel) -> Workspace:
         z((N, nmax)), z((N, nmax)), z(N), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
         z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),
         z((K, N)), z(K), z((K, N)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
-        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3), z((4, 3, 3)))
+        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3), z((4, 3, 3)),
+        z(K), z((K, nmax)), z((nmax, nmax)), z(nmax), z(nmax))

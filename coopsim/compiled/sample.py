@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .chain import arm_terms, chain_forward, loop_residual, object_dynamics, object_pose
+from .chain import arm_terms, chain_forward, constraint_matrix, loop_residual, object_dynamics, object_pose
 from .jit import entry, kernel
 from .linalg import copy1, copy2, copy3, jacobi_eigh
 from .manifold import max_abs
@@ -153,6 +153,7 @@ def reported(P, W, i, qd, out, Yw, ev):
         rv = max(rv, abs(v))
     out.residual_vel[i] = rv
     if K:
+        constraint_matrix(P, W)
         jacobi_eigh(W.A, K, ev, W.m3[0], False)
         out.cond[i] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
     else:

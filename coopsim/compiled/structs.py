@@ -181,6 +181,11 @@ WORKSPACE_FIELDS = (
     ("vec6", _f1),
     ("v3", _f1),
     ("m3", _f3),
+    ("d_inv", _f1),
+    ("V", _f2),
+    ("S", _f2),
+    ("S_inv", _f1),
+    ("yN", _f1),
 )
 WORKSPACE_T = StructType(list(WORKSPACE_FIELDS))
 
@@ -311,6 +316,11 @@ def _new_workspace(r):
     s.vec6 = r.vec6
     s.v3 = r.v3
     s.m3 = r.m3
+    s.d_inv = r.d_inv
+    s.V = r.V
+    s.S = r.S
+    s.S_inv = r.S_inv
+    s.yN = r.yN
     return s
 
 
