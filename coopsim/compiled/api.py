@@ -21,7 +21,7 @@ from ..closed_chain import ConstraintError
 from ..manifold import Projection
 from ..model import Model
 from . import capacity, chain, ik, integrate, manifold, sample
-from .packing import PackedModel, Workspace, pack, tabulated_torques, workspace
+from .packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from .structs import Struct, to_struct
 
 _CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
@@ -33,7 +33,7 @@ REASONS = {
     integrate.NON_FINITE_STATE: "non-finite state",
     integrate.STEP_COLLAPSED: "step size collapsed",
     integrate.MAX_STEPS: "maximum number of steps exceeded",
-    manifold.PROJECTION_FAILED: f"projection: loop closure did not converge in {integrate.PROJECTION_MAX_ITER} "
+    manifold.PROJECTION_FAILED: f"projection: loop closure did not converge in {PROJECTION_MAX_ITER} "
                                 "Gauss–Newton steps",
 }
 
@@ -278,8 +278,6 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     _map(run, chunks)
     return out
 
-
-PROJECTION_MAX_ITER = 50
 
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,

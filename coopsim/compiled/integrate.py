@@ -36,7 +36,6 @@ from .packing import STAB_PROJECTION
 DOP853, DOPRI5, RK4 = 0, 1, 2
 NON_FINITE_STATE, STEP_COLLAPSED, MAX_STEPS = 4, 5, 6
 SAFETY, MIN_FACTOR, MAX_FACTOR, STRETCH, SUBSTEP_SLACK = 0.9, 0.2, 10.0, 1.01, 1e-9
-PROJECTION_MAX_ITER = 50
 
 
 class Tableau(NamedTuple):
@@ -310,7 +309,7 @@ def project(P, W, L, t, y):
     if P.stabilization != STAB_PROJECTION:
         return OK
     L.count[3] += 1
-    st = project_state(P, W, y, P.projection_tol, PROJECTION_MAX_ITER, L.step)
+    st = project_state(P, W, y, P.projection_tol, P.projection_max_iter, L.step)
     if st != OK:
         return fail(L, st, t, y)
     if not finite(y):

@@ -55,7 +55,7 @@ def pivoted_cholesky(A, Lf, perm, K):
             lc = Lf[c, j]
             for i in range(c, K):
                 Lf[i, c] -= Lf[i, j] * lc
-    return 1.0 / (inverse_factor_norm2(Lf, K) * trace(A, K))
+    return 1.0 / (inverse_factor_norm2(Lf, 0, K) * trace(A, K))
 
 
 @kernel
@@ -67,14 +67,16 @@ def trace(A, K):
 
 
 @kernel
-def inverse_factor_norm2(Lf, K):
-    """‖L⁻¹‖_F² of the lower factor in Lf: column j of L⁻¹ by forward substitution (L x = e_j, x_i = 0
-    for i < j), its entries below the diagonal kept in row j of Lf's strict upper triangle."""
+def inverse_factor_norm2(Lf, o, K):
+    """‖L⁻¹‖_F² of the lower factor L = Lf[o:o+K, o:o+K]: column j of L⁻¹ by forward substitution
+    (L x = e_j, x_i = 0 for i < j), its entries below the diagonal kept in row j of the block's strict
+    upper triangle. (The block is addressed by its offset o, not passed as a view, so that every caller
+    shares one compiled specialization.)"""
     total = 0.0
-    for j in range(K):
+    for j in range(o, o + K):
         xj = 1.0 / Lf[j, j]
         total += xj * xj
-        for i in range(j + 1, K):
+        for i in range(j + 1, o + K):
             v = -Lf[i, j] * xj
             for t in range(j + 1, i):
                 v -= Lf[i, t] * Lf[j, t]

@@ -16,6 +16,7 @@ from ..model import Model, TorqueFunction, TorqueTable
 
 STAB_NONE, STAB_PROJECTION, STAB_BAUMGARTE = 0, 1, 2
 _STAB = {"none": STAB_NONE, "projection": STAB_PROJECTION, "baumgarte": STAB_BAUMGARTE}
+PROJECTION_MAX_ITER = 50      # Gauss–Newton steps of a projection before it fails
 
 
 class PackedModel(NamedTuple):
@@ -32,7 +33,7 @@ class PackedModel(NamedTuple):
     grasp_pos (r, 3), grasp_rot (r, 3, 3) EE frame m in the object frame; carrier: arm index;
     gravity (3,) m/s²; rows (k, 6) constraint rows S; rank_tol; rank_error: 1 to stop when Λ𝐈⁻¹Λᵀ
     loses rank, 0 to warn; stabilization code (STAB_*);
-    alpha, beta 1/s (Baumgarte); projection_tol m, rad;
+    alpha, beta 1/s (Baumgarte); projection_tol m, rad; projection_max_iter (PROJECTION_MAX_ITER);
     tq_off (N+1,) int, tq_t, tq_v: joint j's torque table is (tq_t, tq_v)[tq_off[j]:tq_off[j+1]]
     (s, N·m), linear between knots, held outside."""
 
@@ -64,6 +65,7 @@ class PackedModel(NamedTuple):
     alpha: float
     beta: float
     projection_tol: float
+    projection_max_iter: int
     tq_off: np.ndarray
     tq_t: np.ndarray
     tq_v: np.ndarray
@@ -194,7 +196,7 @@ def pack(model: Model) -> PackedModel:
         cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
         float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
         _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],
-        float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol), tq_off, tq_t, tq_v)
+        float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol), PROJECTION_MAX_ITER, tq_off, tq_t, tq_v)
 
 
 def workspace(P: PackedModel) -> Workspace:

@@ -132,9 +132,11 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
 
 @kernel
-def reported(P, W, i, qd, out, Yw, ev):
+def reported(P, W, i, qd, out, Yw, ev, V):
     """Row i of `out` after an evaluation at rates qd: object pose, twist and acceleration, grasp and
-    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,), ev (K,) scratch."""
+    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,), ev (K,), V (K, K)
+    scratch (the eigenvectors are computed though unused: `jacobi_eigh` is then compiled once, for
+    this call and `eig_solve`'s)."""
     N = P.dof[-1]
     K = W.Lam.shape[0]
     copy1(W.p_C, out.object_pos[i])
@@ -154,7 +156,7 @@ def reported(P, W, i, qd, out, Yw, ev):
     out.residual_vel[i] = rv
     if K:
         constraint_matrix(P, W)
-        jacobi_eigh(W.A, K, ev, W.m3[0], False)
+        jacobi_eigh(W.A, K, ev, V, True)
         out.cond[i] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
     else:
         out.cond[i] = 1.0
@@ -166,12 +168,12 @@ def evaluate(P, W, Y, out, full):
     status codes into out.status; with `full`, every other field of `out` (Samples) too."""
     N = P.dof[-1]
     stab = np.zeros(W.Lam.shape[0])
-    Yw, ev = np.empty(6), np.empty(W.Lam.shape[0])
+    Yw, ev, V = np.empty(6), np.empty(W.Lam.shape[0]), np.empty((W.Lam.shape[0], W.Lam.shape[0]))
     for i in range(Y.shape[0]):
         out.status[i] = chain_forward(P, W, Y[i, :N], Y[i, N:], out.tau[i], stab)
         copy1(W.qdd, out.qdd[i])
         if full:
-            reported(P, W, i, Y[i, N:], out, Yw, ev)
+            reported(P, W, i, Y[i, N:], out, Yw, ev, V)
 
 
 class InverseTerms(NamedTuple):

@@ -94,7 +94,7 @@ def schur_factor(P, W, Y, trA):
                 for t in range(i):
                     v -= Lg[i, t] * Vg[t, j]
                 Vg[i, j] = v * dg[i]
-        worst = max(worst, inverse_factor_norm2(Lg, k))
+        worst = max(worst, inverse_factor_norm2(Lf, i0, k))
     if not 1.0 / (worst * trA) > max(SCHUR_MIN_RATIO, P.rank_tol):
         return False
     for i in range(nc):               # S = I + VᵀV = L_S L_Sᵀ, row by row

@@ -126,6 +126,7 @@ PACKED_FIELDS = (
     ("alpha", _F),
     ("beta", _F),
     ("projection_tol", _F),
+    ("projection_max_iter", _I),
     ("tq_off", _i1),
     ("tq_t", _f1),
     ("tq_v", _f1),
@@ -259,6 +260,7 @@ def _new_packed(r):
     s.alpha = r.alpha
     s.beta = r.beta
     s.projection_tol = r.projection_tol
+    s.projection_max_iter = r.projection_max_iter
     s.tq_off = r.tq_off
     s.tq_t = r.tq_t
     s.tq_v = r.tq_v
