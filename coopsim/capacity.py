@@ -248,8 +248,9 @@ def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode
                      max_evals: int = 400) -> tuple[np.ndarray, Capacity]:
     """Energy weights (n,) maximising the minimum-energy capacity (weights are scale-free: normalised
     to a geometric mean of 1 over the active joints), with that capacity. Nelder–Mead on log-weights
-    (clipped to ±ln 10⁴) from equal weights and from the paper's suggestion (weight ×10 on the motor
-    that saturates first); the better of the two is kept. The weight-independent part of the
+    (clipped to ±ln 10⁴) from equal weights, from the paper's suggestion (weight ×10 on the motor
+    that saturates first) and from `res.weights` when they are not all equal (the scenario's
+    `energy_weights`); the best is kept. The weight-independent part of the
     minimum-energy problem (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once;
     each evaluation is one compiled pass over the samples (`min_energy_interval`)."""
     from scipy.optimize import minimize
@@ -278,6 +279,9 @@ def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode
         s = np.zeros(act.sum())
         s[int(np.sum(act[:base.joint]))] = np.log(10.0)
         starts.append(s)
+    own = np.log(res.weights[act])
+    if np.ptp(own) > 0:
+        starts.append(own - own.mean())
     best = None
     for x0 in starts:
         opt = minimize(objective, x0, method="Nelder-Mead",

@@ -700,11 +700,12 @@ def frame_transforms(model: Model, native=None, twin=None, topic: str = "/tf") -
                      np.array(times, dtype=np.float64) * 1e-9, tuple({"transforms": by_time[ns]} for ns in times))
 
 
-def _cube_entity(frame: str, center, size, color: dict) -> dict:
+def _cube_entity(frame: str, center, size, color: dict, quat_wxyz=(1.0, 0.0, 0.0, 0.0)) -> dict:
     v3 = lambda v: {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}  # noqa: E731
+    w, x, y, z = (float(v) for v in quat_wxyz)
     return {"timestamp": stamp(0), "frame_id": frame, "id": frame, "lifetime": {"sec": 0, "nsec": 0},
             "frame_locked": True, "metadata": [],
-            "cubes": [{"pose": {"position": v3(center), "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+            "cubes": [{"pose": {"position": v3(center), "orientation": {"x": x, "y": y, "z": z, "w": w}},
                        "size": v3(size), "color": dict(color)}],
             **{kind: [] for kind in _UNUSED_PRIMITIVES}}
 
@@ -716,7 +717,7 @@ def _model_entities(model: Model, root: str, color: dict) -> list[dict]:
         for i in range(arm.n):
             name = next(names)
             if np.any(arm.link_box[i] > 0):
-                out.append(_cube_entity(name, arm.link_com[i], arm.link_box[i], color))
+                out.append(_cube_entity(name, arm.box_pos[i], arm.link_box[i], color, rot_to_quat(arm.box_rot[i])))
     if np.any(model.object.box > 0):
         out.append(_cube_entity(f"{root}/object", np.zeros(3), model.object.box, color))
     return out
@@ -724,7 +725,7 @@ def _model_entities(model: Model, root: str, color: dict) -> list[dict]:
 
 def scene_update(model: Model, native: bool, twin: bool, topic: str = "/scene") -> JsonTopic:
     """foxglove.SceneUpdate on `topic`, once at t = 0: a cube per link (ArmModel.link_box centred at
-    link_com in the link frame) and for the object (ObjectModel.box), locked to its frame, lifetime 0
+    box_pos, axes box_rot, in the link frame) and for the object (ObjectModel.box), locked to its frame, lifetime 0
     (forever); native in blue, mujoco in translucent orange."""
     entities = (_model_entities(model, "native", NATIVE_COLOR) if native else []) + \
                (_model_entities(model, "mujoco", MUJOCO_COLOR) if twin else [])

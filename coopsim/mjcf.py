@@ -49,15 +49,15 @@ def _add_arm(parent, arm: ArmModel, m: int, with_geoms: bool) -> list:
         body.mass, body.ipos = float(arm.link_mass[i]), arm.link_com[i]
         body.fullinertia, body.explicitinertial = _full_inertia(arm.link_inertia[i]), True
         if with_geoms and np.all(arm.link_box[i] > 0):
-            _visual_box(body, arm.link_box[i], arm.link_com[i])
+            _visual_box(body, arm.link_box[i], arm.box_pos[i], rot_to_quat(arm.box_rot[i]))
         bodies.append(body)
         parent = body
     parent.add_site(name=f"a{m}_ee", pos=arm.ee_pos, quat=rot_to_quat(arm.ee_rot))
     return bodies
 
 
-def _visual_box(body, size: np.ndarray, pos: np.ndarray, rgba=(0.6, 0.6, 0.7, 1.0)):
-    body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=0.5 * np.asarray(size), pos=pos,
+def _visual_box(body, size: np.ndarray, pos: np.ndarray, quat=(1.0, 0.0, 0.0, 0.0), rgba=(0.6, 0.6, 0.7, 1.0)):
+    body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=0.5 * np.asarray(size), pos=pos, quat=list(quat),
                   contype=0, conaffinity=0, mass=0.0, rgba=list(rgba))
 
 

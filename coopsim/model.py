@@ -34,9 +34,11 @@ class ArmModel:
     joint_pos (n, 3) origin of frame i in frame i−1 (the base frame for i = 0);
     joint_rot (n, 3, 3) frame i−1 ← frame i at θ_i = 0; joint_axis (n, 3) unit, in frame i;
     link_mass (n,) kg; link_com (n, 3) centre of mass in frame i; link_inertia (n, 3, 3) about the
-    centre of mass, frame-i axes (kg·m²); link_box (n, 3) box size for drawing (zeros: none), its
-    centre at link_com; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1;
-    joint_type (n,) int: REVOLUTE or PRISMATIC per joint (None: every joint revolute).
+    centre of mass, frame-i axes (kg·m²); link_box (n, 3) box size for drawing (zeros: none) along
+    its own axes; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1;
+    joint_type (n,) int: REVOLUTE or PRISMATIC per joint (None: every joint revolute);
+    box_pos (n, 3) the drawing box's centre in frame i (None: link_com) and box_rot (n, 3, 3) frame i ←
+    box axes (None: the link's own axes). Drawing only: the dynamics never reads link_box, box_pos, box_rot.
     """
 
     name: str
@@ -52,10 +54,16 @@ class ArmModel:
     ee_pos: np.ndarray
     ee_rot: np.ndarray
     joint_type: np.ndarray | None = None
+    box_pos: np.ndarray | None = None
+    box_rot: np.ndarray | None = None
 
     def __post_init__(self):
         types = np.full(len(self.link_mass), REVOLUTE) if self.joint_type is None else self.joint_type
         object.__setattr__(self, "joint_type", np.asarray(types, dtype=np.int64))
+        if self.box_pos is None:
+            object.__setattr__(self, "box_pos", np.array(self.link_com, dtype=float))
+        if self.box_rot is None:
+            object.__setattr__(self, "box_rot", np.tile(np.eye(3), (len(self.link_mass), 1, 1)))
 
     @property
     def n(self) -> int:

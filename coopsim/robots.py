@@ -121,7 +121,7 @@ def robot_file(name: str) -> Path:
 @dataclass(frozen=True, eq=False)
 class Chain:
     """One serial chain of a robot file: `links`, the arm in coopsim's link convention
-    (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes) with its base
+    (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes yet) with its base
     link's frame at the world origin and its end-effector at the tip body's frame; per joint (n of
     them) joint_names, joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s
     limits (inf: none) — m, N and m/s for a prismatic joint (`links.joint_type`)."""
@@ -142,10 +142,41 @@ class Chain:
     def arm(self, name: str, base_pos: np.ndarray, base_rot: np.ndarray, ee_pos: np.ndarray,
             ee_rot: np.ndarray) -> ArmModel:
         """The arm with its base link's frame at (base_pos, base_rot) in the world and its end-effector
-        at (ee_pos, ee_rot) in the tip body's frame."""
+        at (ee_pos, ee_rot) in the tip body's frame, each link drawn as a box from its joint to the next
+        (`segment_boxes`)."""
         tip_pos, tip_rot = self.links.ee_pos, self.links.ee_rot
+        ee = tip_pos + tip_rot @ ee_pos
+        size, centre, axes = segment_boxes(self.links.joint_pos, ee)
         return replace(self.links, name=name, base_pos=np.asarray(base_pos, float),
-                       base_rot=np.asarray(base_rot, float), ee_pos=tip_pos + tip_rot @ ee_pos, ee_rot=tip_rot @ ee_rot)
+                       base_rot=np.asarray(base_rot, float), ee_pos=ee, ee_rot=tip_rot @ ee_rot,
+                       link_box=size, box_pos=centre, box_rot=axes)
+
+
+DRAW_WIDTH = 0.06      # m: the cross-section of a robot-file link's drawing box
+
+
+def segment_boxes(joint_pos: np.ndarray, ee_pos: np.ndarray, width: float = DRAW_WIDTH):
+    """Drawing boxes of a chain whose link frames sit at its joints (a robot file's arm has no shapes
+    of its own: meshes are not read): link i as a box of cross-section width × width (m) from its
+    frame's origin, the joint, to where the next joint sits on it, joint_pos[i + 1] (n, 3) in frame i,
+    the last link to the end-effector ee_pos (3,) in its frame; a link whose next joint sits on its own
+    (Panda's shoulder) is a cube of side `width` at the joint. (A prismatic next joint slides its link
+    from that end.) Returns (size (n, 3) along the box's axes, centre (n, 3) in frame i, axes (n, 3, 3):
+    frame i ← box axes, x along the segment) — `ArmModel.link_box`, `box_pos`, `box_rot`."""
+    ends = np.vstack([joint_pos[1:], ee_pos[None]])
+    length = np.linalg.norm(ends, axis=1)
+    size = np.column_stack([np.where(length > 1e-9, length, width), np.full(len(ends), width),
+                            np.full(len(ends), width)])
+    return size, 0.5 * ends, np.array([_segment_axes(e) for e in ends])
+
+
+def _segment_axes(d: np.ndarray) -> np.ndarray:
+    """Right-handed axes (3, 3), columns x, y, z, with x along d (along the frame's x when d is zero)."""
+    norm = np.linalg.norm(d)
+    x = d / norm if norm > 1e-9 else np.array([1.0, 0.0, 0.0])
+    y = np.cross(x, np.eye(3)[np.argmin(np.abs(x))])
+    y /= np.linalg.norm(y)
+    return np.column_stack([x, y, np.cross(x, y)])
 
 
 # ------------------------------------------------------------------------------------- the file

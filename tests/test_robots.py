@@ -20,15 +20,20 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 import yaml
 
 from coopsim import robots
+from coopsim.closed_chain import arm_poses
 from coopsim.harness import cross_validate
+from coopsim.log import link_frame_names, native_link_poses, scene_update
+from coopsim.mjcf import build_spec, qpos_address
 from coopsim.model import PRISMATIC, REVOLUTE
 from coopsim.robots import ROBOTS, read_chain, robot_file, robots_folder
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
+from coopsim.spatial import quat_to_rot
 from conftest import ROOT, SCENARIOS, mutated
 from independent.pinocchio_urdf import RobotScene
 from test_independent import Report, check_arm_dynamics, check_chain, check_poses, consistent_states, random_states
@@ -321,3 +326,62 @@ def test_hand_written_joint_range():
     with pytest.raises(ScenarioError, match=r"arms\[0\]\.initial\.angles: joint 2 at 5\.29812 rad is outside its "
                                             r"range \[-0\.174533, 5\.23599\] rad"):
         model_from_dict(data)
+
+
+# ------------------------------------------------------------------------------ drawing
+def _box_ends(center, R, size):
+    """The two ends of a drawing box along its x axis: center ∓ (size_x / 2) R[:, 0]."""
+    half = 0.5 * size[0] * R[:, 0]
+    return center - half, center + half
+
+
+def _joint_points(model, q):
+    """Per arm, the kinematic joint positions and end-effector point (n + 1, 3), world."""
+    return [np.vstack([p.p, p.p_ee[None]]) for p in arm_poses(model, q)]
+
+
+def assert_links_drawn_joint_to_joint(model, q):
+    """The MuJoCo twin's link boxes (what `coopsim animate` draws) and the log's /scene cubes placed by
+    its /tf link frames (Foxglove) run from each joint to the next (the last to the end-effector) at the
+    angles q, ≤ 1e-12 m; a link whose next joint sits on its own is a cube centred on its joint."""
+    points = _joint_points(model, q)
+    mj = build_spec(model).compile()
+    d = mujoco.MjData(mj)
+    d.qpos[qpos_address(mj, model)] = q
+    mujoco.mj_kinematics(mj, d)
+    pos, quat = native_link_poses(model, q[None])
+    cubes = {e["id"]: e["cubes"][0] for e in scene_update(model, True, False).messages[0]["entities"]}
+    names = iter(link_frame_names(model, "native"))
+    k = 0
+    for m, arm in enumerate(model.arms):
+        for i in range(arm.n):
+            (g,) = [g for g in range(mj.ngeom) if mj.body(mj.geom_bodyid[g]).name == f"a{m}_l{i}"]
+            c = cubes[next(names)]
+            R_link = quat_to_rot(quat[0, k])
+            R_cube = quat_to_rot([c["pose"]["orientation"][a] for a in "wxyz"])
+            centre = pos[0, k] + R_link @ [c["pose"]["position"][a] for a in "xyz"]
+            size = [c["size"][a] for a in "xyz"]
+            drawn = (_box_ends(d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3), 2 * mj.geom_size[g]),
+                     _box_ends(centre, R_link @ R_cube, size))
+            length = np.linalg.norm(points[m][i + 1] - points[m][i])
+            expected = (points[m][i], points[m][i + 1]) if length > 1e-9 else (points[m][i], points[m][i])
+            for ends in drawn:
+                if length <= 1e-9:
+                    ends = (0.5 * (ends[0] + ends[1]),) * 2
+                assert np.max(np.abs(np.array(ends) - np.array(expected))) <= 1e-12, (model.name, m, i)
+            k += 1
+
+
+@needs_robots
+def test_robot_links_are_drawn_from_joint_to_joint():
+    """panda_ceiling_carry at its initial and two random postures."""
+    model = load_scenario(SCENARIOS / "robots" / "panda_ceiling_carry.yaml")
+    rng = np.random.default_rng(5)
+    for q in (model.q0, *rng.uniform(-2, 2, (2, model.n_total))):
+        assert_links_drawn_joint_to_joint(model, q)
+
+
+def test_small_robot_links_are_drawn_from_joint_to_joint(tiny_dir):
+    """tiny.urdf (an end-effector offset past the tip, rpy joint origins) needs no optional package."""
+    model = load_scenario(_write(tiny_dir, TINY))
+    assert_links_drawn_joint_to_joint(model, model.q0 + 0.3)
