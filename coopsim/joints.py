@@ -21,7 +21,7 @@ import numpy as np
 from collections.abc import Sequence
 
 from .model import JOINT_TYPES, PRISMATIC, REVOLUTE
-from .spatial import axis_angle_to_rot, cross
+from .spatial import axis_angle_to_rot, cross, skew
 
 TYPE_NAMES = {code: name for name, code in JOINT_TYPES.items()}          # 0 → "revolute", 1 → "prismatic"
 UNITS = {"revolute": ("rad", "rad/s", "N·m"), "prismatic": ("m", "m/s", "N")}
@@ -34,6 +34,18 @@ def joint_transform(joint_type: int, axis: np.ndarray, q: float) -> tuple[np.nda
     if joint_type == PRISMATIC:
         return np.eye(3), q * np.asarray(axis, dtype=float)
     return axis_angle_to_rot(axis, q), np.zeros(3)
+
+
+def joint_transforms(joint_type: int, axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`joint_transform` over samples q (S,): (R_J (S, 3, 3), d_J (S, 3)), Rodrigues' formula
+    1 + sin q [a×] + (1 − cos q)[a×]² for a revolute joint, as `spatial.axis_angle_to_rot`."""
+    q = np.asarray(q, dtype=float)
+    a = np.asarray(axis, dtype=float)
+    if joint_type == PRISMATIC:
+        return np.broadcast_to(np.eye(3), q.shape + (3, 3)), q[:, None] * a
+    K = skew(a)
+    R = np.eye(3) + np.sin(q)[:, None, None] * K + (1.0 - np.cos(q))[:, None, None] * (K @ K)
+    return R, np.zeros(q.shape + (3,))
 
 
 def revolute_mask(joint_type: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .joints import joint_transform, motion_subspace, revolute_mask
+from .joints import joint_transform, joint_transforms, motion_subspace, revolute_mask
 from .model import ArmModel
 from .spatial import cross, rigid_acceleration
 
@@ -77,6 +77,21 @@ def arm_pose(arm: ArmModel, q: np.ndarray) -> ArmPose:
     R_ee = R[-1] @ arm.ee_rot
     o = np.asarray(arm.base_pos, dtype=float)
     return ArmPose(o + p, R, z, o + c, I, o + p_ee, R_ee, o, p, c, p_ee, arm.joint_type)
+
+
+def arm_frames(arm: ArmModel, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The link frames of `arm_pose` over samples Q (S, n) (rad or m), the recursion evaluated for all
+    samples at once: joint origins p (S, n, 3) world and frames R (S, n, 3, 3) world axes."""
+    S, n = Q.shape
+    p, R = np.empty((S, n, 3)), np.empty((S, n, 3, 3))
+    p_prev, R_prev = np.zeros((S, 3)), np.broadcast_to(arm.base_rot, (S, 3, 3))
+    for i in range(n):
+        R_J, d_J = joint_transforms(arm.joint_type[i], arm.joint_axis[i], Q[:, i])
+        R0 = R_prev @ arm.joint_rot[i]
+        p[:, i] = p_prev + R_prev @ arm.joint_pos[i] + np.einsum("sij,sj->si", R0, d_J)
+        R[:, i] = R0 @ R_J
+        p_prev, R_prev = p[:, i], R[:, i]
+    return p + np.asarray(arm.base_pos, dtype=float), R
 
 
 def link_motion(pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, a_base: np.ndarray) -> LinkMotion:

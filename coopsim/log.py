@@ -46,11 +46,11 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from .atomic import atomic_path
-from .closed_chain import arm_poses
+from .kinematics import arm_frames
 from .joints import type_names
 from .labels import joint_labels
 from .model import CoopsimError, Model
-from .spatial import rot_to_quat
+from .spatial import rot_to_quat, rots_to_quats
 
 LIBRARY = "coopsim.log"
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"
@@ -662,12 +662,8 @@ def _transform(ns: int, child: str, p, quat_wxyz) -> dict:
 def native_link_poses(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Link frame poses of the native model over samples: q (N, n) → positions (N, n, 3) m and
     quaternions (N, n, 4) [w, x, y, z], world, joints stacked as q."""
-    pos, quat = np.zeros(q.shape + (3,)), np.zeros(q.shape + (4,))
-    for k, qk in enumerate(q):
-        poses = arm_poses(model, qk)
-        pos[k] = np.concatenate([p.p for p in poses])
-        quat[k] = [rot_to_quat(R) for p in poses for R in p.R]
-    return pos, quat
+    frames = [arm_frames(arm, q[:, sl]) for arm, sl in zip(model.arms, model.dof_slices)]
+    return np.concatenate([p for p, _ in frames], axis=1), rots_to_quats(np.concatenate([R for _, R in frames], axis=1))
 
 
 def _model_frames(model: Model, root: str, t, link_pos, link_quat, obj_pos, obj_quat) -> dict[int, list[dict]]:
@@ -683,7 +679,7 @@ def _model_frames(model: Model, root: str, t, link_pos, link_quat, obj_pos, obj_
 
 def frame_transforms(model: Model, native=None, twin=None, topic: str = "/tf") -> JsonTopic:
     """foxglove.FrameTransforms on `topic`: per sample, every link frame and the object frame of each
-    model given ("native/…" from arm_poses of the native q, "mujoco/…" from the twin's link poses),
+    model given ("native/…" from the link frames of the native q, "mujoco/…" from the twin's link poses),
     children of "world". Samples at the same time (to the ns) share one message."""
     by_time: dict[int, list[dict]] = {}
     if native is not None:

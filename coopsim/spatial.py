@@ -61,6 +61,33 @@ def rot_to_quat(R: np.ndarray) -> np.ndarray:
     return q if q[0] >= 0 else -q
 
 
+def rots_to_quats(R: np.ndarray) -> np.ndarray:
+    """`rot_to_quat` over rotation matrices R (..., 3, 3) → (..., 4) [w, x, y, z], w >= 0: Shepperd's
+    branch chosen per matrix as there (the trace when positive, else the largest diagonal entry)."""
+    R = np.asarray(R, dtype=float)
+    shape, R = R.shape[:-2], R.reshape(-1, 3, 3)
+    q = np.empty((len(R), 4))
+    t = np.trace(R, axis1=1, axis2=2)
+    pos = t > 0
+    s, Rp = 2.0 * np.sqrt(1.0 + t[pos]), R[pos]
+    q[pos] = np.stack([0.25 * s, (Rp[:, 2, 1] - Rp[:, 1, 2]) / s, (Rp[:, 0, 2] - Rp[:, 2, 0]) / s,
+                       (Rp[:, 1, 0] - Rp[:, 0, 1]) / s], axis=1)
+    largest = np.argmax(np.diagonal(R, axis1=1, axis2=2), axis=1)
+    for i in range(3):
+        sel = ~pos & (largest == i)
+        j, k, Rs = (i + 1) % 3, (i + 2) % 3, R[sel]
+        s = 2.0 * np.sqrt(1.0 + Rs[:, i, i] - Rs[:, j, j] - Rs[:, k, k])
+        qs = np.empty((len(Rs), 4))
+        qs[:, 0] = (Rs[:, k, j] - Rs[:, j, k]) / s
+        qs[:, 1 + i] = 0.25 * s
+        qs[:, 1 + j] = (Rs[:, j, i] + Rs[:, i, j]) / s
+        qs[:, 1 + k] = (Rs[:, k, i] + Rs[:, i, k]) / s
+        q[sel] = qs
+    q /= np.sqrt(np.sum(q * q, axis=1))[:, None]
+    q[q[:, 0] < 0] *= -1.0
+    return q.reshape(shape + (4,))
+
+
 def rot_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector φ (rad, |φ| <= π) with exp([φ×]) = R, to about 1e-15 rad at every angle.
 

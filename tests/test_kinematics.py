@@ -1,9 +1,11 @@
 """Stage 1 — kinematics against MuJoCo's forward kinematics and Jacobians (mj_jac, mj_jacDot)."""
 
+import numpy as np
 import pytest
 
-from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian
-from conftest import MujocoReference, random_states, rel_err
+from coopsim.kinematics import arm_frames, arm_pose, ee_bias_acceleration, ee_jacobian
+from coopsim.scenario import load_scenario
+from conftest import SCENARIOS, MujocoReference, random_states, rel_err
 
 TOL_POSE = 1e-12  # m, dimensionless rotation entries
 TOL_JAC = 1e-9    # relative
@@ -42,3 +44,21 @@ def test_bias_acceleration_matches_finite_difference_of_jacobian(spatial):
         dJ = (ee_jacobian(arm_pose(arm, q + h * qd)) - ee_jacobian(arm_pose(arm, q - h * qd))) / (2 * h)
         worst = max(worst, rel_err(ee_bias_acceleration(arm_pose(arm, q), qd), dJ @ qd))
     assert worst <= 1e-8, f"J̇θ̇ differs from the finite difference by {worst:.3g}"
+
+
+@pytest.mark.parametrize("scenario", ["paper", "spatial", "gantry"])
+def test_link_frames_over_samples_match_mujoco(scenario, request):
+    """`arm_frames` (every sample at once, for the Foxglove /tf topic) against MuJoCo's body frames
+    (xpos, xmat of the twin's link bodies), at 20 random configurations; revolute and prismatic."""
+    model = (load_scenario(SCENARIOS / "gantry_prismatic.yaml") if scenario == "gantry"
+             else request.getfixturevalue(scenario))
+    ref = MujocoReference(model, with_object=False)
+    Q = np.array([q for q, _ in random_states(model, 20, seed=3)])
+    worst = 0.0
+    for m, (arm, sl) in enumerate(zip(model.arms, model.dof_slices)):
+        p, R = arm_frames(arm, Q[:, sl])
+        bodies = [ref.m.body(f"a{m}_l{i}").id for i in range(arm.n)]
+        for k, q in enumerate(Q):
+            ref.set_state(q, np.zeros(model.n_total))
+            worst = max(worst, rel_err(p[k], ref.d.xpos[bodies]), rel_err(R[k], ref.d.xmat[bodies].reshape(-1, 3, 3)))
+    assert worst <= TOL_POSE, f"link frames differ from MuJoCo's body frames by {worst:.3g}"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coopsim.spatial import axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rpy_to_rot, skew
+from coopsim.spatial import axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rots_to_quats, rpy_to_rot, skew
 
 RNG_SEED = 20240508
 PI = np.pi
@@ -173,6 +173,23 @@ def test_rot_to_quat_matches_scipy_and_mujoco():
     assert worst_mj <= 2e-15, f"rot_to_quat vs MuJoCo mju_mat2Quat: max component error {worst_mj:.3g}"
     assert worst_norm <= 4.5e-16, f"rot_to_quat |q| − 1 = {worst_norm:.3g}"
     assert min_w >= 0.0, f"rot_to_quat returned w = {min_w} < 0 (canonical w >= 0)"
+
+
+def test_rots_to_quats_matches_mujoco_over_a_batch():
+    """The batched conversion (every Shepperd branch in one call, an extra leading axis) against MuJoCo's
+    mju_mat2Quat, and equal to rot_to_quat matrix by matrix."""
+    rng = np.random.default_rng(RNG_SEED + 6)
+    R = np.array([R for _, _, R in _rotations(rng)])
+    q = rots_to_quats(R.reshape(-1, 2, 3, 3)).reshape(-1, 4)
+    mj = np.zeros(4)
+    worst_mj = worst_own = 0.0
+    for qi, Ri in zip(q, R):
+        mujoco.mju_mat2Quat(mj, Ri.ravel())
+        worst_mj = max(worst_mj, min(_max(qi - mj), _max(qi + mj)))
+        worst_own = max(worst_own, _max(qi - rot_to_quat(Ri)))
+    assert worst_mj <= 2e-15, f"rots_to_quats vs MuJoCo mju_mat2Quat: max component error {worst_mj:.3g}"
+    assert worst_own <= 4.5e-16, f"rots_to_quats vs rot_to_quat: max component error {worst_own:.3g}"
+    assert np.all(q[:, 0] >= 0.0), "rots_to_quats returned w < 0 (canonical w >= 0)"
 
 
 def test_rot_log_recovers_the_rotation_vector_at_every_angle_including_near_pi():
