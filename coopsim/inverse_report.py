@@ -358,9 +358,9 @@ def capacity_summary(study: CapacityStudy) -> dict:
         out["energy_ratio_to_min_energy"] = {k: v / e for k, v in study.energies.items()}
     if study.optimised is not None:
         w, c, _ = study.optimised
-        equal = study.caps.get(("min_energy", "scaled"))
+        start = study.caps.get(("min_energy", "scaled"))   # with the scenario's energy_weights (equal by default)
         out["optimised_weights"] = {"weights": w.tolist(), **_capacity_entry(m, c),
-                                    "equal_weights_mass_kg": None if equal is None else equal.mass}
+                                    "scenario_weights_mass_kg": None if start is None else start.mass}
     if study.checks:
         out["brute_force_check"] = {f"{k}/{mode}": v for (k, mode), v in study.checks.items()}
     return out

@@ -41,6 +41,16 @@ EIGEN, DENSE, SCHUR = 0, 1, 2   # the constraint solve's paths (`chain_solve`)
 # ------------------------------------------------------------------------------------------------
 
 @kernel
+def place_point(R, x, l, o, rel, world):
+    """A point l (3,) fixed in a frame (R (3, 3), origin x (3,) relative to the arm's base point o):
+    rel ← x + R l, world ← o + rel."""
+    for a in range(3):
+        v = x[a] + R[a, 0] * l[0] + R[a, 1] * l[1] + R[a, 2] * l[2]
+        rel[a] = v
+        world[a] = o[a] + v
+
+
+@kernel
 def arm_kinematics(P, W, m, q):
     """Frame poses of arm m at the stacked joint angles q (rad): R_i = R_{i−1} R0_i Rot(axis_i, θ_i),
     p_i = p_{i−1} + R_{i−1} d_i; z_i, c_i, I_i (world) and the end-effector frame. With Rodrigues'
@@ -98,12 +108,7 @@ def arm_kinematics(P, W, m, q):
         R[j, 2, 0], R[j, 2, 1], R[j, 2, 2] = b20, b21, b22
         pr[j, 0], pr[j, 1], pr[j, 2] = x0, x1, x2
         p[j, 0], p[j, 1], p[j, 2] = o0 + x0, o1 + x1, o2 + x2
-        l0, l1, l2 = lc[j, 0], lc[j, 1], lc[j, 2]
-        y0 = x0 + b00 * l0 + b01 * l1 + b02 * l2
-        y1 = x1 + b10 * l0 + b11 * l1 + b12 * l2
-        y2 = x2 + b20 * l0 + b21 * l1 + b22 * l2
-        cr[j, 0], cr[j, 1], cr[j, 2] = y0, y1, y2
-        cw[j, 0], cw[j, 1], cw[j, 2] = o0 + y0, o1 + y1, o2 + y2
+        place_point(R[j], pr[j], lc[j], bp[m], cr[j], cw[j])
         i00, i01, i02 = li[j, 0, 0], li[j, 0, 1], li[j, 0, 2]
         i10, i11, i12 = li[j, 1, 0], li[j, 1, 1], li[j, 1, 2]
         i20, i21, i22 = li[j, 2, 0], li[j, 2, 1], li[j, 2, 2]
@@ -126,12 +131,7 @@ def arm_kinematics(P, W, m, q):
         Iw[j, 0, 2], Iw[j, 2, 0] = v02, v02
         Iw[j, 1, 2], Iw[j, 2, 1] = v12, v12
         a00, a01, a02, a10, a11, a12, a20, a21, a22 = b00, b01, b02, b10, b11, b12, b20, b21, b22
-    e0, e1, e2 = eep[m, 0], eep[m, 1], eep[m, 2]
-    y0 = x0 + a00 * e0 + a01 * e1 + a02 * e2
-    y1 = x1 + a10 * e0 + a11 * e1 + a12 * e2
-    y2 = x2 + a20 * e0 + a21 * e1 + a22 * e2
-    per[m, 0], per[m, 1], per[m, 2] = y0, y1, y2
-    p_ee[m, 0], p_ee[m, 1], p_ee[m, 2] = o0 + y0, o1 + y1, o2 + y2
+    place_point(R[e - 1], pr[e - 1], eep[m], bp[m], per[m], p_ee[m])
     for b in range(3):
         f0, f1, f2 = eer[m, 0, b], eer[m, 1, b], eer[m, 2, b]
         R_ee[m, 0, b] = a00 * f0 + a01 * f1 + a02 * f2

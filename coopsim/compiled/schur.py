@@ -58,6 +58,24 @@ def constraint_trace(P, Y):
 
 
 @kernel
+def cholesky_entry(L, d_inv, o, i, l, a):
+    """Entry (i, l), l ≤ i, of the lower Cholesky factor in L[o:, o:] of a symmetric matrix whose
+    (i, l) entry is a, factored row by row (rows < i and entries < l of row i done): L_il = (a −
+    Σ_t<l L_it L_lt) / L_ll, or on the diagonal its square root, with its reciprocal in d_inv[o + i].
+    Returns False if a diagonal entry is not positive."""
+    for t in range(l):
+        a -= L[o + i, o + t] * L[o + l, o + t]
+    if l < i:
+        L[o + i, o + l] = a * d_inv[o + l]
+    elif a > 0.0:
+        L[o + i, o + i] = np.sqrt(a)
+        d_inv[o + i] = 1.0 / L[o + i, o + i]
+    else:
+        return False
+    return True
+
+
+@kernel
 def schur_factor(P, W, Y, trA):
     """Factor A = Y Yᵀ (Y (K, N) block-structured, trA its trace) as D + U Uᵀ (module docstring):
     L_g into the diagonal blocks of W.A_f (lower triangle) with the reciprocals of their diagonals in
@@ -80,14 +98,7 @@ def schur_factor(P, W, Y, trA):
                 a = 0.0
                 for j in range(nm):
                     a += Yg[i, j] * Yg[l, j]
-                for t in range(l):
-                    a -= Lg[i, t] * Lg[l, t]
-                if l < i:
-                    Lg[i, l] = a * dg[l]
-                elif a > 0.0:
-                    Lg[i, i] = np.sqrt(a)
-                    dg[i] = 1.0 / Lg[i, i]
-                else:
+                if not cholesky_entry(Lf, di, i0, i, l, a):
                     return False
             for j in range(nc):       # row i of V_g = L_g⁻¹ U_g
                 v = Ug[i, j]
@@ -102,13 +113,7 @@ def schur_factor(P, W, Y, trA):
             a = 1.0 if l == i else 0.0
             for t in range(K):
                 a += V[t, i] * V[t, l]
-            for t in range(l):
-                a -= S[i, t] * S[l, t]
-            if l < i:
-                S[i, l] = a * Si[l]
-            else:
-                S[i, i] = np.sqrt(a)
-                Si[i] = 1.0 / S[i, i]
+            cholesky_entry(S, Si, 0, i, l, a)     # a ≥ 1 on the diagonal
     return True
 
 
