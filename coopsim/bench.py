@@ -77,7 +77,7 @@ class Ladders:
     repeat_budget_s: float = 0.3
     max_repeats: int = 15
     eval_states: int = 20000
-    scaling_r: tuple[int, ...] = (2, 3, 4)
+    scaling_r: tuple[int, ...] = (2, 3, 4, 6, 8)
     scaling_n: tuple[int, ...] = (3, 6, 7)
     startup: bool = True
 
@@ -554,9 +554,10 @@ def scaling_point(r: int, n: int, count: int, peers=None, repeats: int = 3, seed
     """µs per evaluation of synthetic_model(r, n) at `count` states q0 + N(0, 0.1²) rad, rates N(0,
     1) rad/s, torques N(0, 1) N·m (not on the manifold: the cost does not depend on it): native
     amortised and from Python (`native_eval_us`), and 'native_cholesky_us', amortised with rank_tol
-    CHOLESKY_RANK_TOL (a diagnostic: the pivoted-Cholesky fast path taken whenever its pivots are
-    positive, where the default rank_tol's guaranteed-bound test sends K ≳ 12 constraint rows to the
-    eigen-decomposition); with peers also mj_forward and constraintDynamics from Python."""
+    CHOLESKY_RANK_TOL (a diagnostic: the dense path's pivoted Cholesky taken whenever its pivots are
+    positive, where the default rank_tol's guaranteed-bound test may send it to the eigen-decomposition;
+    for three arms or more the O(r) Schur path (`compiled.schur`) is taken either way where its own
+    certificate holds); with peers also mj_forward and constraintDynamics from Python."""
     model = synthetic_model(r, n)
     rng = np.random.default_rng(seed)
     N = model.n_total

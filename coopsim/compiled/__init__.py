@@ -12,13 +12,15 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
                    fallback)
     spatial.py     3-vector / 3×3 helpers, rotation log, quaternion
     chain.py       kinematics → Gibbs–Appell arm terms → object/grasp terms → closed-chain solve
+    schur.py       the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
+                   three arms or more
     manifold.py    loop-closure residual Φ, projection of positions and rates
     tableaux.py    DOP853 and Dormand–Prince coefficients, dense output included
     integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop, torque tables, stabilization
     sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py          one arm's inverse kinematics and rates
     api.py         the Python entry points (batches on threads, parameter sets) and error reporting
-    warmup.py      the first compile, on two cores
+    warmup.py      the first compile, on two cores (chain_forward compiled once)
 
 Tested against the reference stages at random states of every bundled scenario (≤ 1e-12 relative).
 """
