@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 DPI = 110
+PNG_COMPRESSION = 1   # zlib level: about 0.1 s less per figure than the default 6, files about 10 % larger
 WORKER_NICENESS = 5   # the workers yield the CPU to the command while it computes
 # Margins and gaps (inches) around a grid of axes with 10-point tick labels, axis labels and titles of
 # up to two lines: matplotlib's tight_layout finds them by drawing every text once more (about half
@@ -47,12 +48,13 @@ def fixed_layout(fig: Figure) -> None:
 
 
 def _draw_png(fig: Figure, target) -> None:
-    """Lay out (`fixed_layout`) and draw `fig` as PNG (DPI dots per inch) into `target` (a path or a file)."""
+    """Lay out (`fixed_layout`) and draw `fig` as PNG (DPI dots per inch, zlib level PNG_COMPRESSION) into
+    `target` (a path or a file)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
     fixed_layout(fig)
-    fig.savefig(target, format="png", dpi=DPI)
+    fig.savefig(target, format="png", dpi=DPI, pil_kwargs={"compress_level": PNG_COMPRESSION})
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
