@@ -679,6 +679,8 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
         reference = "object_motion"
         opts.update(object_kp=sec.array("object_kp", (2,), nonneg=True),
                     object_kd=sec.array("object_kd", (2,), nonneg=True),
+                    grasp_kp=sec.array("grasp_kp", (2,), default=np.zeros(2), nonneg=True),
+                    grasp_kd=sec.array("grasp_kd", (2,), default=np.zeros(2), nonneg=True),
                     squeeze=sec.number("squeeze", 0.0), reference=reference)
     if reference == "object_motion" and inverse.object_motion is None:
         sec.fail("reference" if law == "joint_pd" else "law",

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import tableaux
 from .chain import OK, RANK_DEFICIENT, chain_forward
+from .control import NONE, feedback
 from .jit import entry, kernel
 from .linalg import copy1
 from .manifold import project_state
@@ -166,13 +167,18 @@ def fail(L, code, t, y):
 
 
 @kernel
-def rhs(P, W, L, t, y, dy):
-    """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques). A lost rank of
+def rhs(P, W, L, ctl, t, y, dy):
+    """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques, and a controller's
+    command added to them: ctl = (Pc, Wc, C), `control.feedback`, unless C.law is NONE). A lost rank of
     Λ𝐈⁻¹Λᵀ stops the loop (P.rank_error) or is recorded once (minimum-norm wrenches). Returns 0 or
     a failure code."""
     N = P.dof[-1]
     L.count[0] += 1
     torque_at(P, t, W.tau)
+    if ctl[2].law != NONE:
+        st = feedback(ctl[0], ctl[1], ctl[2], t, y[:N], y[N:], W.tau)
+        if st != OK:
+            return fail(L, st, t, y)
     st = chain_forward(P, W, y[:N], y[N:], W.tau, L.stab)
     if st == RANK_DEFICIENT:
         if P.rank_error:
@@ -388,10 +394,12 @@ def step_too_small(t, h_abs, h_min):
 
 
 @entry
-def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step, k_stop):
+def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step, k_stop, land):
     """Integrate from L's state until outputs up to k_stop − 1 are in Y (len(t_out), 2N): first the
     projection of the initial state (output 0), then adaptive steps, or fixed steps of at most
-    fixed_step s when fixed_step > 0. Stops early on a failure (L.status).
+    fixed_step s when fixed_step > 0. Stops early on a failure (L.status). ctl = (Pc, Wc, C): the
+    controller in the loop (`rhs`). land: adaptive steps end on every output time (as the reference
+    `coopsim.integrate` does) instead of reaching them by dense output.
 
     This is the only function that evaluates the right-hand side (every stage, probe and dense-output
     stage is evaluated here): each compiled function that calls the closed-chain kernel compiles it
@@ -414,11 +422,11 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
                 if L.count[1] >= max_steps:
                     fail(L, MAX_STEPS, t, L.y)
                     return
-                if rhs(P, W, L, t, L.y, L.K[0]) != OK:
+                if rhs(P, W, L, ctl, t, L.y, L.K[0]) != OK:
                     return
                 for i in range(1, tab.stages):
                     stage_input(tab, L, L.y, h, i)
-                    if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                    if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                         return
                 rk_combine(tab, L, L.y, h, L.y_new)
                 if not finite(L.y_new):
@@ -436,13 +444,13 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
     s = tab.stages
     expo = -1.0 / (tab.err_order + 1)
     if L.has_fy[0] == 0:
-        if rhs(P, W, L, L.t[0], L.y, L.fy) != OK:
+        if rhs(P, W, L, ctl, L.t[0], L.y, L.fy) != OK:
             return
         L.has_fy[0] = 1
     if L.h[0] <= 0.0:
         span = t_end - L.t[0]
         h0 = probe_step(L, span, rtol, atol)
-        if rhs(P, W, L, L.t[0] + h0, L.ytmp, L.K[1]) != OK:
+        if rhs(P, W, L, ctl, L.t[0] + h0, L.ytmp, L.K[1]) != OK:
             return
         L.h[0] = first_step(tab, L, h0, span, h_max, rtol, atol)
     while L.k_next[0] < k_stop:
@@ -455,17 +463,17 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
             if L.count[1] + L.count[2] >= max_steps:
                 fail(L, MAX_STEPS, t, L.y)
                 return
-            h, t_new, clipped = clip_step(t, h_abs, t_end, h_max)
+            h, t_new, clipped = clip_step(t, h_abs, t_out[L.k_next[0]] if land else t_end, h_max)
             copy1(L.fy, L.K[0])
             for i in range(1, s):
                 stage_input(tab, L, L.y, h, i)
-                if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                     return
             rk_combine(tab, L, L.y, h, L.y_new)
             if not finite(L.y_new):
                 fail(L, NON_FINITE_STATE, t_new, L.y_new)
                 return
-            if rhs(P, W, L, t_new, L.y_new, L.K[s]) != OK:
+            if rhs(P, W, L, ctl, t_new, L.y_new, L.K[s]) != OK:
                 return
             err = error_norm(tab, L, L.y, L.y_new, h, rtol, atol)
             if err < 1.0:
@@ -480,7 +488,7 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
             if tab.code == DOP853:
                 for i in range(13, 16):
                     stage_input(tab, L, L.y, h, i)
-                    if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                    if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                         return
             dense_coefficients(tab, L, L.y, L.y_new, h)
             while k < len(t_out) and t_out[k] < t_new:
@@ -493,7 +501,7 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
         if P.stabilization == STAB_PROJECTION:
             if project(P, W, L, t_new, L.y) != OK:
                 return
-            if rhs(P, W, L, t_new, L.y, L.fy) != OK:
+            if rhs(P, W, L, ctl, t_new, L.y, L.fy) != OK:
                 return
         while k < len(t_out) and t_out[k] <= t_new:
             copy1(L.y, Y[k])
