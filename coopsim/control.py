@@ -38,6 +38,7 @@ from .model import CoopsimError, Model, TorqueFeedback, torque_at
 
 LAWS = ("joint_pd", "computed_torque")
 COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
+FALLBACKS = COMPILED_DISTRIBUTIONS + ("error",)                     # where 'bounded' has no solution
 COMPENSATIONS = ("none", "gravity", "bias")
 REFERENCES = ("setpoint", "object_motion")
 
@@ -165,9 +166,40 @@ class Controller:
 
     @cached_property
     def resolution(self):
+        """The distribution's resolution (`coopsim.inverse.resolution_for`); 'bounded' with the bounds of
+        inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
         from .inverse import resolution_for
 
-        return resolution_for(self.plant, self.settings.distribution)
+        inv = self.plant.inverse
+        bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
+        return resolution_for(self.plant, self.settings.distribution, force_bound=bounds[0], moment_bound=bounds[1])
+
+    @cached_property
+    def fallbacks(self) -> list:
+        """(t s, q (n,), reason) of every evaluation whose 'bounded' QP had no solution and that took
+        control.fallback instead (appended as they happen)."""
+        return []
+
+    def _distribute(self, prob, t: float):
+        """Grasp wrenches f (1, rk) of the resolution at one state (`inverse_dynamics`); where 'bounded' has
+        no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
+        import warnings
+
+        from .diagnostics import describe_state
+        from .inverse import SampleFailureWarning, distribute, resolution_for
+
+        failures: list = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SampleFailureWarning)     # reported as a RunWarning instead
+            f = distribute(prob, prob.y, self.resolution, failures)
+        if not failures:
+            return f
+        fallback, reason = self.settings.fallback, failures[0].reason
+        if fallback == "error":
+            raise ControlError(f"control.fallback: error: the 'bounded' distribution has no solution at "
+                               f"{describe_state(t, prob.q[0])}: {reason}")
+        self.fallbacks.append((t, prob.q[0].copy(), reason))
+        return distribute(prob, prob.y, resolution_for(self.plant, fallback))
 
     @cached_property
     def setpoint(self) -> np.ndarray:
@@ -204,15 +236,16 @@ class Controller:
         q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
         return q, qd
 
-    def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0):
-        """(τ (n,), problem) of the closed-chain inverse dynamics at one state, the object's wrench
-        distributed by the resolution, a squeeze added in the null space of the grasp matrix."""
-        from .inverse import distribute, inverse_problem, torques_of
+    def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0, t: float = 0.0):
+        """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
+        messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
+        the null space of the grasp matrix."""
+        from .inverse import inverse_problem, torques_of
         from .trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
-        f = distribute(prob, prob.y, self.resolution)
+        f = self._distribute(prob, t)
         if squeeze:
             f = f + squeeze_wrenches(prob.grasp_offset[0], prob.rows, prob.A[0], squeeze)[None]
         return torques_of(prob, f)[0], prob
@@ -245,7 +278,7 @@ class Controller:
             q_ref, qd_ref = self.reference(t)
             u = pd_torque(s.kp, s.kd, q_ref, qd_ref, q, qd)
             if s.compensation != "none":
-                u = u + self.inverse_dynamics(q, qd if s.compensation == "bias" else np.zeros(n), np.zeros(n))[0]
+                u = u + self.inverse_dynamics(q, qd if s.compensation == "bias" else np.zeros(n), np.zeros(n), t=t)[0]
             e, ed = nan6, nan6
         else:
             q_ref, qd_ref = nan_n, nan_n
@@ -267,13 +300,25 @@ class Controller:
         a = object_acceleration(s.object_kp, s.object_kd, e, ed, a_r)
         n = [sl.stop - sl.start for sl in m.dof_slices]
         qdd = joint_accelerations(m.rows, W.J, W.Jd_qd, -state.s[0], v, a, n)
-        J, p_ee, R_ee = W.J.copy(), W.p_ee.copy(), W.R_ee.copy()      # the next evaluation reuses W
-        u = self.inverse_dynamics(q, qd, qdd, s.squeeze)[0]
+        J = W.J.copy()                                   # the next evaluation reuses W
+        ge, ged = self._grasp_errors(q, qd, state)
+        u = self.inverse_dynamics(q, qd, qdd, s.squeeze, t)[0]
         if np.any(s.grasp_kp) or np.any(s.grasp_kd):
-            ee_twist = np.array([J[i][:, :k] @ qd[sl] for i, (k, sl) in enumerate(zip(n, m.dof_slices))])
-            ge, ged = grasp_errors(m.object.grasp_pos, m.object.grasp_rot, p, R, v, p_ee, R_ee, ee_twist)
             u = u + grasp_torques(m.rows, J, s.grasp_kp, s.grasp_kd, ge, ged, n)
         return u, e, ed
+
+    def _grasp_errors(self, q, qd, state):
+        """`grasp_errors` at (q, qd) from the terms `state` of `_terms` there (the workspace holds them)."""
+        m, W = self.plant, self._kernel[2]
+        ee_twist = np.array([W.J[i][:, :sl.stop - sl.start] @ qd[sl] for i, sl in enumerate(m.dof_slices)])
+        return grasp_errors(m.object.grasp_pos, m.object.grasp_rot, state.p_C[0], state.R_o[0], state.twist[0],
+                            W.p_ee, W.R_ee, ee_twist)
+
+    def grasp_errors_at(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every arm's grasp error e and its rate ė (r, 6) at (q, qd) (`grasp_errors`), the object pose
+        and twist those of the carrier arm's grasp (as the native model's)."""
+        state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
+        return self._grasp_errors(q, qd, state)
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         return self.command(t, q, qd).tau
@@ -319,6 +364,23 @@ class Controller:
 
         P = api.compiled(self.plant).P
         return api.compiled(self.plant).Ps, api.fresh_workspace(P), control_struct(self.packed)
+
+    def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`, about 10 µs)."""
+        from .compiled import api
+        from .compiled.control import evaluate
+
+        Ps, Ws, C = self.compiled_loop
+        tau = np.array(torque_at(self.model.torques, t), dtype=float)
+        st = evaluate(Ps, Ws, C, float(t), np.concatenate([q, qd]).astype(float), tau)
+        if st:
+            raise ControlError(f"control: at t={t:.6g} s: {api.REASONS[st]}")
+        return tau
+
+    @property
+    def fastest(self):
+        """τ = u(t, q, qd): `compiled_call` where the controller is compiled, else this Controller."""
+        return self.compiled_call if self.compiled_reason is None else self
 
     def compiled_commands(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
         """The compiled controller at every sample (t (N,), q, qd (N, n)): a Command of (N, …) arrays, as

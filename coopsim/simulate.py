@@ -316,6 +316,7 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
     except IntegrationError as exc:
         n = model.n_total
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+    events += _fallback_events(model)
     return replace(_sample(model, t_out, Y, init, stats, time.perf_counter() - start), events=tuple(events))
 
 
@@ -353,8 +354,24 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
                              atol=s.atol, step=step, project=project if s.stabilization == "projection" else None)
     except IntegrationError as exc:
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+    events += _fallback_events(model)
     tau = np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
     return _sampled_result(model, t_out, Y, api.sample_states(model, t_out, Y, tau), init, stats, start, events)
+
+
+def _fallback_events(model: Model) -> list[RunWarning]:
+    """A `distribution_fallback` RunWarning when the run's controller fell back from 'bounded' (at its
+    first evaluation that did, with their count), else none."""
+    from .control import controller_of
+
+    ctrl = controller_of(model)
+    if ctrl is None or not ctrl.fallbacks:
+        return []
+    t, q, reason = ctrl.fallbacks[0]
+    count, fallback = len(ctrl.fallbacks), ctrl.settings.fallback
+    return [run_warning("distribution_fallback", t, q, f"the 'bounded' distribution has no solution ({reason}); the "
+                        f"{fallback!r} distribution was used there and at {count - 1} later controller evaluations "
+                        f"(control.fallback)", fallbacks=count)]
 
 
 def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:

@@ -56,7 +56,7 @@ def compile_pending() -> bool:
     try:
         return any(not os.path.exists(e._cache._cache_file._index_path)
                    for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve,
-                             capacity.min_energy_mass_interval, control.commands))
+                             capacity.min_energy_mass_interval, control.commands, control.evaluate))
     except AttributeError:
         return False
 

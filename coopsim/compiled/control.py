@@ -755,3 +755,11 @@ def commands(P, W, C, t, Y, tables, raw, tau, q_ref, qd_ref, err, rate_err, stat
         copy1(C.qd_ref, qd_ref[i])
         copy1(C.err, err[i])
         copy1(C.rate_err, rate_err[i])
+
+
+@entry
+def evaluate(P, W, C, t, y, tau):
+    """τ (N,) (the torque tables at t on entry) ← the controller's torque at (t, y = [θ; θ̇]) (`feedback`),
+    for one state (the MuJoCo twin's control callback). Returns OK or CONTROL_SINGULAR."""
+    N = len(tau)
+    return feedback(P, W, C, t, y[:N], y[N:], tau)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ def compile_loop() -> None:
 
 
 def compile_evaluations() -> None:
-    """The evaluation, inverse-dynamics-terms and inverse-kinematics entries."""
+    """The evaluation, inverse-dynamics-terms, inverse-kinematics and controller entries."""
     from . import api
 
     model = _model()
@@ -43,6 +44,13 @@ def compile_evaluations() -> None:
     api.evaluate_states(model, y, np.zeros((1, model.n_total)), full=True, n_threads=1)
     api.inverse_terms(model, y[:, :model.n_total], y[:, model.n_total:], np.zeros((1, model.n_total)), n_threads=1)
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
+    from ..control import Controller
+    from ..model import ControlSettings
+
+    n = model.n_total
+    pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
+    pd.compiled_commands(np.zeros(1), y[:, :n], y[:, n:])
+    pd.compiled_call(0.0, y[0, :n], y[0, n:])
 
 
 def warm_up() -> None:
