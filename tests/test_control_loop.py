@@ -126,3 +126,115 @@ def test_the_grasp_error_is_the_loop_closure_residual_and_its_rate_its_derivativ
     assert np.max(np.abs(e0)) <= 1e-12
     np.testing.assert_allclose(fd, ed, rtol=0, atol=1e-8)
     assert np.max(np.abs(ed)) > 0.1, "the rates left the grasps closed: nothing was differentiated"
+
+
+def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_model_alone(carry):
+    """The carry's twin with soft welds (time constant 0.05 s, impedance 0.5: compliant grasps), started
+    with arm 2 turned 1–2 mrad off its grasp (grasp error 1.2e-3 m) under the perfect-model computed
+    torque: without grasp feedback the error grows as the welds yield to the controller's forces
+    (measured 4.4e-3 m at 0.2 s); with J_mᵀ(Kp e + Kd ė) (2000 N/m, 20 N·m/rad; 100 N·s/m, 1 N·m·s/rad)
+    it decays, to at most 5 % by 0.2 s (measured 1.5 %). On the native model, whose grasps are rigid
+    (e = 0 to the closure tolerance), the same gains change the trajectory by ≤ 1e-12 rad."""
+    from coopsim.mujoco_run import run_twin
+    from coopsim.simulate import initial_state, output_times
+
+    zero = tuple(TorqueTable(np.zeros(1), np.zeros((1, tab.values.shape[1]))) for tab in carry.torques)
+    soft = replace(carry.mujoco, weld_solref=(0.05, 1.0), weld_solimp=(0.5, 0.5, 0.001, 0.5, 2.0))
+    base = replace(carry, torques=zero, duration=0.2, control=replace(carry.control, mass_scale=1.0, squeeze=0.0),
+                   integrator=replace(carry.integrator, output_dt=0.01), mujoco=soft)
+    fed = replace(base, control=replace(base.control, grasp_kp=np.array([2e3, 20.0]), grasp_kd=np.array([100.0, 1.0])))
+    init = initial_state(base)
+    q0 = init.q + np.r_[0.0, 0.0, 0.0, 2e-3, -2e-3, 1e-3]
+    t = output_times(0.2, 0.01)
+    ctrl = Controller(base)
+    err = {}
+    for name, model in (("without", base), ("with", fed)):
+        twin = run_twin(model, q0, init.qd, t)
+        err[name] = np.array([np.linalg.norm(ctrl.grasp_errors_at(q, qd)[0][1, :3]) for q, qd in zip(twin.q, twin.qd)])
+    e0 = err["with"][0]
+    assert 1e-3 < e0 == err["without"][0]
+    assert err["without"][-1] > e0, f"the soft grasps closed by themselves: {err['without'][-1]:.3g} m"
+    assert err["with"][-1] <= 0.05 * e0, f"grasp feedback left {err['with'][-1]:.3g} m of {e0:.3g} m"
+
+    short = dict(duration=0.05, integrator=replace(base.integrator, output_dt=0.025))
+    a, b = simulate(replace(base, **short)), simulate(replace(fed, **short))
+    assert float(np.max(np.abs(a.q - b.q))) <= 1e-12
+
+
+# ------------------------------------------------------------------------------------------------
+# 'bounded' distribution without a solution: fallback or a one-line error
+# ------------------------------------------------------------------------------------------------
+
+@pytest.fixture
+def failing_qp(monkeypatch):
+    """`coopsim.inverse.solve_qps` reporting no solution at the calls whose numbers are in the returned
+    set (1-based; the real solver runs, its answer is dropped there). With actuated arms the bounded QP
+    always has one (zero internal wrench is feasible), so the failure is injected."""
+    import coopsim.inverse as inv
+
+    real, calls, failing = inv.solve_qps, [0], set()
+
+    def solve(*args):
+        out = real(*args)
+        calls[0] += 1
+        if calls[0] in failing:
+            out.ok[:] = False
+            out.x[:] = np.nan
+            out.messages[:] = ["injected: no verified minimiser"] * len(out.messages)
+        return out
+
+    monkeypatch.setattr(inv, "solve_qps", solve)
+    return failing
+
+
+def _bounded(hold, **control):
+    """The hold under 'bounded' (unbounded internal wrench: the minimum-energy torques), two RK4 steps."""
+    model = _short(hold, 0.004, 0.002, distribution="bounded", **control)
+    return replace(model, integrator=replace(model.integrator, output_dt=0.004))
+
+
+def test_a_bounded_distribution_without_solution_falls_back_and_says_so(hold, failing_qp):
+    """Where the QP has no solution the controller uses control.fallback's distribution (default
+    non-squeezing: its torque exactly), the run goes on on the 'stages' engine, and one RunWarning names
+    the first such evaluation's time and configuration, the reason and their count (2: the 2nd and 3rd
+    stages of the first step, t = 1 ms); the summary carries it. Without failures: no warning."""
+    from coopsim.summary import simulation_summary
+
+    model = _bounded(hold)
+    failing_qp.update({1})
+    ctrl, ref = Controller(model), Controller(replace(model, control=replace(model.control, distribution="nonsqueezing")))
+    q, qd = hold.q0, np.zeros(hold.n_total)
+    np.testing.assert_allclose(ctrl(0.0, q, qd), ref(0.0, q, qd), rtol=0, atol=1e-12)
+    assert len(ctrl.fallbacks) == 1
+    assert not np.allclose(ctrl(0.0, q, qd), ref(0.0, q, qd), rtol=0, atol=1e-6), "bounded is non-squeezing here"
+
+    failing_qp.clear()
+    failing_qp.update({4, 5})            # 2 calls above; the run's stages 1, 2, 3 are calls 3, 4, 5
+    res = simulate(model)
+    assert res.engine == "stages"
+    [w] = [w for w in res.warnings if w.kind == "distribution_fallback"]
+    assert w.values == {"fallbacks": 2.0} and w.t == pytest.approx(0.001)
+    assert "injected: no verified minimiser" in w.reason and "'nonsqueezing'" in w.reason
+    assert w.as_dict() in simulation_summary(res)["warnings"]
+    failing_qp.clear()
+    assert not [w for w in simulate(model).warnings if w.kind == "distribution_fallback"]
+
+
+def test_a_bounded_distribution_without_solution_stops_the_run_when_told(hold, failing_qp):
+    """control.fallback: error — the run stops at the first evaluation without a solution, with one line
+    naming the field, the time, the configuration and the reason; fallback is validated by name."""
+    from coopsim.scenario import ScenarioError, model_from_dict
+    import yaml
+
+    failing_qp.update({2})
+    with pytest.raises(ControlError) as err:
+        simulate(_bounded(hold, fallback="error"))
+    msg = str(err.value)
+    assert msg.startswith("control.fallback: error: the 'bounded' distribution has no solution at t=0.001 s, q=[")
+    assert msg.endswith("rad: injected: no verified minimiser") and "\n" not in msg
+    for extra, expect in (({"fallback": "paper"}, "control.fallback: only with distribution: bounded"),
+                          ({"distribution": "bounded", "fallback": "qp"}, "control.fallback: must be one of")):
+        data = yaml.safe_load(HOLD.read_text())
+        data["control"].update(extra)
+        with pytest.raises(ScenarioError, match=expect.replace(".", r"\.")):
+            model_from_dict(data, where="s.yaml")
