@@ -33,7 +33,7 @@ from numba.experimental import structref
 
 from .chain import OK, arm_terms, object_dynamics, object_pose
 from .jit import entry, kernel
-from .linalg import copy1, copy2
+from .linalg import copy1, copy2, gauss_solve
 from .sample import object_acceleration, object_wrench
 from .spatial import axis_rotation, matmul3, matmul3_T, rot_log
 from .structs import StructType
@@ -237,34 +237,27 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int = NONE, **fields) ->
 
 
 # ------------------------------------------------------------------------------------------------
-# Small linear algebra
+# Small helpers
 # ------------------------------------------------------------------------------------------------
 
 @kernel
-def gauss_solve(a, n, x):
-    """x ← a⁻¹ x for the square a[:n, :n] by Gaussian elimination with partial pivoting, in place (a is
-    overwritten by its factors). Returns False when a pivot is exactly zero."""
-    for c in range(n):
-        p = c
-        for i in range(c + 1, n):
-            if abs(a[i, c]) > abs(a[p, c]):
-                p = i
-        if a[p, c] == 0.0:
-            return False
-        if p != c:
-            x[c], x[p] = x[p], x[c]
-            for j in range(n):
-                a[c, j], a[p, j] = a[p, j], a[c, j]
-        for i in range(c + 1, n):
-            g = a[i, c] / a[c, c]
-            for j in range(c + 1, n):
-                a[i, j] -= g * a[c, j]
-            x[i] -= g * x[c]
-    for i in range(n - 1, -1, -1):
-        v = x[i]
-        for j in range(i + 1, n):
-            v -= a[i, j] * x[j]
-        x[i] = v / a[i, i]
+def gram_solve(C, k):
+    """C.x[:rk] ← MA (A MA)⁻¹ C.xk (C.MA (rk, k); C.G and C.xk overwritten). Returns False when A MA is
+    singular."""
+    mk = C.A.shape[1]
+    for i in range(k):
+        for b in range(k):
+            v = 0.0
+            for c in range(mk):
+                v += C.A[i, c] * C.MA[c, b]
+            C.G[i, b] = v
+    if gauss_solve(C.G, k, C.xk) == 0.0:
+        return False
+    for c in range(mk):
+        v = 0.0
+        for b in range(k):
+            v += C.MA[c, b] * C.xk[b]
+        C.x[c] = v
     return True
 
 
@@ -449,18 +442,10 @@ def nonsqueezing_distribution(P, W, C):
                                       + S[i, 3] * C.v3[0] + S[i, 4] * C.v3[1] + S[i, 5] * C.v3[2])
     for i in range(k):
         C.xk[i] = C.y[i]
-        for b in range(k):
-            v = 0.0
-            for c in range(r * k):
-                v += C.A[i, c] * C.MA[c, b]
-            C.G[i, b] = v
-    if not gauss_solve(C.G, k, C.xk):
+    if not gram_solve(C, k):
         return False
     for c in range(r * k):
-        v = 0.0
-        for b in range(k):
-            v += C.MA[c, b] * C.xk[b]
-        C.f[c] = v
+        C.f[c] = C.x[c]
     return True
 
 
@@ -487,7 +472,7 @@ def min_energy_distribution(C, k):
         C.x[mk + i] = C.y[i]
         for c in range(k):
             K[mk + i, mk + c] = 0.0
-    if not gauss_solve(K, mk + k, C.x):
+    if gauss_solve(K, mk + k, C.x) == 0.0:
         return False
     for p in range(mk):
         C.f[p] = C.x[p]
@@ -512,19 +497,12 @@ def squeeze_wrenches(P, W, C, force):
         v = 0.0
         for c in range(r * k):
             v += C.A[i, c] * C.fs[c]
+            C.MA[c, i] = C.A[i, c]
         C.xk[i] = v
-        for b in range(k):
-            v = 0.0
-            for c in range(r * k):
-                v += C.A[i, c] * C.A[b, c]
-            C.G[i, b] = v
-    if not gauss_solve(C.G, k, C.xk):
+    if not gram_solve(C, k):
         return False
     for c in range(r * k):
-        v = 0.0
-        for i in range(k):
-            v += C.A[i, c] * C.xk[i]
-        C.f[c] += C.fs[c] - v
+        C.f[c] += C.fs[c] - C.x[c]
     return True
 
 
@@ -640,7 +618,7 @@ def arm_accelerations(P, W, C):
                 for a in range(6):
                     v += S[i, a] * W.J[m, a, j]
                 C.G[i, j] = v
-        if not gauss_solve(C.G, k, C.xk):
+        if gauss_solve(C.G, k, C.xk) == 0.0:
             return False
         for j in range(k):
             C.qdd[o + j] = C.xk[j]

@@ -6,7 +6,9 @@ Methods and step control are those of the reference `coopsim.integrate` (Hairer,
 h_new = h·min(10, max(0.2, 0.9·err^(−1/(p̂+1)))), no growth right after a rejection. Unlike the
 reference, outputs come from the methods' dense output — DOP853's 7th-order interpolant (3 extra
 stages, only in steps that hold an output time) and Dormand–Prince's 4th-order one (free) — so the
-output grid does not limit the step, and the adaptive step is unbounded unless `h_max` is given.
+output grid does not limit the step, and the adaptive step is unbounded unless `h_max` is given
+(`land`: the steps end on every output time instead, as the reference's do — with a controller in the
+loop, so that both loops take the same steps).
 With projection stabilization, every accepted step and every output sample is projected onto the
 loop-closure manifold (`manifold.project_state`) and the derivative is re-evaluated there.
 
@@ -15,7 +17,7 @@ ceil(Δt/step − 1e-9) equal steps, as the reference's RK4; its stage times t +
 `stage_times` computes them, so torques tabulated at exactly those times are met exactly (replays).
 
 Torques are the packed per-joint tables (linear between knots, held outside), evaluated at every
-stage time. The loop can stop after the step that fills output `k_stop` and resume exactly where it
+stage time, plus a controller's command where one is in the loop (`control.feedback`). The loop can stop after the step that fills output `k_stop` and resume exactly where it
 stopped (the step sequence is unchanged), which is how progress is reported.
 """
 

@@ -266,6 +266,14 @@ def lu_solve(A, n, b, x):
         x[i] = b[i]
         for j in range(n):
             a[i, j] = A[i, j]
+    return gauss_solve(a, n, x)
+
+
+@kernel
+def gauss_solve(a, n, x):
+    """x ← a⁻¹ x for the square a[:n, :n] by Gaussian elimination with partial pivoting, in place (a is
+    overwritten by its factors, nothing allocated); returns det a (0 for an exactly singular a, and then
+    x is NaN)."""
     det = 1.0
     for k in range(n):
         p = k
