@@ -232,7 +232,7 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
     loop (`coopsim.control.Controller.compiled_loop`), whose command is added to the model's tables;
     land: adaptive steps end on every output time (`integrate.run`)."""
     P, W, Ps, Ws = compiled(model)
-    ctl = (Ps, Ws, _no_controller(P)) if controller is None else controller
+    ctl = controller
     tab = _tableau(method)
     t_out = _f(t_out)
     Y = np.zeros((len(t_out), len(y0)))
@@ -256,12 +256,6 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
     if L.warn[0]:
         warn = (float(L.warn_t[0]), L.warn_y.copy(), int(L.warn[1]), float(L.warn_cond[0]))
     return Run(Y, tuple(int(c) for c in L.count), int(L.status[0]), float(L.fail_t[0]), L.fail_y.copy(), warn)
-
-
-def _no_controller(P: PackedModel) -> Struct:
-    """The empty controller (law NONE) of the time loop for model P."""
-    return control.control_struct(control.new_control(int(P.dof[-1]), len(P.dof) - 1, P.rows.shape[0],
-                                                      int(np.max(np.diff(P.dof)))))
 
 
 def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | None = None) -> sample.Samples:

@@ -38,7 +38,7 @@ from .sample import object_acceleration, object_wrench
 from .spatial import axis_rotation, matmul3, matmul3_T, rot_log
 from .structs import StructType
 
-NONE, JOINT_PD, COMPUTED_TORQUE = 0, 1, 2
+JOINT_PD, COMPUTED_TORQUE = 0, 1
 COMP_NONE, COMP_GRAVITY, COMP_BIAS = 0, 1, 2
 REF_SETPOINT, REF_TRAJECTORY = 0, 1
 DIST_PAPER, DIST_NONSQUEEZING, DIST_MIN_ENERGY = 0, 1, 2
@@ -48,7 +48,7 @@ CONTROL_SINGULAR = 8      # a failure code of the time loop (after integrate's a
 
 class PackedControl(NamedTuple):
     """A controller for the kernels (N joints, r arms, k rows per grasp, m = rk grasp-wrench unknowns).
-    Codes: law (NONE | JOINT_PD | COMPUTED_TORQUE), compensation (COMP_*), reference (REF_*),
+    Codes: law (JOINT_PD | COMPUTED_TORQUE), compensation (COMP_*), reference (REF_*),
     distribution (DIST_*), saturate (0/1), time_law (LAW_*).
     Joint PD: kp, kd (N,); q_set (N,) rad; joint trajectory tr_t (M,) s, tr_q, tr_qd, tr_qdd (M, N),
     read at tr_t[0] + t. Computed torque: okp, okd (2,) [linear, angular]; object motion om_t (w,) s,
@@ -211,9 +211,9 @@ def control_struct(C: PackedControl):
     return _new_control(C)
 
 
-def new_control(N: int, r: int, k: int, nmax: int, law: int = NONE, **fields) -> PackedControl:
-    """A PackedControl for N joints, r arms (nmax joints in the longest), k rows with its scratch
-    allocated; `fields` set the rest (absent ones: NONE codes, zero gains, two-sample tables)."""
+def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> PackedControl:
+    """A PackedControl of `law` for N joints, r arms (nmax joints in the longest), k rows with its scratch
+    allocated; `fields` set the rest (absent ones: the first code, zero gains, two-sample tables)."""
     m, z = r * k, np.zeros
     base = dict(law=law, compensation=COMP_NONE, reference=REF_SETPOINT, distribution=DIST_PAPER, saturate=0,
                 time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=z(2) + [0.0, 1.0], tr_q=z((2, N)),

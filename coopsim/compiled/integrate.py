@@ -18,7 +18,8 @@ ceil(Δt/step − 1e-9) equal steps, as the reference's RK4; its stage times t +
 
 Torques are the packed per-joint tables (linear between knots, held outside), evaluated at every
 stage time, plus a controller's command where one is in the loop (`control.feedback`). The loop can stop after the step that fills output `k_stop` and resume exactly where it
-stopped (the step sequence is unchanged), which is how progress is reported.
+stopped (the step sequence is unchanged), which is how progress is reported. `run` is compiled twice:
+without a controller (ctl None) and with one.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 
 from . import tableaux
 from .chain import OK, RANK_DEFICIENT, chain_forward
-from .control import NONE, feedback
+from .control import feedback
 from .jit import entry, kernel
 from .linalg import copy1
 from .manifold import project_state
@@ -171,13 +172,14 @@ def fail(L, code, t, y):
 @kernel
 def rhs(P, W, L, ctl, t, y, dy):
     """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques, and a controller's
-    command added to them: ctl = (Pc, Wc, C), `control.feedback`, unless C.law is NONE). A lost rank of
+    command added to them: ctl = (Pc, Wc, C), `control.feedback`; None: no controller — numba prunes
+    the branch, so the open loop's compiled code is what it was without controllers). A lost rank of
     Λ𝐈⁻¹Λᵀ stops the loop (P.rank_error) or is recorded once (minimum-norm wrenches). Returns 0 or
     a failure code."""
     N = P.dof[-1]
     L.count[0] += 1
     torque_at(P, t, W.tau)
-    if ctl[2].law != NONE:
+    if ctl is not None:
         st = feedback(ctl[0], ctl[1], ctl[2], t, y[:N], y[N:], W.tau)
         if st != OK:
             return fail(L, st, t, y)

@@ -2,7 +2,8 @@
 
 numba compiles on one thread and caches per function, so the entries are split in two groups, each
 compiled by its own process: this one compiles the time loop (`integrate.run`), a child process the
-evaluation, inverse-dynamics and inverse-kinematics entries. Both write numba's on-disk cache; what
+evaluation, inverse-dynamics, inverse-kinematics and controller entries and the time loop with a
+controller in it. Both write numba's on-disk cache; what
 one has written the other loads. `python -m coopsim.compiled.warmup` compiles everything.
 """
 
@@ -36,7 +37,9 @@ def compile_loop() -> None:
 
 
 def compile_evaluations() -> None:
-    """The evaluation, inverse-dynamics-terms, inverse-kinematics and controller entries."""
+    """The evaluation, inverse-dynamics-terms, inverse-kinematics and controller entries, and the time
+    loop with a controller."""
+    from ..simulate import simulate
     from . import api
 
     model = _model()
@@ -51,6 +54,7 @@ def compile_evaluations() -> None:
     pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
     pd.compiled_commands(np.zeros(1), y[:, :n], y[:, n:])
     pd.compiled_call(0.0, y[0, :n], y[0, n:])
+    simulate(pd.model, duration=0.01)          # the time loop with a controller (its second compilation)
 
 
 def warm_up() -> None:
