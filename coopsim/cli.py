@@ -200,7 +200,6 @@ def _cmd_inverse(args) -> int:
         out = Path(args.out or Path("out") / model.name)
         streams, meta = inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
-            "native_engine": cv.native.engine,
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
                         "moment_bound_Nm": study.bounds[1]}})
         summary: dict = {}

@@ -352,8 +352,8 @@ class Controller:
         res = self.resolution
         ts, ws = m.motors.stall_torque, m.motors.no_load_speed
         slope = np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
-        return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights, vmass=res.masses,
-                              vinertia=res.inertias, stall=ts, slope=slope, **fields)
+        return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights,
+                              vmass=res.masses, vinertia=res.inertias, stall=ts, slope=slope, **fields)
 
     @cached_property
     def compiled_loop(self) -> tuple:

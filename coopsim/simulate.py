@@ -193,10 +193,12 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
              progress=None, engine: str = "compiled", fixed_step: float | None = None) -> SimResult:
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
     scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
-    called as the run advances. engine: 'compiled' or 'reference' (module docstring); torques given
-    as a TorqueFunction (a controller in the loop too: `coopsim.control`) always run on the reference engine. fixed_step (s, compiled engine): run the
-    method (DOP853 or DOPRI5 too) at fixed steps of at most this size, landing on every output time —
-    for torques tabulated at exactly those steps' stage times (`coopsim.compiled.integrate.stage_times`)."""
+    called as the run advances. engine: 'compiled', 'reference' or 'stages' (module docstring); a
+    scenario's controller runs on the compiled engine unless it needs Python ('bounded', then on
+    'stages'); other torques given as a Python function run on 'reference' ('stages' for feedback).
+    fixed_step (s, compiled engine): run the method (DOP853 or DOPRI5 too) at fixed steps of at most
+    this size, landing on every output time — for torques tabulated at exactly those steps' stage times
+    (`coopsim.compiled.integrate.stage_times`)."""
     if settings is not None:
         model = replace(model, integrator=settings)
     if duration is not None:

@@ -202,7 +202,8 @@ def test_a_bounded_distribution_without_solution_falls_back_and_says_so(hold, fa
 
     model = _bounded(hold)
     failing_qp.update({1})
-    ctrl, ref = Controller(model), Controller(replace(model, control=replace(model.control, distribution="nonsqueezing")))
+    ctrl = Controller(model)
+    ref = Controller(replace(model, control=replace(model.control, distribution="nonsqueezing")))
     q, qd = hold.q0, np.zeros(hold.n_total)
     np.testing.assert_allclose(ctrl(0.0, q, qd), ref(0.0, q, qd), rtol=0, atol=1e-12)
     assert len(ctrl.fallbacks) == 1

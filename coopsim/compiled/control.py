@@ -33,7 +33,7 @@ from numba.experimental import structref
 
 from .chain import OK, arm_terms, object_dynamics, object_pose
 from .jit import entry, kernel
-from .linalg import copy1, copy2, gauss_solve
+from .linalg import bisect, copy1, copy2, gauss_solve
 from .sample import object_acceleration, object_wrench
 from .spatial import axis_rotation, matmul3, matmul3_T, rot_log
 from .structs import StructType
@@ -61,7 +61,8 @@ class PackedControl(NamedTuple):
     pairs]; q_ref, qd_ref (N,); err, rate_err (6,) object pose and twist error [m; rad], [m/s; rad/s];
     u (N,) the law's command; raw (N,) with the tables added; gerr (r, 6) each arm's grasp error
     [m; rad] (`grasp_feedback`).
-    Scratch: zero, qdd, tau_arms, tau_c (N,); Mb (N, nmax) the arms' mass-matrix blocks (no object); acc, Y, a, p_r... (6,) / (3,); A (k, m); JT (N, m);
+    Scratch: zero, qdd, tau_arms, tau_c (N,); Mb (N, nmax) the arms' mass-matrix blocks (no object);
+    p_r (3,), v_r, a_r, a, acc, Y, v6 (6,), v3 (3,); A (k, m); JT (N, m);
     f, fs (m,); y (k,); kkt (m+k, m+k), x (m+k,); MA (m, k); G (k, k); xk (k,); R3, R3b (3, 3)."""
 
     law: int
@@ -216,17 +217,17 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> Packed
     allocated; `fields` set the rest (absent ones: the first code, zero gains, two-sample tables)."""
     m, z = r * k, np.zeros
     base = dict(law=law, compensation=COMP_NONE, reference=REF_SETPOINT, distribution=DIST_PAPER, saturate=0,
-                time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=z(2) + [0.0, 1.0], tr_q=z((2, N)),
+                time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=np.array([0.0, 1.0]), tr_q=z((2, N)),
                 tr_qd=z((2, N)), tr_qdd=z((2, N)), okp=z(2), okd=z(2), om_t=np.array([0.0, 1.0]), om_p=z((2, 3)),
                 om_R=np.tile(np.eye(3), (2, 1, 1)), om_axis=z((1, 3)), om_angle=z(1), om_w=z((1, 3)), squeeze=0.0,
                 gkp=z(2), gkd=z(2), weights=np.ones(N), vmass=np.ones(r), vinertia=np.tile(np.eye(3), (r, 1, 1)),
                 stall=np.full(N, np.inf), slope=z(N))
     base.update(fields)
     scratch = dict(count=np.zeros(3, dtype=np.int64), q_ref=z(N), qd_ref=z(N), err=z(6), rate_err=z(6), u=z(N),
-                   raw=z(N), zero=z(N), qdd=z(N), tau_arms=z(N), tau_c=z(N), Mb=z((N, nmax)), gerr=z((r, 6)), p_r=z(3), v_r=z(6), a_r=z(6), a=z(6),
-                   acc=z(6), Y=z(6), v6=z(6), v3=z(3), A=z((k, m)), JT=z((N, m)), f=z(m), fs=z(m), y=z(k),
-                   kkt=z((m + k, m + k)), x=z(m + k), MA=z((m, k)), G=z((k, k)), xk=z(k), R3=z((3, 3)),
-                   R3b=z((3, 3)))
+                   raw=z(N), zero=z(N), qdd=z(N), tau_arms=z(N), tau_c=z(N), Mb=z((N, nmax)), gerr=z((r, 6)),
+                   p_r=z(3), v_r=z(6), a_r=z(6), a=z(6), acc=z(6), Y=z(6), v6=z(6), v3=z(3), A=z((k, m)),
+                   JT=z((N, m)), f=z(m), fs=z(m), y=z(k), kkt=z((m + k, m + k)), x=z(m + k), MA=z((m, k)),
+                   G=z((k, k)), xk=z(k), R3=z((3, 3)), R3b=z((3, 3)))
     out = {}
     for name in PackedControl._fields:
         v = base[name] if name in base else scratch[name]
@@ -281,14 +282,7 @@ def segment(ts, t):
     """(i, t clamped): the interval [ts[i], ts[i+1]] holding t (clamped to the span), as
     clip(searchsorted(ts, t, 'right') − 1, 0, len(ts) − 2)."""
     t = min(max(t, ts[0]), ts[-1])
-    lo, hi = 0, len(ts) - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if ts[mid] <= t:
-            lo = mid
-        else:
-            hi = mid
-    return lo, t
+    return bisect(ts, 0, len(ts) - 1, t), t
 
 
 @kernel
@@ -649,7 +643,8 @@ def grasp_feedback(P, W, C, qd, u):
     for m in range(len(P.dof) - 1):
         o, e = P.dof[m], P.dof[m + 1]
         for a in range(3):
-            C.v3[a] = W.R_o[a, 0] * P.grasp_pos[m, 0] + W.R_o[a, 1] * P.grasp_pos[m, 1] + W.R_o[a, 2] * P.grasp_pos[m, 2]
+            g = P.grasp_pos[m]
+            C.v3[a] = W.R_o[a, 0] * g[0] + W.R_o[a, 1] * g[1] + W.R_o[a, 2] * g[2]
         matmul3(W.R_o, P.grasp_rot[m], C.R3)
         matmul3_T(C.R3, W.R_ee[m], C.R3b)
         for a in range(3):

@@ -17,9 +17,10 @@ ceil(Δt/step − 1e-9) equal steps, as the reference's RK4; its stage times t +
 `stage_times` computes them, so torques tabulated at exactly those times are met exactly (replays).
 
 Torques are the packed per-joint tables (linear between knots, held outside), evaluated at every
-stage time, plus a controller's command where one is in the loop (`control.feedback`). The loop can stop after the step that fills output `k_stop` and resume exactly where it
-stopped (the step sequence is unchanged), which is how progress is reported. `run` is compiled twice:
-without a controller (ctl None) and with one.
+stage time, plus a controller's command where one is in the loop (`control.feedback`). The loop can
+stop after the step that fills output `k_stop` and resume exactly where it stopped (the step sequence
+is unchanged), which is how progress is reported. `run` is compiled twice: without a controller (ctl
+None) and with one.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from . import tableaux
 from .chain import OK, RANK_DEFICIENT, chain_forward
 from .control import feedback
 from .jit import entry, kernel
-from .linalg import copy1
+from .linalg import bisect, copy1
 from .manifold import project_state
 from .packing import STAB_PROJECTION
 
@@ -149,12 +150,7 @@ def torque_at(P, t, tau):
         elif t >= tt[hi]:
             tau[j] = tv[hi]
         else:
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if tt[mid] <= t:
-                    lo = mid
-                else:
-                    hi = mid
+            lo = bisect(tt, lo, hi, t)
             t0 = tt[lo]
             tau[j] = tv[lo] + (t - t0) / (tt[lo + 1] - t0) * (tv[lo + 1] - tv[lo])
 

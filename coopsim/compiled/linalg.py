@@ -304,6 +304,19 @@ def gauss_solve(a, n, x):
 
 
 @kernel
+def bisect(ts, lo, hi, t):
+    """The index i in [lo, hi) with ts[i] <= t < ts[i+1] for sorted ts and ts[lo] <= t < ts[hi]
+    (the interval of a table holding t)."""
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@kernel
 def copy1(src, dst):
     """dst[:] ← src (1-D; explicit loop: slice assignment drags numba's shape-error formatting into
     every caller's compile)."""
