@@ -78,7 +78,10 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
     moves. The bundled DOP853 runs one variant; the others take RK4 steps, so that no accept/reject
     decision at the kinks of the torque table or of saturation can be flipped by round-off (with DOP853
     they then agree to the tolerance instead: measured 4.5e-11 rad). Saturation clips in the saturated
-    variant, within the motor lines, and is counted."""
+    variant, within the motor lines, and is counted (`summary.json`: `native.controller`); the summary
+    names the engine that ran."""
+    from coopsim.summary import simulation_summary
+
     for name, model in _variants(hold, carry):
         a, b = simulate(model), simulate(model, engine="stages")
         assert (a.engine, b.engine) == ("compiled", "stages"), name
@@ -92,6 +95,10 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
         if "saturated" in name:                      # eq. 36 written out: ∓5 − (5/4) θ̇
             lo, hi = -5.0 - 1.25 * a.qd, 5.0 - 1.25 * a.qd
             assert pairs >= clipped and np.all(a.tau >= lo - 1e-12) and np.all(a.tau <= hi + 1e-12)
+            summary = simulation_summary(a)
+            assert summary["engine"] == "compiled" and summary["controller"] == {
+                "evaluations": evaluations, "saturated_evaluations": clipped, "saturated_joint_evaluations": pairs}
+            assert simulation_summary(b)["engine"] == "stages" and "controller" not in simulation_summary(b)
 
 
 # ------------------------------------------------------------------------------------------------
