@@ -1,10 +1,10 @@
-"""Compile every entry of the native model on two cores at once (the first run on a machine).
+"""Compile every entry of the native model on all cores at once (the first run on a machine).
 
-numba compiles on one thread and caches per function, so the entries are split in two groups, each
+numba compiles on one thread and caches per function, so the entries are split in three groups, each
 compiled by its own process: this one compiles the time loop (`integrate.run`), a child process the
-evaluation, inverse-dynamics, inverse-kinematics and controller entries and the time loop with a
-controller in it. Both write numba's on-disk cache; what
-one has written the other loads. `python -m coopsim.compiled.warmup` compiles everything.
+evaluation, inverse-dynamics and inverse-kinematics entries, another the controller entries and the
+time loop with a controller in it. All write numba's on-disk cache; what one has written the others
+load. `python -m coopsim.compiled.warmup` compiles everything.
 """
 
 from __future__ import annotations
@@ -37,9 +37,7 @@ def compile_loop() -> None:
 
 
 def compile_evaluations() -> None:
-    """The evaluation, inverse-dynamics-terms, inverse-kinematics and controller entries, and the time
-    loop with a controller."""
-    from ..simulate import simulate
+    """The evaluation, inverse-dynamics-terms and inverse-kinematics entries."""
     from . import api
 
     model = _model()
@@ -47,34 +45,46 @@ def compile_evaluations() -> None:
     api.evaluate_states(model, y, np.zeros((1, model.n_total)), full=True, n_threads=1)
     api.inverse_terms(model, y[:, :model.n_total], y[:, model.n_total:], np.zeros((1, model.n_total)), n_threads=1)
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
+
+
+def compile_control() -> None:
+    """The controller entries and the time loop with a controller in it (its second compilation)."""
     from ..control import Controller
     from ..model import ControlSettings
+    from ..simulate import simulate
 
+    model = _model()
     n = model.n_total
+    y = np.concatenate([model.q0, model.qd0])[None]
     pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
     pd.compiled_commands(np.zeros(1), y[:, :n], y[:, n:])
     pd.compiled_call(0.0, y[0, :n], y[0, n:])
-    simulate(pd.model, duration=0.01)          # the time loop with a controller (its second compilation)
+    simulate(pd.model, duration=0.01)
+
+
+GROUPS = {"evaluations": compile_evaluations, "control": compile_control}
 
 
 def warm_up() -> None:
-    """Compile everything, the two groups in parallel (a no-op when the cache is complete). Needs the
+    """Compile everything, the three groups at once (a no-op when the cache is complete). Needs the
     source checkout's scenarios/ folder; does nothing without it."""
     from .api import compile_pending
 
     if not compile_pending() or not SCENARIO.exists():
         return
-    child = subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", "evaluations"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children = [subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", name],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in GROUPS]
     try:
         compile_loop()
     finally:
-        child.wait()
-    compile_evaluations()   # loads what the child cached (or compiles it, if the child failed)
+        for child in children:
+            child.wait()
+    for group in GROUPS.values():   # loads what the children cached (or compiles it, if a child failed)
+        group()
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["evaluations"]:
-        compile_evaluations()
+    if sys.argv[1:2] and sys.argv[1] in GROUPS:
+        GROUPS[sys.argv[1]]()
     else:
         warm_up()
