@@ -111,6 +111,7 @@ def _cmd_run(args) -> int:
         bar.close()
         streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+            "native_engine": cv.native.engine,
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
         summary: dict = {}
 

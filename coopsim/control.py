@@ -12,13 +12,19 @@ clip it when `saturate` is set:
     log(R_r Rᵀ)], world axes) is turned into the arms' joint accelerations by differential kinematics
     (`coopsim.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
     the resolution gives τ; a squeeze force f_s along each grasp line (towards the centre of mass) is
-    added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion.
+    added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion;
+    and each arm's grasp error (`grasp_errors`) is fed back in joint space, τ_m += J_mᵀSᵀS (Kp e_m +
+    Kd ė_m) (zero on the native model up to its closure tolerance; the twin's welds yield).
     With a perfect model and zero initial error this is the inverse-dynamics feedforward of the
     prescribed motion.
 
-The compiled time loop (`coopsim.compiled.integrate`) does not take controllers: a model with a
-controller runs on the reference engine (`simulate(…, engine="reference")`, chosen by itself) and, in
-the MuJoCo twin, through the control callback at every RK4 stage (`coopsim.mujoco_run`).
+Two implementations of the same laws: `Controller.command` here (NumPy over the compiled inverse-dynamics
+terms: the 'stages' engine of `coopsim.simulate` calls it at every stage of the reference time loop),
+and `coopsim.compiled.control` (the whole evaluation compiled, called by the compiled time loop at
+every stage: the default engine; `Controller.packed` is its data). The 'bounded' distribution (a QP)
+and Python callables (`TorqueFeedback`) run on the 'stages' engine only (`Controller.compiled_reason`).
+The MuJoCo twin calls the controller through its control callback at every RK4 stage
+(`coopsim.mujoco_run`), compiled where it can be.
 """
 
 from __future__ import annotations
@@ -31,6 +37,8 @@ import numpy as np
 from .model import CoopsimError, Model, TorqueFeedback, torque_at
 
 LAWS = ("joint_pd", "computed_torque")
+COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
+FALLBACKS = COMPILED_DISTRIBUTIONS + ("error",)                     # where 'bounded' has no solution
 COMPENSATIONS = ("none", "gravity", "bias")
 REFERENCES = ("setpoint", "object_motion")
 
@@ -107,6 +115,28 @@ def joint_accelerations(rows: np.ndarray, J: np.ndarray, Jd_qd: np.ndarray, rho:
     return np.concatenate(out)
 
 
+def grasp_errors(grasp_pos: np.ndarray, grasp_rot: np.ndarray, p_C: np.ndarray, R_o: np.ndarray,
+                 twist: np.ndarray, p_ee: np.ndarray, R_ee: np.ndarray, ee_twist: np.ndarray):
+    """(e, ė) (r, 6) of every arm's end effector against where its grasp puts it on the object:
+    e_m = [p_t − p_EE; log(R_t R_EEᵀ)] m, rad (world axes) with p_t = p_C + R_o g_m, R_t = R_o G_m (grasp
+    g_m (r, 3), G_m (r, 3, 3) in the object frame; object pose p_C (3,), R_o (3, 3), twist [v_C; ω] (6,));
+    ė_m = [v_C + ω × R_o g_m; ω] − [v_EE; ω_EE] (ee_twist (r, 6) = J_m θ̇_m). p_ee (r, 3), R_ee (r, 3, 3)."""
+    from .spatial import cross, rot_log
+
+    rho = grasp_pos @ R_o.T
+    e = np.concatenate([(p_C + rho) - p_ee, [rot_log(R_o @ G @ R.T) for G, R in zip(grasp_rot, R_ee)]], axis=1)
+    target = np.concatenate([twist[:3] + cross(twist[3:], rho), np.broadcast_to(twist[3:], rho.shape)], axis=1)
+    return e, target - ee_twist
+
+
+def grasp_torques(rows: np.ndarray, J: np.ndarray, kp: np.ndarray, kd: np.ndarray, e: np.ndarray, ed: np.ndarray,
+                  n: list[int]) -> np.ndarray:
+    """Stacked τ (N,) = J_mᵀSᵀS (Kp e_m + Kd ė_m) per arm (J (r, 6, nmax), gains (2,) [linear, angular],
+    e, ė (r, 6), n: joints per arm)."""
+    w = (np.repeat(kp, 3) * e + np.repeat(kd, 3) * ed) @ rows.T          # (r, k)
+    return np.concatenate([(rows @ J[m][:, :nm]).T @ w[m] for m, nm in enumerate(n)])
+
+
 def squeeze_wrenches(grasp_offset: np.ndarray, rows: np.ndarray, A: np.ndarray, force: float) -> np.ndarray:
     """Grasp wrenches f (rk,) in the rows S of a squeeze: each grasp pushes `force` N towards the centre
     of mass along its grasp line (offset ρ_m = p_grasp − p_C (r, 3)), projected on the null space of
@@ -136,9 +166,40 @@ class Controller:
 
     @cached_property
     def resolution(self):
+        """The distribution's resolution (`coopsim.inverse.resolution_for`); 'bounded' with the bounds of
+        inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
         from .inverse import resolution_for
 
-        return resolution_for(self.plant, self.settings.distribution)
+        inv = self.plant.inverse
+        bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
+        return resolution_for(self.plant, self.settings.distribution, force_bound=bounds[0], moment_bound=bounds[1])
+
+    @cached_property
+    def fallbacks(self) -> list:
+        """(t s, q (n,), reason) of every evaluation whose 'bounded' QP had no solution and that took
+        control.fallback instead (appended as they happen)."""
+        return []
+
+    def _distribute(self, prob, t: float):
+        """Grasp wrenches f (1, rk) of the resolution at one state (`inverse_dynamics`); where 'bounded' has
+        no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
+        import warnings
+
+        from .diagnostics import describe_state
+        from .inverse import SampleFailureWarning, distribute, resolution_for
+
+        failures: list = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SampleFailureWarning)     # reported as a RunWarning instead
+            f = distribute(prob, prob.y, self.resolution, failures)
+        if not failures:
+            return f
+        fallback, reason = self.settings.fallback, failures[0].reason
+        if fallback == "error":
+            raise ControlError(f"control.fallback: error: the 'bounded' distribution has no solution at "
+                               f"{describe_state(t, prob.q[0])}: {reason}")
+        self.fallbacks.append((t, prob.q[0].copy(), reason))
+        return distribute(prob, prob.y, resolution_for(self.plant, fallback))
 
     @cached_property
     def setpoint(self) -> np.ndarray:
@@ -175,15 +236,16 @@ class Controller:
         q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
         return q, qd
 
-    def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0):
-        """(τ (n,), problem) of the closed-chain inverse dynamics at one state, the object's wrench
-        distributed by the resolution, a squeeze added in the null space of the grasp matrix."""
-        from .inverse import distribute, inverse_problem, torques_of
+    def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0, t: float = 0.0):
+        """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
+        messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
+        the null space of the grasp matrix."""
+        from .inverse import inverse_problem, torques_of
         from .trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
-        f = distribute(prob, prob.y, self.resolution)
+        f = self._distribute(prob, t)
         if squeeze:
             f = f + squeeze_wrenches(prob.grasp_offset[0], prob.rows, prob.A[0], squeeze)[None]
         return torques_of(prob, f)[0], prob
@@ -216,7 +278,7 @@ class Controller:
             q_ref, qd_ref = self.reference(t)
             u = pd_torque(s.kp, s.kd, q_ref, qd_ref, q, qd)
             if s.compensation != "none":
-                u = u + self.inverse_dynamics(q, qd if s.compensation == "bias" else np.zeros(n), np.zeros(n))[0]
+                u = u + self.inverse_dynamics(q, qd if s.compensation == "bias" else np.zeros(n), np.zeros(n), t=t)[0]
             e, ed = nan6, nan6
         else:
             q_ref, qd_ref = nan_n, nan_n
@@ -236,11 +298,124 @@ class Controller:
         p_r, R_r, v_r, a_r = object_motion_at(motion, motion.times[0] + t)
         e, ed = pose_error(p_r, R_r, p, R), v_r - v
         a = object_acceleration(s.object_kp, s.object_kd, e, ed, a_r)
-        qdd = joint_accelerations(m.rows, W.J, W.Jd_qd, -state.s[0], v, a, [sl.stop - sl.start for sl in m.dof_slices])
-        return self.inverse_dynamics(q, qd, qdd, s.squeeze)[0], e, ed
+        n = [sl.stop - sl.start for sl in m.dof_slices]
+        qdd = joint_accelerations(m.rows, W.J, W.Jd_qd, -state.s[0], v, a, n)
+        J = W.J.copy()                                   # the next evaluation reuses W
+        ge, ged = self._grasp_errors(q, qd, state)
+        u = self.inverse_dynamics(q, qd, qdd, s.squeeze, t)[0]
+        if np.any(s.grasp_kp) or np.any(s.grasp_kd):
+            u = u + grasp_torques(m.rows, J, s.grasp_kp, s.grasp_kd, ge, ged, n)
+        return u, e, ed
+
+    def _grasp_errors(self, q, qd, state):
+        """`grasp_errors` at (q, qd) from the terms `state` of `_terms` there (the workspace holds them)."""
+        m, W = self.plant, self._kernel[2]
+        ee_twist = np.array([W.J[i][:, :sl.stop - sl.start] @ qd[sl] for i, sl in enumerate(m.dof_slices)])
+        return grasp_errors(m.object.grasp_pos, m.object.grasp_rot, state.p_C[0], state.R_o[0], state.twist[0],
+                            W.p_ee, W.R_ee, ee_twist)
+
+    def grasp_errors_at(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every arm's grasp error e and its rate ė (r, 6) at (q, qd) (`grasp_errors`), the object pose
+        and twist those of the carrier arm's grasp (as the native model's)."""
+        state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
+        return self._grasp_errors(q, qd, state)
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         return self.command(t, q, qd).tau
+
+    @cached_property
+    def compiled_reason(self) -> str | None:
+        """Why this controller cannot run in the compiled time loop (None when it can)."""
+        d = self.settings.distribution
+        if d not in COMPILED_DISTRIBUTIONS:
+            return f"control.distribution {d!r} (a QP per evaluation) is evaluated in Python"
+        return None
+
+    @cached_property
+    def packed(self):
+        """The controller's data for the compiled laws (`coopsim.compiled.control.PackedControl`)."""
+        from .compiled import control as cc
+
+        s, m = self.settings, self.model
+        N, r, k = m.n_total, m.r, m.rows.shape[0]
+        fields = dict(kp=s.kp, kd=s.kd, okp=s.object_kp, okd=s.object_kd, squeeze=s.squeeze, saturate=int(s.saturate),
+                      gkp=s.grasp_kp, gkd=s.grasp_kd,
+                      compensation=COMPENSATIONS.index(s.compensation), distribution=COMPILED_DISTRIBUTIONS.index(
+                          s.distribution), reference=REFERENCES.index(s.reference))
+        if s.law == "joint_pd" and s.reference == "setpoint":
+            fields.update(q_set=self.setpoint)
+        elif s.law == "joint_pd":
+            tr = self.trajectory
+            fields.update(tr_t=tr.t, tr_q=tr.q, tr_qd=tr.qd, tr_qdd=tr.qdd)
+        else:
+            fields.update(_packed_motion(self.plant.inverse.object_motion))
+        res = self.resolution
+        ts, ws = m.motors.stall_torque, m.motors.no_load_speed
+        slope = np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
+        return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights,
+                              vmass=res.masses, vinertia=res.inertias, stall=ts, slope=slope, **fields)
+
+    @cached_property
+    def compiled_loop(self) -> tuple:
+        """(Pc, Wc, C): the controller's model, a workspace of its own and `packed`, as the StructRefs the
+        compiled time loop takes (`coopsim.compiled.api.integrate_chain`)."""
+        from .compiled import api
+        from .compiled.control import control_struct
+
+        P = api.compiled(self.plant).P
+        return api.compiled(self.plant).Ps, api.fresh_workspace(P), control_struct(self.packed)
+
+    def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`, about 10 µs)."""
+        from .compiled import api
+        from .compiled.control import evaluate
+
+        Ps, Ws, C = self.compiled_loop
+        tau = np.array(torque_at(self.model.torques, t), dtype=float)
+        st = evaluate(Ps, Ws, C, float(t), np.concatenate([q, qd]).astype(float), tau)
+        if st:
+            raise ControlError(f"control: at t={t:.6g} s: {api.REASONS[st]}")
+        return tau
+
+    @property
+    def fastest(self):
+        """τ = u(t, q, qd): `compiled_call` where the controller is compiled, else this Controller."""
+        return self.compiled_call if self.compiled_reason is None else self
+
+    def compiled_commands(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
+        """The compiled controller at every sample (t (N,), q, qd (N, n)): a Command of (N, …) arrays, as
+        `record` gives (CoopsimError where its equations are singular)."""
+        from .compiled import api
+        from .compiled.control import commands
+        from .compiled.packing import tabulated_torques
+
+        N, n = q.shape
+        Ps, Ws, C = self.compiled_loop
+        t = np.ascontiguousarray(t, dtype=float)
+        Y = np.ascontiguousarray(np.concatenate([q, qd], axis=1), dtype=float)
+        tables = tabulated_torques(api.compiled(self.model).P, t)
+        raw, tau, q_ref, qd_ref = (np.zeros((N, n)) for _ in range(4))
+        e, ed, status = np.zeros((N, 6)), np.zeros((N, 6)), np.zeros(N, dtype=np.int64)
+        commands(Ps, Ws, C, t, Y, tables, raw, tau, q_ref, qd_ref, e, ed, status)
+        if np.any(status):
+            i = int(np.flatnonzero(status)[0])
+            raise ControlError(f"control: at t={t[i]:.6g} s: {api.REASONS[int(status[i])]}")
+        return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
+
+
+def _packed_motion(motion) -> dict:
+    """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
+    and R_a φ of `coopsim.trajectory.object_motion_at`)."""
+    from .compiled.control import LAW_CUBIC, LAW_QUINTIC
+    from .spatial import rot_log
+
+    R = motion.rotations
+    phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])
+    angle = np.linalg.norm(phi, axis=1)
+    axis = phi / np.where(angle > 0, angle, 1.0)[:, None]
+    return dict(om_t=motion.times, om_p=motion.positions, om_R=R, om_axis=axis, om_angle=angle,
+                om_w=np.einsum("sij,sj->si", R[:-1], phi),
+                time_law={"quintic": LAW_QUINTIC, "cubic": LAW_CUBIC}[motion.time_law])
 
 
 def _controller_model(model: Model, mass_scale: float) -> Model:
@@ -268,5 +443,7 @@ def controller_of(model: Model) -> Controller | None:
 def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
     """The controller evaluated at every sample (t (N,), q, qd (N, n)) of a run: a Command of (N, …)
     arrays."""
+    if controller.compiled_reason is None:
+        return controller.compiled_commands(t, q, qd)
     cmds = [controller.command(float(ti), qi, qdi) for ti, qi, qdi in zip(t, q, qd)]
     return Command(**{f.name: np.array([getattr(c, f.name) for c in cmds]) for f in fields(Command)})

@@ -132,9 +132,16 @@ class ControlSettings:
     computed_torque: track inverse.object_motion with the object acceleration
     a = a_r + Kd (v_r − v) + Kp e (object_kp, object_kd (2,): [linear, angular], 1/s² and 1/s), the
     closed-chain inverse dynamics of that acceleration distributed by `distribution`, plus a squeeze
-    force (N, along each grasp line towards the centre of mass, in the null space of the grasp matrix).
+    force (N, along each grasp line towards the centre of mass, in the null space of the grasp matrix),
+    plus joint-space feedback on each arm's grasp error e_m (`coopsim.control.grasp_errors`),
+    τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m) with grasp_kp (2,) [N/m, N·m/rad] and grasp_kd (2,) [N·s/m,
+    N·m·s/rad] (zero: none; e_m is zero on the native model up to its loop-closure tolerance).
     mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =
-    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.capacity.torque_limits`)."""
+    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.capacity.torque_limits`).
+    fallback (distribution 'bounded' only, its bounds inverse.internal_force_bound and
+    internal_moment_bound, none: unbounded): where its QP has no solution, the resolution used instead
+    ('nonsqueezing', 'paper', 'min_energy': a `distribution_fallback` RunWarning counts them) or
+    'error' (the run stops there with a one-line error)."""
 
     law: str
     kp: np.ndarray
@@ -146,8 +153,11 @@ class ControlSettings:
     object_kp: np.ndarray = field(default_factory=lambda: np.zeros(2))
     object_kd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     squeeze: float = 0.0
+    grasp_kp: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    grasp_kd: np.ndarray = field(default_factory=lambda: np.zeros(2))
     mass_scale: float = 1.0
     saturate: bool = False
+    fallback: str = "nonsqueezing"
 
 
 @dataclass(frozen=True, eq=False)

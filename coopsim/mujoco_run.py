@@ -42,8 +42,17 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         yield
         return
 
-    def callback(m, d):
-        d.ctrl[ctrl_index] = applied_torque(model.torques, d.time, d.qpos[qadr], d.qvel[dadr])
+    from .control import controller_of
+
+    ctrl = controller_of(model)
+    if ctrl is not None:                         # compiled where it can be (`Controller.fastest`)
+        fn = ctrl.fastest
+
+        def callback(m, d):
+            d.ctrl[ctrl_index] = fn(d.time, d.qpos[qadr], d.qvel[dadr])
+    else:
+        def callback(m, d):
+            d.ctrl[ctrl_index] = applied_torque(model.torques, d.time, d.qpos[qadr], d.qvel[dadr])
 
     mujoco.set_mjcb_control(callback)
     try:

@@ -653,7 +653,7 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
     """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
     if sec is None:
         return None
-    from .control import COMPENSATIONS, LAWS, REFERENCES
+    from .control import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
     from .resolutions import METHODS
 
     law = sec.string("law", LAWS)
@@ -661,6 +661,10 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
         sec.fail("law", "a controller needs every joint actuated (arms[].passive has a passive joint)")
     opts = dict(distribution=sec.string("distribution", METHODS, "paper"),
                 mass_scale=sec.number("mass_scale", 1.0, positive=True))
+    if sec.has("fallback"):
+        if opts["distribution"] != "bounded":
+            sec.fail("fallback", "only with distribution: bounded")
+        opts["fallback"] = sec.string("fallback", FALLBACKS)
     saturate = sec.raw("saturate", default=False)
     if not isinstance(saturate, bool):
         sec.fail("saturate", f"expected true or false, got {_show(saturate)}")
@@ -679,6 +683,8 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
         reference = "object_motion"
         opts.update(object_kp=sec.array("object_kp", (2,), nonneg=True),
                     object_kd=sec.array("object_kd", (2,), nonneg=True),
+                    grasp_kp=sec.array("grasp_kp", (2,), default=np.zeros(2), nonneg=True),
+                    grasp_kd=sec.array("grasp_kd", (2,), default=np.zeros(2), nonneg=True),
                     squeeze=sec.number("squeeze", 0.0), reference=reference)
     if reference == "object_motion" and inverse.object_motion is None:
         sec.fail("reference" if law == "joint_pd" else "law",

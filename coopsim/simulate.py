@@ -13,8 +13,10 @@ Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the 
 compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.integrate`, which lands on
 every output time; used for torques given as a Python function, and as the readable reference the
 compiled engine is tested against). A controller in the loop (`coopsim.control`, torques that read the
-state) runs on a third, 'stages': the reference time loop over the compiled stage kernels — the
-compiled time loop does not take controllers yet.
+state) runs in the compiled time loop (`coopsim.compiled.control`, evaluated at every stage; the
+adaptive steps then end on every output time, as the reference loop's do), except a 'bounded'
+distribution or a Python callable: those run on a third engine, 'stages' — the reference time loop over
+the compiled stage kernels, the controller evaluated in Python. `SimResult.engine` says which ran.
 """
 
 from __future__ import annotations
@@ -57,7 +59,9 @@ class SimResult(SampledMotion):
     residual_pos (N,) max |Φ| (m or rad); residual_vel (N,) max |Λθ̇|; cond (N,) condition number of
     Λ𝐈⁻¹Λᵀ; initial: the projection applied to the scenario's initial state; stats: integrator counts;
     wall_time s (not deterministic: never logged as data); events: warnings raised while integrating
-    (a rank-deficient constraint matrix).
+    (a rank-deficient constraint matrix); engine: the engine that ran ('compiled', 'reference' or
+    'stages'); control_counts: with a controller in the compiled loop, (stage evaluations, evaluations
+    in which the motor lines clipped a joint, clipped (evaluation, joint) pairs), else None.
 
     Computed on first use (`coopsim.diagnostics`; about 4 µs a sample): manipulability (N, r) of each
     arm, kinetic_energy (N,) J, warnings (every `RunWarning` of the run, events included)."""
@@ -73,6 +77,8 @@ class SimResult(SampledMotion):
     stats: IntegratorStats
     wall_time: float
     events: tuple[RunWarning, ...] = ()
+    engine: str = "compiled"
+    control_counts: tuple[int, int, int] | None = None
 
     @cached_property
     def arm_terms(self) -> diagnostics.ArmTerms:
@@ -187,10 +193,12 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
              progress=None, engine: str = "compiled", fixed_step: float | None = None) -> SimResult:
     """Integrate the closed chain from its consistent initial state over `duration` s (default the
     scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
-    called as the run advances. engine: 'compiled' or 'reference' (module docstring); torques given
-    as a TorqueFunction (a controller in the loop too: `coopsim.control`) always run on the reference engine. fixed_step (s, compiled engine): run the
-    method (DOP853 or DOPRI5 too) at fixed steps of at most this size, landing on every output time —
-    for torques tabulated at exactly those steps' stage times (`coopsim.compiled.integrate.stage_times`)."""
+    called as the run advances. engine: 'compiled', 'reference' or 'stages' (module docstring); a
+    scenario's controller runs on the compiled engine unless it needs Python ('bounded', then on
+    'stages'); other torques given as a Python function run on 'reference' ('stages' for feedback).
+    fixed_step (s, compiled engine): run the method (DOP853 or DOPRI5 too) at fixed steps of at most
+    this size, landing on every output time — for torques tabulated at exactly those steps' stage times
+    (`coopsim.compiled.integrate.stage_times`)."""
     if settings is not None:
         model = replace(model, integrator=settings)
     if duration is not None:
@@ -198,11 +206,12 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    from .control import closed_loop
+    from .control import closed_loop, controller_of
 
     model = closed_loop(model)
+    ctrl = controller_of(model)
     if isinstance(model.torques, TorqueFeedback) and engine == "compiled":
-        engine = "stages"
+        engine = "compiled" if ctrl is not None and ctrl.compiled_reason is None else "stages"
     elif isinstance(model.torques, TorqueFunction) and engine != "stages":
         engine = "reference"
     init = initial_state(model, engine)
@@ -212,7 +221,9 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
             raise ValueError("fixed_step needs the compiled engine and tabulated torques")
         res = _simulate_reference(model, init, t_out, progress, start, stages=engine == "stages")
     else:
-        res = _simulate_compiled(model, init, t_out, progress, start, fixed_step)
+        res = _simulate_compiled(model, init, t_out, progress, start, fixed_step,
+                                 ctrl if isinstance(model.torques, TorqueFeedback) else None)
+    res = replace(res, engine=engine)
     _check_conditioning(res)
     return res
 
@@ -230,17 +241,23 @@ def _check_conditioning(res: SimResult) -> None:
 
 
 def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
-                       fixed_step: float | None = None) -> SimResult:
+                       fixed_step: float | None = None, controller=None) -> SimResult:
     """The compiled engine: one compiled time loop (`coopsim.compiled.api.integrate_chain`), then the
-    compiled sampling of every reported quantity."""
+    compiled sampling of every reported quantity. With a `coopsim.control.Controller` (model being its
+    closed loop) the loop evaluates it at every stage over its scenario's torque tables, lands on every
+    output time, and the samples' torques are the controller's there."""
     from .compiled import api
 
     s = model.integrator
+    kernel_model = model if controller is None else controller.model
     y0 = np.concatenate([init.q, init.qd])
     fixed = fixed_step if fixed_step is not None else (s.step if s.method == "rk4" else None)
     h_max = np.inf if s.max_step is None else s.max_step
-    run = api.integrate_chain(model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
-                              fixed_step=fixed, progress=progress)
+    loop = None if controller is None else controller.compiled_loop
+    if loop is not None:
+        controller.packed.count[:] = 0
+    run = api.integrate_chain(kernel_model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
+                              fixed_step=fixed, progress=progress, controller=loop, land=loop is not None)
     n = model.n_total
     events = ()
     if run.rank_warning is not None:
@@ -248,11 +265,15 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
         events = (_rank_event(t, y[:n], rank, cond, stacklevel=3),)
     if run.status:
         raise SimulationError(f"simulation failed at {describe_state(run.fail_t, run.fail_y[:n])}: "
-                              f"{_compiled_reason(model, run)}")
-    smp = api.sample_states(model, t_out, run.Y)
+                              f"{_compiled_reason(kernel_model, run)}")
+    counts, tau = None, None
+    if controller is not None:
+        counts = tuple(int(c) for c in controller.packed.count)
+        tau = controller.compiled_commands(t_out, run.Y[:, :n], run.Y[:, n:]).tau
+    smp = api.sample_states(kernel_model, t_out, run.Y, tau)
     stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
                             n_projections=run.counts[3])
-    return _sampled_result(model, t_out, run.Y, smp, init, stats, start, events)
+    return replace(_sampled_result(model, t_out, run.Y, smp, init, stats, start, events), control_counts=counts)
 
 
 def _sampled_result(model: Model, t_out, Y, smp, init: Projection, stats, start: float, events) -> SimResult:
@@ -297,6 +318,7 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
     except IntegrationError as exc:
         n = model.n_total
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+    events += _fallback_events(model)
     return replace(_sample(model, t_out, Y, init, stats, time.perf_counter() - start), events=tuple(events))
 
 
@@ -334,8 +356,24 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
                              atol=s.atol, step=step, project=project if s.stabilization == "projection" else None)
     except IntegrationError as exc:
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+    events += _fallback_events(model)
     tau = np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
     return _sampled_result(model, t_out, Y, api.sample_states(model, t_out, Y, tau), init, stats, start, events)
+
+
+def _fallback_events(model: Model) -> list[RunWarning]:
+    """A `distribution_fallback` RunWarning when the run's controller fell back from 'bounded' (at its
+    first evaluation that did, with their count), else none."""
+    from .control import controller_of
+
+    ctrl = controller_of(model)
+    if ctrl is None or not ctrl.fallbacks:
+        return []
+    t, q, reason = ctrl.fallbacks[0]
+    count, fallback = len(ctrl.fallbacks), ctrl.settings.fallback
+    return [run_warning("distribution_fallback", t, q, f"the 'bounded' distribution has no solution ({reason}); the "
+                        f"{fallback!r} distribution was used there and at {count - 1} later controller evaluations "
+                        f"(control.fallback)", fallbacks=count)]
 
 
 def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:

@@ -35,6 +35,7 @@ def simulation_summary(res: SimResult) -> dict:
         "samples": len(res.t),
         "integrator": m.integrator.method,
         "stabilization": m.integrator.stabilization,
+        "engine": res.engine,
         "initial_correction": {
             "max_abs_dq_rad": float(np.max(np.abs(init.dq))),
             "max_abs_dqd_rad_s": float(np.max(np.abs(init.dqd))),
@@ -56,7 +57,12 @@ def simulation_summary(res: SimResult) -> dict:
         "steps_accepted": res.stats.n_accepted,
         "steps_rejected": res.stats.n_rejected,
         "wall_time_s": res.wall_time,
-    }
+    } | ({} if res.control_counts is None else {"controller": control_counts_summary(res.control_counts)})
+
+
+def control_counts_summary(counts: tuple[int, int, int]) -> dict:
+    """The compiled closed loop's controller counts (`SimResult.control_counts`)."""
+    return dict(zip(("evaluations", "saturated_evaluations", "saturated_joint_evaluations"), counts))
 
 
 def run_summary(cv, log_path, plots) -> dict:
@@ -100,7 +106,8 @@ def format_simulation_summary(s: dict) -> str:
         f"initial state   loop-closure residual {ic['residual_before']:.3g} -> {ic['residual_after']:.3g} "
         f"(max joint correction {ic['max_abs_dq_rad']:.3g} {unit}, {ic['iterations']} Gauss-Newton steps)",
         f"integration     {s['integrator']} + {s['stabilization']}, {s['duration_s']:g} s, {s['steps_accepted']} steps "
-        f"({s['steps_rejected']} rejected), {s['rhs_evaluations']} evaluations, {s['wall_time_s']:.2f} s wall",
+        f"({s['steps_rejected']} rejected), {s['rhs_evaluations']} evaluations, {s['wall_time_s']:.2f} s wall "
+        f"({s.get('engine', 'compiled')} engine)",
         f"{f'final q ({unit})':<15} [{', '.join(f'{x:.6f}' for x in s['final_q_rad'])}]",
         f"final object    [{', '.join(f'{x:.6f}' for x in s['final_object_position_m'])}] m",
         f"constraints     max |phi| {s['max_constraint_residual']:.3g}, max |Lambda qd| {s['max_velocity_residual']:.3g}, "
@@ -110,4 +117,8 @@ def format_simulation_summary(s: dict) -> str:
         f"({ke['max_relative_change']:.3g} of the peak{'; nothing does work: this is drift' if ke['conserved'] else ''})",
         f"warnings        {len(s['warnings']) or 'none'}",
     ]
+    if "controller" in s:
+        c = s["controller"]
+        lines.append(f"controller      {c['evaluations']} evaluations, {c['saturated_evaluations']} with a joint clipped "
+                     f"at its motor line ({c['saturated_joint_evaluations']} joint clippings)")
     return "\n".join(lines)

@@ -16,6 +16,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
                    three arms or more
     manifold.py    loop-closure residual Φ, projection of positions and rates
     tableaux.py    DOP853 and Dormand–Prince coefficients, dense output included
+    control.py     controllers in the loop: joint PD, object-space computed torque, the linear
+                   distributions of the inverse dynamics, squeeze, grasp feedback, saturation
     integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop, torque tables, stabilization
     sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py          one arm's inverse kinematics and rates
@@ -50,7 +52,7 @@ def _import_kernels() -> None:
     previous = _numba_config.CACHE_DIR
     _numba_config.CACHE_DIR = _cache_dir()
     try:
-        from . import api, chain, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
+        from . import api, chain, control, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
     finally:
         _numba_config.CACHE_DIR = previous
 

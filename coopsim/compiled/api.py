@@ -20,7 +20,7 @@ import numpy as np
 from ..closed_chain import ConstraintError
 from ..manifold import Projection
 from ..model import Model
-from . import capacity, chain, ik, integrate, manifold, sample
+from . import capacity, chain, control, ik, integrate, manifold, sample
 from .packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from .structs import Struct, to_struct
 
@@ -30,6 +30,7 @@ REASONS = {
     chain.NOT_PD: "closed-chain mass matrix is not positive definite",
     chain.RANK_DEFICIENT: "constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient",
     chain.NON_FINITE: "non-finite joint accelerations",
+    control.CONTROL_SINGULAR: "controller: singular equations (an arm's S J or the wrench distribution)",
     integrate.NON_FINITE_STATE: "non-finite state",
     integrate.STEP_COLLAPSED: "step size collapsed",
     integrate.MAX_STEPS: "maximum number of steps exceeded",
@@ -55,7 +56,7 @@ def compile_pending() -> bool:
     try:
         return any(not os.path.exists(e._cache._cache_file._index_path)
                    for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve,
-                             capacity.min_energy_mass_interval))
+                             capacity.min_energy_mass_interval, control.commands, control.evaluate))
     except AttributeError:
         return False
 
@@ -223,12 +224,15 @@ class Run(NamedTuple):
 def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str, rtol: float = 1e-10,
                     atol: float = 1e-12, h_max: float = math.inf, h_min: float = 1e-12,
                     max_steps: int = 10_000_000, fixed_step: float | None = None, progress=None,
-                    chunk_seconds: float = 0.25) -> Run:
+                    chunk_seconds: float = 0.25, controller=None, land: bool = False) -> Run:
     """Integrate the closed chain of `model` from y0 = [θ; θ̇] (already consistent) at t_out[0], sampled
     at t_out (strictly increasing). Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it).
     `progress(fraction)` is called between chunks of about chunk_seconds of work; the chunking does
-    not change the result."""
+    not change the result. controller: None, or (Pc, Wc, C) StructRefs of a compiled controller in the
+    loop (`coopsim.control.Controller.compiled_loop`), whose command is added to the model's tables;
+    land: adaptive steps end on every output time (`integrate.run`)."""
     P, W, Ps, Ws = compiled(model)
+    ctl = controller
     tab = _tableau(method)
     t_out = _f(t_out)
     Y = np.zeros((len(t_out), len(y0)))
@@ -240,7 +244,8 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
     while st == 0 and int(L.k_next[0]) < n_out:
         start = time.perf_counter()
         before = int(L.k_next[0])
-        integrate.run(Ps, Ws, Ls, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step or 0.0, k_stop)
+        integrate.run(Ps, Ws, Ls, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step or 0.0, k_stop,
+                      land)
         st = int(L.status[0])
         if progress is not None:
             progress(float((t_out[min(int(L.k_next[0]), n_out) - 1] - t_out[0]) / max(t_out[-1] - t_out[0], 1e-300)))

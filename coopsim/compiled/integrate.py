@@ -6,7 +6,9 @@ Methods and step control are those of the reference `coopsim.integrate` (Hairer,
 h_new = h·min(10, max(0.2, 0.9·err^(−1/(p̂+1)))), no growth right after a rejection. Unlike the
 reference, outputs come from the methods' dense output — DOP853's 7th-order interpolant (3 extra
 stages, only in steps that hold an output time) and Dormand–Prince's 4th-order one (free) — so the
-output grid does not limit the step, and the adaptive step is unbounded unless `h_max` is given.
+output grid does not limit the step, and the adaptive step is unbounded unless `h_max` is given
+(`land`: the steps end on every output time instead, as the reference's do — with a controller in the
+loop, so that both loops take the same steps).
 With projection stabilization, every accepted step and every output sample is projected onto the
 loop-closure manifold (`manifold.project_state`) and the derivative is re-evaluated there.
 
@@ -15,8 +17,10 @@ ceil(Δt/step − 1e-9) equal steps, as the reference's RK4; its stage times t +
 `stage_times` computes them, so torques tabulated at exactly those times are met exactly (replays).
 
 Torques are the packed per-joint tables (linear between knots, held outside), evaluated at every
-stage time. The loop can stop after the step that fills output `k_stop` and resume exactly where it
-stopped (the step sequence is unchanged), which is how progress is reported.
+stage time, plus a controller's command where one is in the loop (`control.feedback`). The loop can
+stop after the step that fills output `k_stop` and resume exactly where it stopped (the step sequence
+is unchanged), which is how progress is reported. `run` is compiled twice: without a controller (ctl
+None) and with one.
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ import numpy as np
 
 from . import tableaux
 from .chain import OK, RANK_DEFICIENT, chain_forward
+from .control import feedback
 from .jit import entry, kernel
-from .linalg import copy1
+from .linalg import bisect, copy1
 from .manifold import project_state
 from .packing import STAB_PROJECTION
 
@@ -144,12 +149,7 @@ def torque_at(P, t, tau):
         elif t >= tt[hi]:
             tau[j] = tv[hi]
         else:
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if tt[mid] <= t:
-                    lo = mid
-                else:
-                    hi = mid
+            lo = bisect(tt, lo, hi, t)
             t0 = tt[lo]
             tau[j] = tv[lo] + (t - t0) / (tt[lo + 1] - t0) * (tv[lo + 1] - tv[lo])
 
@@ -165,13 +165,19 @@ def fail(L, code, t, y):
 
 
 @kernel
-def rhs(P, W, L, t, y, dy):
-    """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques). A lost rank of
+def rhs(P, W, L, ctl, t, y, dy):
+    """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques, and a controller's
+    command added to them: ctl = (Pc, Wc, C), `control.feedback`; None: no controller — numba prunes
+    the branch, so the open loop's compiled code is what it was without controllers). A lost rank of
     Λ𝐈⁻¹Λᵀ stops the loop (P.rank_error) or is recorded once (minimum-norm wrenches). Returns 0 or
     a failure code."""
     N = P.dof[-1]
     L.count[0] += 1
     torque_at(P, t, W.tau)
+    if ctl is not None:
+        st = feedback(ctl[0], ctl[1], ctl[2], t, y[:N], y[N:], W.tau)
+        if st != OK:
+            return fail(L, st, t, y)
     st = chain_forward(P, W, y[:N], y[N:], W.tau, L.stab)
     if st == RANK_DEFICIENT:
         if P.rank_error:
@@ -387,10 +393,12 @@ def step_too_small(t, h_abs, h_min):
 
 
 @entry
-def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step, k_stop):
+def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step, k_stop, land):
     """Integrate from L's state until outputs up to k_stop − 1 are in Y (len(t_out), 2N): first the
     projection of the initial state (output 0), then adaptive steps, or fixed steps of at most
-    fixed_step s when fixed_step > 0. Stops early on a failure (L.status).
+    fixed_step s when fixed_step > 0. Stops early on a failure (L.status). ctl = (Pc, Wc, C): the
+    controller in the loop (`rhs`). land: adaptive steps end on every output time (as the reference
+    `coopsim.integrate` does) instead of reaching them by dense output.
 
     This is the only function that evaluates the right-hand side (every stage, probe and dense-output
     stage is evaluated here): each compiled function that calls the closed-chain kernel compiles it
@@ -412,11 +420,11 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
                 if L.count[1] >= max_steps:
                     fail(L, MAX_STEPS, t, L.y)
                     return
-                if rhs(P, W, L, t, L.y, L.K[0]) != OK:
+                if rhs(P, W, L, ctl, t, L.y, L.K[0]) != OK:
                     return
                 for i in range(1, tab.stages):
                     stage_input(tab, L, L.y, h, i)
-                    if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                    if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                         return
                 rk_combine(tab, L, L.y, h, L.y_new)
                 if not finite(L.y_new):
@@ -434,13 +442,13 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
     s = tab.stages
     expo = -1.0 / (tab.err_order + 1)
     if L.has_fy[0] == 0:
-        if rhs(P, W, L, L.t[0], L.y, L.fy) != OK:
+        if rhs(P, W, L, ctl, L.t[0], L.y, L.fy) != OK:
             return
         L.has_fy[0] = 1
     if L.h[0] <= 0.0:
         span = t_end - L.t[0]
         h0 = probe_step(L, span, rtol, atol)
-        if rhs(P, W, L, L.t[0] + h0, L.ytmp, L.K[1]) != OK:
+        if rhs(P, W, L, ctl, L.t[0] + h0, L.ytmp, L.K[1]) != OK:
             return
         L.h[0] = first_step(tab, L, h0, span, h_max, rtol, atol)
     while L.k_next[0] < k_stop:
@@ -453,17 +461,17 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
             if L.count[1] + L.count[2] >= max_steps:
                 fail(L, MAX_STEPS, t, L.y)
                 return
-            h, t_new, clipped = clip_step(t, h_abs, t_end, h_max)
+            h, t_new, clipped = clip_step(t, h_abs, t_out[L.k_next[0]] if land else t_end, h_max)
             copy1(L.fy, L.K[0])
             for i in range(1, s):
                 stage_input(tab, L, L.y, h, i)
-                if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                     return
             rk_combine(tab, L, L.y, h, L.y_new)
             if not finite(L.y_new):
                 fail(L, NON_FINITE_STATE, t_new, L.y_new)
                 return
-            if rhs(P, W, L, t_new, L.y_new, L.K[s]) != OK:
+            if rhs(P, W, L, ctl, t_new, L.y_new, L.K[s]) != OK:
                 return
             err = error_norm(tab, L, L.y, L.y_new, h, rtol, atol)
             if err < 1.0:
@@ -478,7 +486,7 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
             if tab.code == DOP853:
                 for i in range(13, 16):
                     stage_input(tab, L, L.y, h, i)
-                    if rhs(P, W, L, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
+                    if rhs(P, W, L, ctl, t + tab.C[i] * h, L.ytmp, L.K[i]) != OK:
                         return
             dense_coefficients(tab, L, L.y, L.y_new, h)
             while k < len(t_out) and t_out[k] < t_new:
@@ -491,7 +499,7 @@ def run(P, W, L, tab, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step,
         if P.stabilization == STAB_PROJECTION:
             if project(P, W, L, t_new, L.y) != OK:
                 return
-            if rhs(P, W, L, t_new, L.y, L.fy) != OK:
+            if rhs(P, W, L, ctl, t_new, L.y, L.fy) != OK:
                 return
         while k < len(t_out) and t_out[k] <= t_new:
             copy1(L.y, Y[k])

@@ -268,6 +268,14 @@ def lu_solve(A, n, b, x):
         x[i] = b[i]
         for j in range(n):
             a[i, j] = A[i, j]
+    return gauss_solve(a, n, x)
+
+
+@kernel
+def gauss_solve(a, n, x):
+    """x ← a⁻¹ x for the square a[:n, :n] by Gaussian elimination with partial pivoting, in place (a is
+    overwritten by its factors, nothing allocated); returns det a (0 for an exactly singular a, and then
+    x is NaN)."""
     det = 1.0
     for k in range(n):
         p = k
@@ -295,6 +303,19 @@ def lu_solve(A, n, b, x):
             v -= a[i, j] * x[j]
         x[i] = v / a[i, i]
     return det
+
+
+@kernel
+def bisect(ts, lo, hi, t):
+    """The index i in [lo, hi) with ts[i] <= t < ts[i+1] for sorted ts and ts[lo] <= t < ts[hi]
+    (the interval of a table holding t)."""
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 @kernel

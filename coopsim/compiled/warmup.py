@@ -1,14 +1,16 @@
-"""Compile every entry of the native model on two cores at once (the first run on a machine).
+"""Compile every entry of the native model on all cores at once (the first run on a machine).
 
 numba compiles on one thread and caches per function and signature; a function cached by one process
 is loaded by another instead of compiled, if it is on disk when that process needs it. The closed-chain
-kernel `chain_forward` is the largest piece, and both the time loop and the evaluation entry call it,
-so the work is split to compile it once:
-  this process:   `chain_forward`, then the time loop (`integrate.run`, which loads the manifold
-                  kernels the child has cached by then) and the capacity kernel;
-  a child process: the chain-free entries (projection, inverse kinematics, inverse-dynamics terms),
-                  then the evaluation entry once `chain_forward` is on disk (or after WAIT_S).
-Then this process loads what the child wrote. `python -m coopsim.compiled.warmup` compiles everything.
+kernel `chain_forward` is the largest piece, and the time loop (open and closed loop) and the
+evaluation entry all call it, so the work is split to compile it once:
+  this process:    `chain_forward`, then the open-loop time loop (`integrate.run`, which loads the
+                   manifold kernels a child has cached by then) and the capacity kernel;
+  child "chain_free": the chain-free entries (projection, inverse kinematics, inverse-dynamics terms),
+                   then the evaluation entry once `chain_forward` is on disk (or after WAIT_S);
+  child "control": the controller entries, then the time loop with a controller in it (its second
+                   compilation) once `chain_forward` is on disk.
+Then this process loads what the children wrote. `python -m coopsim.compiled.warmup` compiles everything.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -78,6 +82,21 @@ def compile_evaluations(model) -> None:
     api.evaluate_states(model, _state(model)[None], np.zeros((1, model.n_total)), full=True, n_threads=1)
 
 
+def compile_control(model) -> None:
+    """The controller entries and the time loop with a controller in it."""
+    from ..control import Controller
+    from ..model import ControlSettings
+    from . import api
+
+    n = model.n_total
+    y = _state(model)
+    pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
+    pd.compiled_commands(np.zeros(1), y[None, :n], y[None, n:])
+    pd.compiled_call(0.0, y[:n], y[n:])
+    _wait_for_chain()
+    api.integrate_chain(pd.model, y, np.array([0.0, 0.01]), "dop853", controller=pd.compiled_loop, land=True)
+
+
 def _chain_cached() -> bool:
     """Whether `chain_forward`'s cache index was written after its source last changed."""
     from . import chain
@@ -89,37 +108,45 @@ def _chain_cached() -> bool:
         return True
 
 
-def child() -> None:
-    """The child's share (module docstring)."""
-    model = _model()
-    compile_chain_free(model)
+def _wait_for_chain() -> None:
     deadline = time.monotonic() + WAIT_S
     while not _chain_cached() and time.monotonic() < deadline:
         time.sleep(0.2)
+
+
+def chain_free_child(model) -> None:
+    """The "chain_free" child's share (module docstring)."""
+    compile_chain_free(model)
+    _wait_for_chain()
     compile_evaluations(model)
 
 
+CHILDREN = {"chain_free": chain_free_child, "control": compile_control}
+
+
 def warm_up() -> None:
-    """Compile everything, on two processes (a no-op when the cache is complete). Needs the source
+    """Compile everything, on three processes (a no-op when the cache is complete). Needs the source
     checkout's scenarios/ folder; does nothing without it."""
     from .api import compile_pending
 
     if not compile_pending() or not SCENARIO.exists():
         return
-    proc = subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", "child"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children = [subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", name],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in CHILDREN]
     model = _model()
     try:
         compile_chain(model)
         compile_loop(model)
     finally:
-        proc.wait()
-    compile_chain_free(model)    # loads what the child cached (or compiles it, if the child failed)
+        for child in children:
+            child.wait()
+    compile_chain_free(model)    # loads what the children cached (or compiles it, if a child failed)
     compile_evaluations(model)
+    compile_control(model)
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["child"]:
-        child()
+    if sys.argv[1:2] and sys.argv[1] in CHILDREN:
+        CHILDREN[sys.argv[1]](_model())
     else:
         warm_up()
