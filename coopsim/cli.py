@@ -522,7 +522,14 @@ def _announce_compile() -> None:
 
         warm_up()
 
-    set_compile_notice(notice)
+    def control_notice():
+        print("coopsim: compiling the controllers for this machine (first closed-loop run only; under a minute)...",
+              file=sys.stderr, flush=True)
+        from .compiled.warmup import warm_up_control
+
+        warm_up_control()
+
+    set_compile_notice(notice, control_notice)
 
 
 INTERRUPTED = 130   # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)

@@ -55,7 +55,7 @@ def pytest_sessionstart(session):
     if not hasattr(session.config, "workerinput"):
         from coopsim.compiled.warmup import warm_up
 
-        warm_up()
+        warm_up(control=True)
 
 
 @pytest.fixture

@@ -49,25 +49,37 @@ class Compiled(NamedTuple):
     Ws: Struct
 
 
-def compile_pending() -> bool:
+def compile_pending(controllers: bool = False) -> bool:
     """True when some entry has no compiled code cached on this machine yet (the first run after
-    installing or editing the package compiles it). Reads numba's cache index files; False when they
-    cannot be located."""
+    installing or editing the package compiles it): the entries every command uses, or with
+    `controllers` the controllers' (compiled on the first closed-loop run). Reads numba's cache index
+    files; False when they cannot be located."""
+    entries = ((control.commands, control.evaluate) if controllers else
+               (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve, capacity.min_energy_mass_interval))
     try:
-        return any(not os.path.exists(e._cache._cache_file._index_path)
-                   for e in (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve,
-                             capacity.min_energy_mass_interval, control.commands, control.evaluate))
+        return any(not os.path.exists(e._cache._cache_file._index_path) for e in entries)
     except AttributeError:
         return False
 
 
-_notice: list = []
+_notice: dict = {}
 
 
-def set_compile_notice(fn) -> None:
+def set_compile_notice(fn, control_fn=None) -> None:
     """Call fn() once, just before this process first packs a model while compiled code is missing
-    from the cache (the command line uses it to say that the first run compiles)."""
-    _notice[:] = [fn]
+    from the cache, and control_fn() once before it first compiles a controller while the controllers'
+    code is missing (`announce_control_compile`): the command line uses them to say that the first run
+    compiles."""
+    _notice.clear()
+    _notice["base"] = fn
+    if control_fn is not None:
+        _notice["control"] = control_fn
+
+
+def announce_control_compile() -> None:
+    """The control notice of `set_compile_notice`, if set and the controllers' code is not cached."""
+    if "control" in _notice and compile_pending(controllers=True):
+        _notice.pop("control")()
 
 
 def compiled(model: Model) -> Compiled:
@@ -78,8 +90,8 @@ def compiled(model: Model) -> Compiled:
     if hit is None:
         key = _content_key(model)
         entry = _BY_CONTENT.pop(key, None)
-        if _notice and compile_pending():
-            _notice.pop()()
+        if "base" in _notice and compile_pending():
+            _notice.pop("base")()
         if entry is None:
             P = pack(model)
             W = workspace(P)

@@ -8,7 +8,8 @@ evaluation entry all call it, so the work is split to compile it once:
                    manifold kernels a child has cached by then) and the capacity kernel;
   child "chain_free": the chain-free entries (projection, inverse kinematics, inverse-dynamics terms),
                    then the evaluation entry once `chain_forward` is on disk (or after WAIT_S);
-  child "control": the controller entries, then the time loop with a controller in it (its second
+  child "control" (with `control`; else `warm_up_control` on the first closed-loop run): the
+                   controller entries, then the time loop with a controller in it (its second
                    compilation) once `chain_forward` is on disk.
 Then this process loads what the children wrote. `python -m coopsim.compiled.warmup` compiles everything.
 """
@@ -124,15 +125,21 @@ def chain_free_child(model) -> None:
 CHILDREN = {"chain_free": chain_free_child, "control": compile_control}
 
 
-def warm_up() -> None:
-    """Compile everything, on three processes (a no-op when the cache is complete). Needs the source
-    checkout's scenarios/ folder; does nothing without it."""
+def warm_up(control: bool = False) -> None:
+    """Compile what every command uses, on two processes, and with `control` the controllers too, on a
+    third (a no-op for what is cached already). Needs the source checkout's scenarios/ folder; does
+    nothing without it."""
     from .api import compile_pending
 
-    if not compile_pending() or not SCENARIO.exists():
+    if not SCENARIO.exists():
         return
+    if not compile_pending():
+        if control:
+            warm_up_control()
+        return
+    names = [name for name in CHILDREN if control or name != "control"]
     children = [subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", name],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in CHILDREN]
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in names]
     model = _model()
     try:
         compile_chain(model)
@@ -142,11 +149,22 @@ def warm_up() -> None:
             child.wait()
     compile_chain_free(model)    # loads what the children cached (or compiles it, if a child failed)
     compile_evaluations(model)
-    compile_control(model)
+    if control:
+        compile_control(model)
+
+
+def warm_up_control() -> None:
+    """Compile the controllers and the closed time loop in this process (a no-op when cached), the
+    rest first if needed."""
+    from .api import compile_pending
+
+    if SCENARIO.exists() and compile_pending(controllers=True):
+        warm_up()
+        compile_control(_model())
 
 
 if __name__ == "__main__":
     if sys.argv[1:2] and sys.argv[1] in CHILDREN:
         CHILDREN[sys.argv[1]](_model())
     else:
-        warm_up()
+        warm_up(control=True)
