@@ -18,7 +18,7 @@ def _cmd_simulate(args) -> int:
     from .simulate import simulate
     from .summary import format_simulation_summary, simulation_summary
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     with ProgressBar(enabled=not args.json) as bar:
         res = simulate(model, duration=args.duration, progress=lambda f: bar("native", f))
         bar("native", 1.0)
@@ -79,12 +79,13 @@ def _cmd_mjcf(args) -> int:
     from .scenario import load_scenario
 
     _announce_compile()                     # the keyframes come from the native model's initial state
+    overrides = _overrides(args)
     scenarios = _scenario_paths(args.scenarios)
     paths = []
     with ProgressBar() as bar:
         for i, scenario in enumerate(scenarios):   # drawn after each file: a first-run compile notice comes first
             path = Path(args.out) / f"{Path(scenario).stem}.xml"
-            write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
+            write_text_atomic(path, mjcf_text(load_scenario(scenario, overrides=overrides), _display_path(scenario)))
             paths.append(path)
             bar("mjcf", (i + 1) / len(scenarios))
     print("\n".join(map(str, paths)))     # after the bar: the paths never share its line
@@ -103,7 +104,7 @@ def _cmd_run(args) -> int:
     from .scenario import load_scenario
     from .summary import run_summary
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
@@ -160,10 +161,11 @@ def _cmd_validate(args) -> int:
     from .progress import ProgressBar
     from .scenario import load_scenario
 
-    results = []
+    results, overrides = [], _overrides(args)
     for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
-        cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
+        cv = cross_validate(load_scenario(scenario, duration=args.duration, overrides=overrides), duration=args.duration,
+                            progress=bar)
         bar.close()
         results.append(cv.comparison)
         if not args.json:
@@ -188,7 +190,7 @@ def _cmd_inverse(args) -> int:
     from .render import FigureWorkers
     from .scenario import load_scenario
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     methods = METHODS if args.method == "all" else (args.method,)
     if args.torques_csv is not None and args.method == "all":
         raise CoopsimError("--torques-csv: name the resolution to export with --method")
@@ -242,7 +244,7 @@ def _cmd_capacity(args) -> int:
     from .render import FigureWorkers
     from .scenario import load_scenario, require_motor_limits
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
     with FigureWorkers() as workers:
@@ -306,7 +308,10 @@ def _cmd_animate(args) -> int:
     start = time.perf_counter()
     probe_renderer()                        # no OpenGL: one line now, not after running the models
     bar = ProgressBar(enabled=not args.json)
+    overrides = _overrides(args)
     if source.suffix.lower() == ".mcap":
+        if overrides:
+            raise CoopsimError("--set: a log is drawn as it was run; give the scenario instead to run it with --set")
         motion = motion_from_log(source, scenario=args.scenario)
         out = Path(args.out or source.parent / f"{motion.model.name}.gif")
     else:
@@ -318,7 +323,8 @@ def _cmd_animate(args) -> int:
             if not args.json:
                 print(f"coopsim: no log of {source} in out/ (coopsim run): running both models", file=sys.stderr)
 
-        motion = scenario_motion(source, duration=args.duration, progress=bar, before_run=before_run)
+        motion = scenario_motion(source, duration=args.duration, progress=bar, before_run=before_run,
+                                 overrides=overrides)
         out = Path(args.out or Path("out") / motion.model.name / f"{motion.model.name}.gif")
     check_output(out)
     result = animate(motion, out, fps=args.fps, speed=args.speed, duration=args.duration, width=args.width,
@@ -338,10 +344,26 @@ def _cmd_animate(args) -> int:
 def _cmd_view(args) -> int:
     from .animate import view
 
+    overrides = _overrides(args)
     if not args.source.lower().endswith(".xml"):
         _announce_compile()                 # the scenario's initial state comes from the native model
-    view(args.source, label=_display_path(args.source))
+    elif overrides:
+        raise CoopsimError("--set: applies to a scenario, not to an MJCF file")
+    view(args.source, label=_display_path(args.source), overrides=overrides)
     return 0
+
+
+def _overrides(args) -> list:
+    """The command's `--set PATH=VALUE` options as (PATH, value) pairs (`coopsim.overrides`), in order."""
+    from .overrides import parse_assignment
+
+    return [parse_assignment(text) for text in args.set or ()]
+
+
+def _add_set(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--set", action="append", metavar="PATH=VALUE",
+                   help="override a scenario field before it is validated (repeatable; a later one wins), e.g. "
+                        "--set object.box.density=2700 --set 'arms[1].motors.stall_torque[0]=0.7'; VALUE is YAML")
 
 
 def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
@@ -391,6 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario YAML file")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_simulate, native=True)
 
     p = sub.add_parser("run", help="run the native model and the MuJoCo twin: MCAP log, plots, summary.json",
@@ -401,6 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    _add_set(p)
     p.set_defaults(func=_cmd_run, native=True)
 
     p = sub.add_parser("plot", help="comparison plots from an existing MCAP log",
@@ -416,12 +440,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")
+    _add_set(p)
     p.set_defaults(func=_cmd_validate, native=True)
 
     p = sub.add_parser("mjcf", help="write the MuJoCo twin of scenarios as MJCF (models/NAME.xml)",
                        description="Write the MuJoCo twin (MJCF) of each SCENARIO (default: scenarios/*.yaml).")
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--out", default="models", help="output folder (default: models)")
+    _add_set(p)
     p.set_defaults(func=_cmd_mjcf)
 
     p = sub.add_parser("inverse", help="inverse dynamics with redundancy resolution, internal wrench, object stress",
@@ -445,6 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_inverse, native=True)
 
     p = sub.add_parser("capacity", help="dynamic load carrying capacity (DLCC) of each resolution, LP bound",
@@ -463,6 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_capacity, native=True)
 
     p = sub.add_parser("bench", help="work-precision benchmark: native model against MuJoCo and Pinocchio",
@@ -499,6 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=int, default=480, help="frame width in pixels (default: 480)")
     p.add_argument("--height", type=int, default=360, help="frame height in pixels (default: 360)")
     p.add_argument("--json", action="store_true", help="print what was written as JSON")
+    _add_set(p)
     p.set_defaults(func=_cmd_animate)
 
     p = sub.add_parser("view", help="open MuJoCo's interactive viewer at the consistent initial state",
@@ -506,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "models/NAME.xml) at the consistent initial state of `coopsim run` (the "
                                     "keyframe); needs a display."))
     p.add_argument("source", help="scenario YAML file or MJCF file")
+    _add_set(p)
     p.set_defaults(func=_cmd_view)
     return parser
 
