@@ -34,19 +34,6 @@ def _print_warnings(res) -> None:
         print(f"coopsim: warning: {w.message()}", file=sys.stderr)
 
 
-def _previous_set(index: str):
-    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
-    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
-    def names(out) -> set[str]:
-        try:
-            files = json.loads((out / index).read_text(encoding="utf-8"))["files"]
-            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
-            return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
-        except (OSError, ValueError, KeyError, TypeError):
-            return {index}
-    return names
-
-
 def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None):
     """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
     previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
@@ -54,7 +41,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold). Returns (log path, plot paths)."""
-    from .atomic import staged_folder, write_text_atomic
+    from .atomic import previous_set, staged_folder, write_text_atomic
     from .log import log_data, write_mcap
     from .render import render_while
 
@@ -62,7 +49,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
         during()
         return write_mcap(stage / log_name, streams, meta)
 
-    with staged_folder(out, replaces=_previous_set(index)) as stage:
+    with staged_folder(out, replaces=previous_set(index)) as stage:
         plots, log_path = render_while(lambda: draw(log_data(streams, meta, messages=False), stage, workers=workers),
                                        work)
         log_path, plots = out / log_path.name, [out / p.name for p in plots]
@@ -262,6 +249,33 @@ def _cmd_capacity(args) -> int:
           format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
     return 0 if ok else 1
+
+
+def _cmd_sweep(args) -> int:
+    from pathlib import Path
+
+    from .progress import ProgressBar
+    from .sweep import load_sweep
+    from .sweep_run import run_sweep, write_outputs
+
+    if sum([args.serial, args.scheduler is not None, args.workers is not None]) > 1:
+        raise CoopsimError("--serial, --workers and --scheduler: give at most one")
+    sweep = load_sweep(args.sweep, overrides=_overrides(args))
+    out = Path(args.out or Path("out") / sweep.name)
+    with ProgressBar(enabled=not args.json) as bar:
+        run = run_sweep(sweep, out, serial=args.serial, scheduler=args.scheduler, workers=args.workers,
+                        resume=args.resume, progress=lambda f: bar("sweep", f))
+    paths = write_outputs(sweep, run, out)
+    summary = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(f"{sweep.name}: {summary['points']} points ({run.computed} run, {run.resumed} resumed from the "
+              f"checkpoint, {summary['failed']} failed) on {run.executor} in {run.wall_time_s:.1f} s")
+        for f in summary["failed_points"][:5]:
+            print(f"  point {f['point']}: {f['error']}")
+        print(f"wrote {len(paths)} files in {out}")
+    return 0
 
 
 def _cmd_bench(args) -> int:
@@ -492,6 +506,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)
     p.set_defaults(func=_cmd_capacity, native=True)
+
+    p = sub.add_parser("sweep", help="parameter sweep of one study over a grid or a quasi-random design (Dask)",
+                       description=("Run SWEEP (YAML: a base scenario, axes of --set paths, a study: simulate, "
+                                    "validate, inverse or capacity) at every point, on an embedded Dask "
+                                    "LocalCluster (one worker process per core), an existing cluster "
+                                    "(--scheduler) or serially; checkpoint each point in DIR/points.jsonl as it "
+                                    "finishes; write results.parquet, results.csv, sweep.json, sweep.mcap and "
+                                    "plots into DIR."))
+    p.add_argument("sweep", help="sweep YAML file")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
+    p.add_argument("--serial", action="store_true", help="run the points in this process, one after another")
+    p.add_argument("--workers", type=int, default=None, help="worker processes of the embedded cluster (default: cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on the Dask cluster whose scheduler is at ADDRESS (e.g. tcp://10.0.0.5:8786)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the finished points of DIR/points.jsonl (the same sweep) and run only the others")
+    p.add_argument("--json", action="store_true", help="print sweep.json")
+    _add_set(p)
+    p.set_defaults(func=_cmd_sweep, native=True)
 
     p = sub.add_parser("bench", help="work-precision benchmark: native model against MuJoCo and Pinocchio",
                        description=("Time the native model (DOP853/DOPRI5 tolerance and RK4 step ladders), the MuJoCo "

@@ -85,7 +85,7 @@ def test_every_scenario_command_takes_set():
     from coopsim.cli import build_parser
 
     parser = build_parser()
-    for command in ("simulate", "run", "validate", "mjcf", "inverse", "capacity", "animate", "view"):
+    for command in ("simulate", "run", "validate", "mjcf", "inverse", "capacity", "animate", "view", "sweep"):
         args = parser.parse_args([command, "x.yaml", "--set", "a=1", "--set", "b=2"])
         assert args.set == ["a=1", "b=2"], command
     with pytest.raises(OverrideError, match="no key 'a'"):
