@@ -157,7 +157,30 @@ def run_points(sweep: Sweep, todo: list[int], serial: bool = False, scheduler: s
 
 def _dask_rows(sweep: Sweep, todo: list[int], scheduler: str | None, workers: int) -> Iterator[dict]:
     """Rows from Dask as they finish; a point whose task fails (a worker killed, ...) is a row with
-    that error."""
+    that error. The embedded cluster's worker processes are forked from this one where the platform
+    forks safely (Linux) after it has run the first point itself: that point loads the compiled
+    kernels and the study's modules, which the workers then share instead of loading them each (a
+    spawned worker takes seconds to start; a forked one a fraction of a second)."""
+    if not todo:
+        return
+    if scheduler:
+        yield from _on_cluster(sweep, todo, scheduler, None)
+        return
+    import sys
+
+    import dask
+
+    method = "fork" if sys.platform.startswith("linux") else "spawn"
+    if method == "fork":
+        yield evaluate_point(sweep, todo[0])
+        todo = todo[1:]
+    with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+        yield from _on_cluster(sweep, todo, None, workers)
+
+
+def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: int | None) -> Iterator[dict]:
+    """Rows of the points `todo` from the cluster at `scheduler`, or from a LocalCluster of `workers`
+    processes × 1 thread started (and closed) here."""
     import logging
 
     from dask.distributed import Client, LocalCluster, as_completed

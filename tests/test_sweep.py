@@ -152,12 +152,8 @@ def real_cluster():
         yield address
     finally:
         for p in reversed(procs):
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+            p.kill()
+            p.wait()
 
 
 def _wait_for_worker(address: str, timeout: float = 60.0) -> None:
@@ -185,22 +181,32 @@ def test_serial_local_cluster_and_real_cluster_give_identical_tables(tmp_path, r
     assert [r["point"] for r in rows[0]] == list(range(6))
 
 
+def _run_serial(path: Path, out: Path) -> None:
+    from coopsim.sweep_run import run_sweep
+
+    run_sweep(load_sweep(path), out, serial=True)
+
+
 def test_resume_after_a_kill_gives_the_same_table_without_recomputing(tmp_path, monkeypatch):
-    """A serial sweep killed (SIGKILL) once two points are checkpointed, its last line torn as a kill
-    mid-write leaves it, then resumed: the same table as an uninterrupted run; only the other points run."""
+    """A serial sweep in a process of its own (forked from this one: it starts with the kernels loaded),
+    killed (SIGKILL) once two points are checkpointed, its last line torn as a kill mid-write leaves it,
+    then resumed: the same table as an uninterrupted run; only the other points run."""
+    import multiprocessing
+
     spec = GRID | {"study": GRID["study"] | {"duration": 2.0}}
     path = write_sweep(tmp_path, spec)
     ckpt = tmp_path / "out" / "points.jsonl"
-    proc = subprocess.Popen([sys.executable, "-m", "coopsim.cli", "sweep", str(path), "--serial", "--out",
-                             str(tmp_path / "out")], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = multiprocessing.get_context("fork").Process(target=_run_serial, args=(path, tmp_path / "out"))
+    proc.start()
     try:
-        deadline = time.monotonic() + 120
-        while (not ckpt.is_file() or ckpt.read_text().count("\n") < 3) and proc.poll() is None \
+        deadline = time.monotonic() + 60
+        while (not ckpt.is_file() or ckpt.read_text().count("\n") < 3) and proc.is_alive() \
                 and time.monotonic() < deadline:
-            time.sleep(0.005)
-        proc.send_signal(signal.SIGKILL)
+            time.sleep(0.002)
+        os.kill(proc.pid, signal.SIGKILL)
     finally:
-        proc.wait()
+        proc.join()
+    assert proc.exitcode == -signal.SIGKILL
     finished = ckpt.read_text().count("\n") - 1
     assert 2 <= finished < 6, f"killed after {finished} points"
     with open(ckpt, "a") as f:
