@@ -256,10 +256,11 @@ def _cmd_sweep(args) -> int:
 
     from .progress import ProgressBar
     from .sweep import load_sweep
-    from .sweep_run import run_sweep, write_outputs
+    from .sweep_run import require_packages, run_sweep, write_outputs
 
     if sum([args.serial, args.scheduler is not None, args.workers is not None]) > 1:
         raise CoopsimError("--serial, --workers and --scheduler: give at most one")
+    require_packages(dask=not args.serial)
     sweep = load_sweep(args.sweep, overrides=_overrides(args))
     out = Path(args.out or Path("out") / sweep.name)
     with ProgressBar(enabled=not args.json) as bar:

@@ -118,6 +118,17 @@ def _end_line(path: Path) -> None:
 # execution
 # ------------------------------------------------------------------------------------------------
 
+def require_packages(dask: bool) -> None:
+    """CoopsimError naming what to install when pyarrow (the results table) or, for `dask`, Dask's
+    distributed scheduler is missing (the `sweep` extra)."""
+    import importlib.util
+
+    missing = [m for m in ("pyarrow",) + (("distributed",) if dask else ()) if importlib.util.find_spec(m) is None]
+    if missing:
+        raise CoopsimError(f"coopsim sweep needs {' and '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} "
+                           f"not installed: pip install 'coopsim[sweep]'")
+
+
 def run_sweep(sweep: Sweep, out: str | Path, serial: bool = False, scheduler: str | None = None,
               workers: int | None = None, resume: bool = False,
               progress: Callable[[float], None] | None = None) -> SweepRun:

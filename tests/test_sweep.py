@@ -102,6 +102,16 @@ def test_bad_sweep_files_are_one_line_errors_naming_the_field(tmp_path, change, 
     assert not (tmp_path / "o").exists()
 
 
+def test_without_dask_the_sweep_says_what_to_install(tmp_path, monkeypatch):
+    import importlib.util
+
+    find = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "distributed" else find(name, *a))
+    out = run_cli("sweep", write_sweep(tmp_path, GRID), "--out", tmp_path / "o", cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr == ("coopsim: error: coopsim sweep needs distributed, which is not "
+                                                  "installed: pip install 'coopsim[sweep]'\n")
+
+
 def test_quasi_random_designs_are_seeded_and_scaled(tmp_path):
     from scipy.stats import qmc
 
