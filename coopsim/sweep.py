@@ -55,7 +55,7 @@ COLUMNS = {   # the summary entries a row keeps, per study (patterns over the fl
                 "methods.*.max_torque_norm_Nm", "methods.*.internal.*.max_force_N", "methods.*.internal.*.max_moment_Nm",
                 "methods.*.stress.peak_normal_Pa", "methods.*.stress.peak_shear_Pa", "methods.*.replay.*"),
     "capacity": ("capacity.*.mass_kg", "capacity.*.saturating_motor", "capacity.*.line", "capacity.*.time_s",
-                 "capacity.*.feasible", "lp_bound.*.mass_kg", "lp_bound.*.saturating_motor",
+                 "capacity.*.feasible", "lp_bound.*.mass_kg", "lp_bound.*.saturating_motor", "lp_bound.*.feasible",
                  "optimised_weights.mass_kg", "optimised_weights.saturating_motor", "energy.*"),
 }
 PLOTS = {     # the columns drawn by default

@@ -65,18 +65,31 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
 
 
 def test_a_failing_point_records_its_error_and_the_sweep_goes_on(tmp_path):
-    spec = GRID | {"axes": [{"path": "object.box.density", "values": [2700, -1, 7850]}]}
+    """Density −1 fails at two points of six; the others run. Outputs: the Parquet table, sweep.json, the
+    MCAP's messages (the table's numbers), and a heat map of the capacity (blank where a point failed)."""
+    from coopsim.log import read_mcap
+
+    spec = GRID | {"axes": [{"path": "object.box.density", "values": [2700, -1, 7850]},
+                            {"path": "arms[0].torque.constant[0]", "name": "tau1", "values": [0.3, 0.5]}],
+                   "plot": ["capacity.scaled.min_energy.mass_kg"]}
     sweep = load_sweep(write_sweep(tmp_path, spec))
     run = run_sweep(sweep, tmp_path / "out", serial=True)
     paths = write_outputs(sweep, run, tmp_path / "out")
     errors = [r["error"] for r in run.rows]
-    assert errors[0] is None and errors[2] is None
-    assert errors[1] == f"{PAPER}: object.box.density: must be positive, got -1.0"
+    assert errors[2] == errors[3] == f"{PAPER}: object.box.density: must be positive, got -1.0"
+    assert errors[:2] + errors[4:] == [None] * 4
     rows = read_rows(tmp_path / "out" / "results.parquet")
-    assert [r["point"] for r in rows] == [0, 1, 2] and rows[1]["capacity.scaled.paper.mass_kg"] is None
-    assert rows[2]["capacity.scaled.paper.mass_kg"] == run.rows[2]["capacity.scaled.paper.mass_kg"]
+    assert [r["point"] for r in rows] == list(range(6)) and rows[2]["capacity.scaled.paper.mass_kg"] is None
+    assert [r["capacity.scaled.paper.mass_kg"] for r in rows] == [r.get("capacity.scaled.paper.mass_kg") for r in run.rows]
     summary = json.loads((tmp_path / "out" / "sweep.json").read_text())
-    assert summary["failed"] == 1 and summary["points"] == 3 and {p.name for p in paths} >= {"results.csv", "sweep.mcap"}
+    assert summary["failed"] == 2 and summary["points"] == 6 and summary["computed"] == 6
+    assert [p.name for p in paths] == ["results.parquet", "results.csv", "sweep.mcap",
+                                       "map_capacity_scaled_min_energy_mass_kg.png", "sweep.json"]
+    assert (tmp_path / "out" / paths[3].name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    msgs = read_mcap(tmp_path / "out" / "sweep.mcap").messages["/sweep/point"]
+    assert [m["capacity_scaled_min_energy_mass_kg"] for m in msgs] == \
+        [r["capacity.scaled.min_energy.mass_kg"] for r in rows]
+    assert [m["timestamp"]["sec"] for m in msgs] == list(range(6)) and msgs[2]["error"] == errors[2]
 
 
 @pytest.mark.parametrize("change, message", [
