@@ -61,15 +61,21 @@ def _values(rows: list[dict], column: str) -> np.ndarray:
                      else np.nan for r in rows])
 
 
-def _mark(ax, x: np.ndarray, y: np.ndarray, labels: list) -> list:
-    """One marker per label (a saturating motor, or "infeasible": a cross) at the points (x, y); returns
+def _mark(ax, x: np.ndarray, y: np.ndarray, labels: list, foot: bool = False) -> list:
+    """One marker per label (a saturating motor, or "infeasible": a cross) at the points (x, y); `foot`
+    (a line plot, whose infeasible points have no value): the crosses at the foot of the panel. Returns
     the legend handles."""
     handles = []
     for k, label in enumerate(_legend_labels(labels)):
         at = np.array([m == label for m in labels])
-        style = dict(marker="x", color="black") if label == "infeasible" else \
-            dict(marker=MARKERS[k % len(MARKERS)], facecolor="white", edgecolor="black")
-        handles.append(ax.scatter(x[at], y[at], s=28, linewidth=0.8, label=label, zorder=3, **style))
+        if label == "infeasible":
+            where = dict(transform=ax.get_xaxis_transform()) if foot else {}
+            yy = np.full(at.sum(), 0.03) if foot else y[at]
+            handles.append(ax.scatter(x[at], yy, s=28, linewidth=0.8, label=label, zorder=3, marker="x", color="black",
+                                      **where))
+        else:
+            handles.append(ax.scatter(x[at], y[at], s=28, linewidth=0.8, label=label, zorder=3,
+                                      marker=MARKERS[k % len(MARKERS)], facecolor="white", edgecolor="black"))
     return handles
 
 
@@ -94,8 +100,11 @@ def column_figure(title: str, axis_names: list[str], axis_values: np.ndarray, gr
         x, y = axis_values[order, 0], values[order]
         ax.plot(x, y, "-", color="tab:blue", lw=1.2, marker="." if motors is None else None)
         ax.set(xlabel=axis_names[0], ylabel=column)
+        pad = 0.04 * (x[-1] - x[0])
+        if pad > 0:
+            ax.set_xlim(x[0] - pad, x[-1] + pad)   # every point, those without a value too
         if motors is not None:
-            handles = _mark(ax, x, y, [motors[i] for i in order])
+            handles = _mark(ax, x, y, [motors[i] for i in order], foot=True)
     elif a == 2:
         x, y = axis_values[:, 0], axis_values[:, 1]
         if grid:
