@@ -136,16 +136,17 @@ def test_quasi_random_designs_are_seeded_and_scaled(tmp_path):
     assert np.array_equal(a.points, np.column_stack([1000 + 8000 * unit[:, 0], -10 + 10 * unit[:, 1]]))
     halton = load_sweep(write_sweep(tmp_path, spec | {"design": "halton"}, "h.yaml"))
     assert halton.points.shape == (8, 2) and not np.array_equal(halton.points, a.points)
+    # the bundled sweeps (in this test: the Monte Carlo one imports scipy.stats, about a second, once)
+    sweeps = {path.stem: load_sweep(path) for path in (SCENARIOS / "sweeps").glob("*.yaml")}
+    assert {k: v.points.shape for k, v in sweeps.items()} == {"paper_capacity_map": (45, 2), "carry_duration": (11, 1),
+                                                              "spatial_mc_agreement": (16, 6)}
+    mc = sweeps["spatial_mc_agreement"]
+    lo, hi = np.array([a.bounds for a in mc.axes]).T
+    assert np.all((lo <= mc.points) & (mc.points <= hi)) and np.all(hi - lo == pytest.approx(0.2))
 
 
 def test_flatten_names_columns_as_paths():
     assert flatten({"a": {"b c": [1, 2]}, "w": [{"x": 1}], "e": []}) == {"a.b_c[0]": 1, "a.b_c[1]": 2, "w": 1, "e": 0}
-
-
-def test_bundled_sweeps_load():
-    for path in sorted((SCENARIOS / "sweeps").glob("*.yaml")):
-        sweep = load_sweep(path)
-        assert len(sweep.points) in (45, 11, 16), path
 
 
 # ------------------------------------------------------------------------------------------------
