@@ -181,6 +181,7 @@ def _dask_rows(sweep: Sweep, todo: list[int], scheduler: str | None, workers: in
     import sys
 
     import dask
+    import distributed  # noqa: F401 — its config defaults, before they are set in a context below
 
     method = "fork" if sys.platform.startswith("linux") else "spawn"
     if method == "fork":

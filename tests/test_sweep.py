@@ -46,6 +46,7 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
 
     monkeypatch.setattr(coopsim.render, "FigureWorkers", lambda *a, **k: contextlib.nullcontext())
     monkeypatch.setattr(coopsim.plots_inverse, "capacity_plots", lambda log, folder, workers=None: [])
+    monkeypatch.setattr(coopsim.plots_inverse, "inverse_plots", lambda log, folder, workers=None: [])
     sweep = load_sweep(write_sweep(tmp_path, GRID))
     assert sweep.points.tolist() == [[2700, 0.3], [2700, 0.5], [2700, 0.7], [7850, 0.3], [7850, 0.5], [7850, 0.7]]
     row = evaluate_point(sweep, 4)
@@ -62,6 +63,17 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
                   "--set", "arms[0].torque.constant[0]=0.5", cwd=tmp_path)
     single = study_row(json.loads(out.stdout), sweep_sim.study)
     assert len(single) == 17 and {k: row[k] for k in single} == single
+    sets = ["--set", "object.box.density=2700", "--set", "arms[0].torque.constant[0]=0.5"]
+    for study, command in (({"kind": "validate", "duration": 0.2}, ["validate", "--duration", "0.2"]),
+                           ({"kind": "inverse", "duration": 0.2}, ["inverse", "--duration", "0.2", "--no-curve",
+                                                                   "--out", tmp_path / "i"])):
+        row = evaluate_point(load_sweep(write_sweep(tmp_path, GRID | {"study": study}, "k.yaml")), 1)
+        out = run_cli(*command[:1], PAPER, *command[1:], "--json", *sets, cwd=tmp_path)
+        summary = json.loads(out.stdout)
+        single = study_row(summary["scenarios"][0] if study["kind"] == "validate" else summary,
+                           load_sweep(tmp_path / "k.yaml").study)
+        assert len(single) == (8 if study["kind"] == "validate" else 39), (study, len(single))
+        assert {k: row[k] for k in single} == single, study
 
 
 def test_a_failing_point_records_its_error_and_the_sweep_goes_on(tmp_path):
