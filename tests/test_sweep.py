@@ -72,7 +72,7 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
         summary = json.loads(out.stdout)
         single = study_row(summary["scenarios"][0] if study["kind"] == "validate" else summary,
                            load_sweep(tmp_path / "k.yaml").study)
-        assert len(single) == (8 if study["kind"] == "validate" else 39), (study, len(single))
+        assert len(single) == (8 if study["kind"] == "validate" else 43), (study, len(single))
         assert {k: row[k] for k in single} == single, study
 
 
@@ -209,6 +209,8 @@ def test_serial_local_cluster_and_real_cluster_give_identical_tables(tmp_path, r
     remote = run_cli("sweep", path, "--scheduler", real_cluster, "--out", tmp_path / "remote", "--json", cwd=tmp_path)
     assert remote.returncode == 0, remote.stderr
     assert "LocalCluster, 2 worker processes" in json.loads(local.stdout)["executor"]
+    again = run_sweep(load_sweep(path), tmp_path / "again", workers=2)     # a second embedded cluster, same process
+    assert again.rows == read_rows(tmp_path / "local" / "results.parquet")
     assert json.loads(remote.stdout)["executor"] == f"Dask cluster at {real_cluster}"
     tables = [(tmp_path / k / "results.csv").read_bytes() for k in ("serial", "local", "remote")]
     assert tables[0] == tables[1] == tables[2]
