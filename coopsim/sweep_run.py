@@ -196,6 +196,7 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
     """Rows of the points `todo` from the cluster at `scheduler`, or from a LocalCluster of `workers`
     processes × 1 thread started (and closed) here."""
     import logging
+    import warnings
 
     from dask.distributed import Client, LocalCluster, as_completed
 
@@ -208,8 +209,10 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
             raise CoopsimError(f"--scheduler {scheduler}: no Dask scheduler answers there ({one_line(exc)})") from None
         cluster = None
     else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        with warnings.catch_warnings():     # "Port 8787 is already in use": the scheduler's HTTP routes move
+            warnings.filterwarnings("ignore", message="Port .* is already in use")
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
         client = Client(cluster)
     try:
         shared = client.scatter(sweep, broadcast=True)
