@@ -15,7 +15,6 @@ import pytest
 import yaml
 
 from conftest import ROOT, SCENARIOS, run_cli
-from coopsim.scenario import ScenarioError
 from coopsim.sweep import evaluate_point, flatten, load_sweep, study_row
 from coopsim.sweep_run import read_rows, run_sweep, write_outputs
 
