@@ -218,13 +218,14 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
 
 
 def scenario_motion(path: str | Path, duration: float | None = None, progress=None,
-                    before_run: Callable[[], None] | None = None) -> Motion:
-    """The scenario's :func:`reusable_log` when there is one, otherwise a fresh run of both models
-    (`before_run()` is called first, e.g. to announce it)."""
+                    before_run: Callable[[], None] | None = None, overrides=()) -> Motion:
+    """The scenario's :func:`reusable_log` when there is one (never with `overrides`, the `--set`
+    pairs of `coopsim.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
+    models (`before_run()` is called first, e.g. to announce it)."""
     from .scenario import load_scenario
 
-    model = load_scenario(path)
-    found = reusable_log(path, model, duration)
+    model = load_scenario(path, overrides=overrides)
+    found = None if overrides else reusable_log(path, model, duration)
     if found is not None:
         return motion_from_log(found[0], scenario=path, log=found[1])
     if before_run is not None:
@@ -670,10 +671,10 @@ def _check_window() -> None:
                            f"`coopsim animate` renders the run into a GIF")
 
 
-def view(source: str | Path, label: str | None = None) -> None:
+def view(source: str | Path, label: str | None = None, overrides=()) -> None:
     """MuJoCo's interactive viewer (`mjcf.launch_viewer`) at the consistent initial state: on an MJCF file
     (`models/NAME.xml`, started at its keyframe) or on a scenario (its twin written as `coopsim mjcf`
-    would, to a temporary file). Returns when the window is closed. Without a display: CoopsimError."""
+    would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when the window is closed. Without a display: CoopsimError."""
     import tempfile
 
     from .mjcf import launch_viewer, mjcf_text
@@ -694,7 +695,7 @@ def view(source: str | Path, label: str | None = None) -> None:
                 raise CoopsimError(f"{source}: MuJoCo cannot load it: {str(exc).splitlines()[0]}") from None
             path = source
         else:
-            model = load_scenario(source)
+            model = load_scenario(source, overrides=overrides)
             path = Path(tmp) / f"{model.name}.xml"
             path.write_text(mjcf_text(model, label or str(source)), encoding="utf-8")
         try:

@@ -127,6 +127,21 @@ def _keep_others(old: Path, new: Path, replaced: set[str]) -> None:
             os.link(src, dst)
 
 
+def previous_set(index: str):
+    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
+    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
+    import json
+
+    def names(out) -> set[str]:
+        try:
+            files = json.loads((Path(out) / index).read_text(encoding="utf-8"))["files"]
+            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
+            return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
+        except (OSError, ValueError, KeyError, TypeError):
+            return {index}
+    return names
+
+
 @contextlib.contextmanager
 def staged_folder(out: str | Path, replaces=lambda old: set()):
     """Write a set of files as a whole: yield a temporary sibling folder of `out` to write them into; on

@@ -18,7 +18,7 @@ def _cmd_simulate(args) -> int:
     from .simulate import simulate
     from .summary import format_simulation_summary, simulation_summary
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     with ProgressBar(enabled=not args.json) as bar:
         res = simulate(model, duration=args.duration, progress=lambda f: bar("native", f))
         bar("native", 1.0)
@@ -34,19 +34,6 @@ def _print_warnings(res) -> None:
         print(f"coopsim: warning: {w.message()}", file=sys.stderr)
 
 
-def _previous_set(index: str):
-    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
-    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
-    def names(out) -> set[str]:
-        try:
-            files = json.loads((out / index).read_text(encoding="utf-8"))["files"]
-            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
-            return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
-        except (OSError, ValueError, KeyError, TypeError):
-            return {index}
-    return names
-
-
 def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None):
     """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
     previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
@@ -54,7 +41,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold). Returns (log path, plot paths)."""
-    from .atomic import staged_folder, write_text_atomic
+    from .atomic import previous_set, staged_folder, write_text_atomic
     from .log import log_data, write_mcap
     from .render import render_while
 
@@ -62,7 +49,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
         during()
         return write_mcap(stage / log_name, streams, meta)
 
-    with staged_folder(out, replaces=_previous_set(index)) as stage:
+    with staged_folder(out, replaces=previous_set(index)) as stage:
         plots, log_path = render_while(lambda: draw(log_data(streams, meta, messages=False), stage, workers=workers),
                                        work)
         log_path, plots = out / log_path.name, [out / p.name for p in plots]
@@ -79,12 +66,13 @@ def _cmd_mjcf(args) -> int:
     from .scenario import load_scenario
 
     _announce_compile()                     # the keyframes come from the native model's initial state
+    overrides = _overrides(args)
     scenarios = _scenario_paths(args.scenarios)
     paths = []
     with ProgressBar() as bar:
         for i, scenario in enumerate(scenarios):   # drawn after each file: a first-run compile notice comes first
             path = Path(args.out) / f"{Path(scenario).stem}.xml"
-            write_text_atomic(path, mjcf_text(load_scenario(scenario), _display_path(scenario)))
+            write_text_atomic(path, mjcf_text(load_scenario(scenario, overrides=overrides), _display_path(scenario)))
             paths.append(path)
             bar("mjcf", (i + 1) / len(scenarios))
     print("\n".join(map(str, paths)))     # after the bar: the paths never share its line
@@ -103,7 +91,7 @@ def _cmd_run(args) -> int:
     from .scenario import load_scenario
     from .summary import run_summary
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
@@ -161,10 +149,11 @@ def _cmd_validate(args) -> int:
     from .progress import ProgressBar
     from .scenario import load_scenario
 
-    results = []
+    results, overrides = [], _overrides(args)
     for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
-        cv = cross_validate(load_scenario(scenario, duration=args.duration), duration=args.duration, progress=bar)
+        cv = cross_validate(load_scenario(scenario, duration=args.duration, overrides=overrides), duration=args.duration,
+                            progress=bar)
         bar.close()
         results.append(cv.comparison)
         if not args.json:
@@ -189,7 +178,7 @@ def _cmd_inverse(args) -> int:
     from .render import FigureWorkers
     from .scenario import load_scenario
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     methods = METHODS if args.method == "all" else (args.method,)
     if args.torques_csv is not None and args.method == "all":
         raise CoopsimError("--torques-csv: name the resolution to export with --method")
@@ -243,7 +232,7 @@ def _cmd_capacity(args) -> int:
     from .render import FigureWorkers
     from .scenario import load_scenario, require_motor_limits
 
-    model = load_scenario(args.scenario, duration=args.duration)
+    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
     with FigureWorkers() as workers:
@@ -261,6 +250,34 @@ def _cmd_capacity(args) -> int:
           format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
     return 0 if ok else 1
+
+
+def _cmd_sweep(args) -> int:
+    from pathlib import Path
+
+    from .progress import ProgressBar
+    from .sweep import load_sweep
+    from .sweep_run import require_packages, run_sweep, write_outputs
+
+    if sum([args.serial, args.scheduler is not None, args.workers is not None]) > 1:
+        raise CoopsimError("--serial, --workers and --scheduler: give at most one")
+    require_packages(dask=not args.serial)
+    sweep = load_sweep(args.sweep, overrides=_overrides(args))
+    out = Path(args.out or Path("out") / sweep.name)
+    with ProgressBar(enabled=not args.json) as bar:
+        run = run_sweep(sweep, out, serial=args.serial, scheduler=args.scheduler, workers=args.workers,
+                        resume=args.resume, progress=lambda f: bar("sweep", f))
+    paths = write_outputs(sweep, run, out)
+    summary = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(f"{sweep.name}: {summary['points']} points ({run.computed} run, {run.resumed} resumed from the "
+              f"checkpoint, {summary['failed']} failed) on {run.executor} in {run.wall_time_s:.1f} s")
+        for f in summary["failed_points"][:5]:
+            print(f"  point {f['point']}: {f['error']}")
+        print(f"wrote {len(paths)} files in {out}")
+    return 0
 
 
 def _cmd_bench(args) -> int:
@@ -307,7 +324,10 @@ def _cmd_animate(args) -> int:
     start = time.perf_counter()
     probe_renderer()                        # no OpenGL: one line now, not after running the models
     bar = ProgressBar(enabled=not args.json)
+    overrides = _overrides(args)
     if source.suffix.lower() == ".mcap":
+        if overrides:
+            raise CoopsimError("--set: a log is drawn as it was run; give the scenario instead to run it with --set")
         motion = motion_from_log(source, scenario=args.scenario)
         out = Path(args.out or source.parent / f"{motion.model.name}.gif")
     else:
@@ -319,7 +339,8 @@ def _cmd_animate(args) -> int:
             if not args.json:
                 print(f"coopsim: no log of {source} in out/ (coopsim run): running both models", file=sys.stderr)
 
-        motion = scenario_motion(source, duration=args.duration, progress=bar, before_run=before_run)
+        motion = scenario_motion(source, duration=args.duration, progress=bar, before_run=before_run,
+                                 overrides=overrides)
         out = Path(args.out or Path("out") / motion.model.name / f"{motion.model.name}.gif")
     check_output(out)
     result = animate(motion, out, fps=args.fps, speed=args.speed, duration=args.duration, width=args.width,
@@ -339,10 +360,26 @@ def _cmd_animate(args) -> int:
 def _cmd_view(args) -> int:
     from .animate import view
 
+    overrides = _overrides(args)
     if not args.source.lower().endswith(".xml"):
         _announce_compile()                 # the scenario's initial state comes from the native model
-    view(args.source, label=_display_path(args.source))
+    elif overrides:
+        raise CoopsimError("--set: applies to a scenario, not to an MJCF file")
+    view(args.source, label=_display_path(args.source), overrides=overrides)
     return 0
+
+
+def _overrides(args) -> list:
+    """The command's `--set PATH=VALUE` options as (PATH, value) pairs (`coopsim.overrides`), in order."""
+    from .overrides import parse_assignment
+
+    return [parse_assignment(text) for text in args.set or ()]
+
+
+def _add_set(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--set", action="append", metavar="PATH=VALUE",
+                   help="override a scenario field before it is validated (repeatable; a later one wins), e.g. "
+                        "--set object.box.density=2700 --set 'arms[1].motors.stall_torque[0]=0.7'; VALUE is YAML")
 
 
 def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
@@ -392,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario YAML file")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_simulate, native=True)
 
     p = sub.add_parser("run", help="run the native model and the MuJoCo twin: MCAP log, plots, summary.json",
@@ -402,6 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    _add_set(p)
     p.set_defaults(func=_cmd_run, native=True)
 
     p = sub.add_parser("plot", help="comparison plots from an existing MCAP log",
@@ -417,12 +456,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--duration", type=float, default=None, help="override the scenarios' duration (s)")
     p.add_argument("--json", action="store_true", help="print a machine-readable JSON table")
+    _add_set(p)
     p.set_defaults(func=_cmd_validate, native=True)
 
     p = sub.add_parser("mjcf", help="write the MuJoCo twin of scenarios as MJCF (models/NAME.xml)",
                        description="Write the MuJoCo twin (MJCF) of each SCENARIO (default: scenarios/*.yaml).")
     p.add_argument("scenarios", nargs="*", help="scenario YAML files")
     p.add_argument("--out", default="models", help="output folder (default: models)")
+    _add_set(p)
     p.set_defaults(func=_cmd_mjcf)
 
     p = sub.add_parser("inverse", help="inverse dynamics with redundancy resolution, internal wrench, object stress",
@@ -446,6 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_inverse, native=True)
 
     p = sub.add_parser("capacity", help="dynamic load carrying capacity (DLCC) of each resolution, LP bound",
@@ -464,7 +506,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the forward run's duration (s)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
+    _add_set(p)
     p.set_defaults(func=_cmd_capacity, native=True)
+
+    p = sub.add_parser("sweep", help="parameter sweep of one study over a grid or a quasi-random design (Dask)",
+                       description=("Run SWEEP (YAML: a base scenario, axes of --set paths, a study: simulate, "
+                                    "validate, inverse or capacity) at every point, on an embedded Dask "
+                                    "LocalCluster (one worker process per core), an existing cluster "
+                                    "(--scheduler) or serially; checkpoint each point in DIR/points.jsonl as it "
+                                    "finishes; write results.parquet, results.csv, sweep.json, sweep.mcap and "
+                                    "plots into DIR."))
+    p.add_argument("sweep", help="sweep YAML file")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
+    p.add_argument("--serial", action="store_true", help="run the points in this process, one after another")
+    p.add_argument("--workers", type=int, default=None, help="worker processes of the embedded cluster (default: cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on the Dask cluster whose scheduler is at ADDRESS (e.g. tcp://10.0.0.5:8786)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the finished points of DIR/points.jsonl (the same sweep) and run only the others")
+    p.add_argument("--json", action="store_true", help="print sweep.json")
+    _add_set(p)
+    p.set_defaults(func=_cmd_sweep, native=True)
 
     p = sub.add_parser("bench", help="work-precision benchmark: native model against MuJoCo and Pinocchio",
                        description=("Time the native model (DOP853/DOPRI5 tolerance and RK4 step ladders), the MuJoCo "
@@ -500,6 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=int, default=480, help="frame width in pixels (default: 480)")
     p.add_argument("--height", type=int, default=360, help="frame height in pixels (default: 360)")
     p.add_argument("--json", action="store_true", help="print what was written as JSON")
+    _add_set(p)
     p.set_defaults(func=_cmd_animate)
 
     p = sub.add_parser("view", help="open MuJoCo's interactive viewer at the consistent initial state",
@@ -507,6 +570,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "models/NAME.xml) at the consistent initial state of `coopsim run` (the "
                                     "keyframe); needs a display."))
     p.add_argument("source", help="scenario YAML file or MJCF file")
+    _add_set(p)
     p.set_defaults(func=_cmd_view)
     return parser
 

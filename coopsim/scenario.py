@@ -776,7 +776,13 @@ def load_yaml(path: Path):
     def fail(reason: str):
         raise ScenarioError(f"{path}: {reason}")
 
-    text = _read_text(path, fail)
+    return parse_yaml_text(_read_text(path, fail), fail)
+
+
+def parse_yaml_text(text: str, fail):
+    """The data of YAML text under the rules of `load_yaml` (one document, no key twice, depth, expanded
+    size; libyaml when present); fail(reason) with one line (the line, and the key) otherwise — e.g. a
+    `--set` value (`coopsim.overrides`)."""
     try:
         _check_events(text, fail)
         loader = _YAML_LOADER(text)
@@ -872,16 +878,21 @@ def _check_events(text: str, fail) -> None:
         loader.dispose()
 
 
-def load_scenario(path: str | Path, duration: float | None = None) -> Model:
+def load_scenario(path: str | Path, duration: float | None = None, overrides=()) -> Model:
     """Read and validate a scenario YAML file (see scenarios/*.yaml for the format). duration: the
     command line's --duration (s), in place of the file's; checked as the file's is, and the work
-    limits apply to it."""
+    limits apply to it. overrides: (PATH, value) pairs set in the file's data before it is validated
+    (`coopsim.overrides.apply_overrides`: the command line's `--set PATH=VALUE`)."""
     if duration is not None:
         check_duration(duration)
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: scenario file not found")
     data = load_yaml(path)
+    if overrides:
+        from .overrides import apply_overrides
+
+        data = apply_overrides(data, overrides, where=f"{path}: --set")
     return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem, duration=duration)
 
 
@@ -904,8 +915,18 @@ def safe_name(stem: str) -> str:
 
 def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."), default_name="scenario",
                     duration: float | None = None) -> Model:
-    """Build the frozen model from parsed YAML data (a dict); duration: the command line's
-    --duration in place of the file's (see `load_scenario`)."""
+    """Build the frozen, validated `Model` from parsed scenario data: `data` is the dict a scenario file
+    holds (`load_yaml`, or built in Python), checked field by field as a file is (ScenarioError, one
+    line "WHERE: FIELD: reason"); where: the name errors start with (the file); base_dir: the folder
+    that relative paths in the data (torque CSVs, robot files) are read from; default_name: the `name`
+    when the data has none (made a safe file stem); duration: the command line's --duration in place
+    of the data's (see `load_scenario`). With `coopsim.overrides.apply_overrides` it is how a script
+    varies a scenario:
+
+        data = load_yaml(Path("scenarios/paper_planar_2x3.yaml"))
+        for rho in (2700.0, 7850.0):
+            model = model_from_dict(apply_overrides(data, [("object.box.density", rho)]), where="paper")
+    """
     root = _Section(data, "", where)
     name = root.string("name", default=safe_name(default_name))
     if not (_NAME.match(name) and len(name) <= MAX_NAME):

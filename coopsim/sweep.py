@@ -1,0 +1,376 @@
+"""Parameter sweeps: the sweep file → a validated `Sweep` (points), and one point's evaluation (pure).
+
+A sweep varies fields of one base scenario (`coopsim.overrides` paths) over a grid or a quasi-random
+design and runs one study per point — the library calls of the single-run command, so a row holds the
+numbers that command prints for the overridden scenario (`coopsim simulate --json`, `coopsim validate
+--json`, `coopsim inverse --no-curve --json`, `coopsim capacity --json`, with `--set` per axis):
+
+    name: paper_capacity_map                   # outputs go to out/NAME (default: the file's stem)
+    scenario: ../paper_planar_2x3_carry.yaml   # relative to the sweep file
+    set: {inverse.object_motion.output_dt: 0.05}        # fixed overrides of every point (optional)
+    design: grid                  # grid (default: every combination, the first axis slowest) | sobol | halton
+    samples: 64                   # sobol | halton: number of points
+    seed: 1                       # sobol | halton: the scrambling's seed
+    axes:
+      - {path: inverse.payload.position[0], values: [-0.2, 0.0, 0.2]}      # grid: values ...
+      - {path: inverse.payload.position[1], linspace: [-0.03, 0.03, 5]}    # ... or start, stop, count
+      # sobol | halton: {path: ..., range: [low, high]}
+    study: {kind: capacity, lp: true, optimise: false}  # simulate | validate | inverse | capacity
+    plot: ["capacity.payload.*.mass_kg"]       # the columns to draw (default: the study's)
+
+Rows are flat: `point` (0-based index), one column per axis (named by its path or `name`), `error`
+(None, or the point's one-line error: the sweep goes on), then the study's columns — its summary
+flattened to dotted names (`capacity.payload.min_energy.mass_kg`, `min_manipulability[0]`) and
+filtered by the study's `columns` patterns (`*` matches any text; defaults `COLUMNS`). No I/O here except reading
+the sweep and scenario files in `load_sweep`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import re
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .model import CoopsimError
+from .overrides import apply_overrides, parse_path
+from .scenario import ScenarioError, _Section, load_yaml, model_from_dict
+
+KINDS = ("simulate", "validate", "inverse", "capacity")
+DESIGNS = ("grid", "sobol", "halton")
+MAX_POINTS = 1_000_000
+COLUMNS = {   # the summary entries a row keeps, per study (patterns over the flattened names: `*` any text)
+    "simulate": ("duration_s", "max_constraint_residual", "max_velocity_residual", "max_condition_number",
+                 "max_internal_force_N", "min_manipulability[*]", "kinetic_energy.initial_J", "kinetic_energy.final_J",
+                 "kinetic_energy.max_relative_change", "final_object_position_m[*]",
+                 "initial_correction.max_abs_dq_rad", "warnings", "steps_accepted", "rhs_evaluations"),
+    "validate": ("passed", "metrics.*.max"),
+    "inverse": ("complete", "bounded.force_bound_N", "bounded.moment_bound_Nm", "methods.*.energy",
+                "methods.*.max_torque_norm_Nm", "methods.*.internal.*.max_force_N", "methods.*.internal.*.max_moment_Nm",
+                "methods.*.stress.peak_normal_Pa", "methods.*.stress.peak_shear_Pa", "methods.*.replay.*"),
+    "capacity": ("capacity.*.mass_kg", "capacity.*.saturating_motor", "capacity.*.line", "capacity.*.time_s",
+                 "capacity.*.feasible", "lp_bound.*.mass_kg", "lp_bound.*.saturating_motor", "lp_bound.*.feasible",
+                 "optimised_weights.mass_kg", "optimised_weights.saturating_motor", "energy.*"),
+}
+PLOTS = {     # the columns drawn by default
+    "simulate": ("max_internal_force_N", "kinetic_energy.max_relative_change"),
+    "validate": ("metrics.joint_angle_error.max", "metrics.object_position_error.max"),
+    "inverse": ("methods.*.energy", "methods.min_energy.internal.nonsqueezing.max_force_N",
+                "methods.min_energy.stress.peak_normal_Pa"),
+    "capacity": ("capacity.*.mass_kg", "lp_bound.*.mass_kg"),
+}
+
+
+@dataclass(frozen=True)
+class Study:
+    """What runs at each point: kind (KINDS); duration (s) in place of the scenario's (the commands'
+    --duration) or None; options: the kind's own (capacity: lp, optimise; inverse: methods, replay,
+    bound_force, bound_moment); columns: fnmatch patterns of the summary entries kept."""
+
+    kind: str
+    duration: float | None
+    options: tuple
+    columns: tuple[str, ...]
+
+    def option(self, key: str, default=None):
+        return dict(self.options).get(key, default)
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One varied field: name (its column), path (`coopsim.overrides`), values (grid) or bounds (low,
+    high) of a quasi-random design."""
+
+    name: str
+    path: str
+    values: tuple[float, ...] | None = None
+    bounds: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Sweep:
+    """A validated sweep: name, file (the sweep file), scenario (the base scenario's path), base (its
+    data), fixed ((path, value) overrides of every point: the file's `set`, then the command line's),
+    axes, design, points (P, len(axes)) float values, study, plot (column patterns), digest (SHA-256
+    of everything a row depends on: a checkpoint of another sweep is never resumed)."""
+
+    name: str
+    description: str
+    file: str
+    scenario: str
+    base: Any
+    fixed: tuple
+    axes: tuple[Axis, ...]
+    design: str
+    points: np.ndarray
+    study: Study
+    plot: tuple[str, ...]
+    digest: str
+
+    def overrides(self, index: int) -> list[tuple[str, Any]]:
+        """The (path, value) overrides of point `index`: the fixed ones, then one per axis."""
+        return list(self.fixed) + [(a.path, float(v)) for a, v in zip(self.axes, self.points[index])]
+
+    def model(self, index: int):
+        """The validated model of point `index` (ScenarioError or OverrideError, one line, otherwise)."""
+        path = Path(self.scenario)
+        data = apply_overrides(self.base, self.overrides(index), where=f"{path}: point {index}: --set")
+        return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem,
+                               duration=self.study.duration)
+
+
+# ------------------------------------------------------------------------------------------------
+# the sweep file
+# ------------------------------------------------------------------------------------------------
+
+def load_sweep(path: str | Path, overrides=()) -> Sweep:
+    """Read and validate a sweep file (format: module docstring); `overrides`: (path, value) pairs set
+    in the base scenario after the file's `set` (the command line's --set). The base scenario with
+    the fixed overrides, and every axis path, are checked here; ScenarioError (one line "FILE: FIELD:
+    reason") otherwise, as for a scenario."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: sweep file not found")
+    root = _Section(load_yaml(path), "", str(path))
+    name = root.string("name", default=path.stem)
+    description = root.string("description", default="")
+    scenario = path.parent / root.string("scenario")
+    if not scenario.is_file():
+        root.fail("scenario", f"scenario file not found: {scenario}")
+    fixed = _fixed(root) + list(overrides)
+    design = root.string("design", choices=DESIGNS, default="grid")
+    axes = _axes(root, design)
+    points = _design_points(root, design, axes)
+    study = _study(root.section("study"))
+    plot = tuple(_patterns(root, "plot", PLOTS[study.kind]))
+    root.done()
+    base = load_yaml(scenario)
+    sweep = Sweep(name, description, str(path), str(scenario), base, tuple(fixed), axes, design, points, study, plot, "")
+    _check_base(sweep, root)
+    digest = hashlib.sha256(json.dumps(
+        {"base": base, "fixed": sweep.fixed, "axes": [a.path for a in axes], "points": points.tolist(),
+         "study": [study.kind, study.duration, list(study.options), list(study.columns)]},
+        sort_keys=True, default=str).encode()).hexdigest()
+    return replace(sweep, digest=digest)
+
+
+def _fixed(root: _Section) -> list[tuple[str, Any]]:
+    sec = root.section("set", default=None)
+    if sec is None:
+        return []
+    for key in sec.data:
+        try:
+            parse_path(str(key), where=f"{root.where}: set:")
+        except CoopsimError as exc:
+            raise ScenarioError(str(exc)) from None
+        sec.raw(key)
+    return [(str(k), v) for k, v in sec.data.items()]
+
+
+def _axes(root: _Section, design: str) -> tuple[Axis, ...]:
+    axes = []
+    for sec in root.items("axes", min_len=1):
+        p = sec.string("path")
+        try:
+            parse_path(p, where=f"{sec.where}: {sec.field('path')}:")
+        except CoopsimError as exc:
+            raise ScenarioError(str(exc)) from None
+        name = sec.string("name", default=p)
+        if design == "grid":
+            if sec.has("values") == sec.has("linspace"):
+                sec.fail("values", "give either values (a list of numbers) or linspace [start, stop, count]")
+            if sec.has("values"):
+                values = sec.array("values", (None,))
+                if len(values) == 0:
+                    sec.fail("values", "expected at least one value")
+            else:
+                lin = sec.array("linspace", (3,))
+                if not (lin[2].is_integer() and lin[2] >= 1):
+                    sec.fail("linspace", f"the count (third entry) must be a whole number of at least 1, got {lin[2]:g}")
+                values = np.linspace(lin[0], lin[1], int(lin[2]))
+            axes.append(Axis(name, p, values=tuple(float(v) for v in values)))
+        else:
+            lo, hi = sec.array("range", (2,))
+            if not lo < hi:
+                sec.fail("range", f"expected [low, high] with low < high, got {[lo, hi]}")
+            axes.append(Axis(name, p, bounds=(float(lo), float(hi))))
+        sec.done()
+    names = [a.name for a in axes]
+    if len(set(names)) != len(names):
+        root.fail("axes", f"axis names must be unique, got {names}")
+    return tuple(axes)
+
+
+def _design_points(root: _Section, design: str, axes: tuple[Axis, ...]) -> np.ndarray:
+    """(P, len(axes)) values: the grid's combinations (the first axis slowest), or `samples` points of a
+    scrambled Sobol or Halton sequence (scipy.stats.qmc, seeded) scaled to the axes' ranges."""
+    if design == "grid":
+        for key in ("samples", "seed"):
+            if root.has(key):
+                root.fail(key, "only for a sobol or halton design (a grid takes every combination of the values)")
+        count = int(np.prod([len(a.values) for a in axes], dtype=float))
+        if count > MAX_POINTS:
+            root.fail("axes", f"{count:,} grid points, more than the {MAX_POINTS:,} a sweep may hold")
+        return np.array(list(itertools.product(*(a.values for a in axes))), dtype=float).reshape(-1, len(axes))
+    from scipy.stats import qmc
+
+    n = root.whole("samples", positive=True, maximum=MAX_POINTS)
+    seed = root.whole("seed", nonneg=True)
+    kind = qmc.Sobol if design == "sobol" else qmc.Halton
+    try:
+        engine = kind(len(axes), scramble=True, rng=seed)
+    except TypeError:                       # scipy < 1.15 names it seed
+        engine = kind(len(axes), scramble=True, seed=seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # Sobol's balance note for a count that is not a power of 2
+        unit = engine.random(n)
+    lo, hi = np.array([a.bounds for a in axes]).T
+    return qmc.scale(unit, lo, hi)
+
+
+def _study(sec: _Section) -> Study:
+    kind = sec.string("kind", choices=KINDS)
+    duration = sec.number("duration", default=None, positive=True)
+    options: dict[str, Any] = {}
+    if kind == "capacity":
+        for key, default in (("lp", True), ("optimise", True)):
+            v = sec.raw(key, default)
+            if not isinstance(v, bool):
+                sec.fail(key, f"expected true or false, got {v!r}")
+            options[key] = v
+    if kind == "inverse":
+        from .resolutions import METHODS
+
+        methods = sec.raw("methods", list(METHODS))
+        if not isinstance(methods, list) or not methods or any(m not in METHODS for m in methods):
+            sec.fail("methods", f"expected a list of resolutions among {', '.join(METHODS)}, got {methods!r}")
+        options["methods"] = tuple(methods)
+        replay = sec.raw("replay", False)
+        if not isinstance(replay, bool):
+            sec.fail("replay", f"expected true or false, got {replay!r}")
+        options["replay"] = replay
+        options["bound_force"] = sec.number("bound_force", default=None, positive=True)
+        options["bound_moment"] = sec.number("bound_moment", default=None, positive=True)
+    columns = tuple(_patterns(sec, "columns", COLUMNS[kind]))
+    sec.done()
+    return Study(kind, duration, tuple(options.items()), columns)
+
+
+def _patterns(sec: _Section, key: str, default) -> list[str]:
+    v = sec.raw(key, list(default))
+    if not isinstance(v, list) or any(not isinstance(x, str) for x in v):
+        sec.fail(key, f"expected a list of column names or patterns (* matches any text), got {v!r}")
+    return v
+
+
+def _check_base(sweep: Sweep, root: _Section) -> None:
+    """The base scenario with the fixed overrides and each axis's first value must make a model (each
+    point's own values are checked when it runs: a bad one is that row's error)."""
+    from .scenario import require_motor_limits
+
+    try:
+        apply_overrides(sweep.base, sweep.fixed, where=f"{sweep.scenario}: set:")
+        for k, a in enumerate(sweep.axes):
+            apply_overrides(sweep.base, [(a.path, 0.0)], where=f"{root.where}: axes[{k}].path: --set")
+        model = sweep.model(0)
+    except CoopsimError as exc:
+        raise ScenarioError(str(exc)) from None
+    if sweep.study.kind == "capacity":
+        require_motor_limits(model, sweep.scenario)
+
+
+# ------------------------------------------------------------------------------------------------
+# one point
+# ------------------------------------------------------------------------------------------------
+
+def study_summary(model, study: Study) -> dict:
+    """The JSON summary of the single-run command of `study` on `model` (library calls only, no
+    files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
+    without its trade-off curve, `capacity_summary`."""
+    if study.kind == "simulate":
+        from .simulate import simulate
+        from .summary import simulation_summary
+
+        return simulation_summary(simulate(model, duration=study.duration))
+    if study.kind == "validate":
+        from .harness import cross_validate
+
+        return cross_validate(model, duration=study.duration).comparison.as_dict()
+    if study.kind == "inverse":
+        from .inverse_report import add_checks, inverse_summary, solve_study
+
+        s = solve_study(model, study.option("methods"), duration=study.duration,
+                        bounds=(study.option("bound_force"), study.option("bound_moment")))
+        return inverse_summary(add_checks(s, study.option("replay"), curve=False))
+    from .inverse_report import capacity_study, capacity_summary
+    from .scenario import require_motor_limits
+
+    require_motor_limits(model, model.name)
+    return capacity_summary(capacity_study(model, duration=study.duration, with_lp=study.option("lp"),
+                                           optimise=study.option("optimise")))
+
+
+def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested summary as {dotted name: leaf}: mapping keys joined by '.', spaces made '_', list items
+    as [i]; a list of mappings (the warnings, failed samples), or an empty list, becomes its length."""
+    if isinstance(obj, dict):
+        out: dict[str, Any] = {}
+        for k, v in obj.items():
+            out |= flatten(v, f"{prefix}.{k}".replace(" ", "_") if prefix else str(k).replace(" ", "_"))
+        return out
+    if isinstance(obj, (list, tuple)):
+        if not obj or any(isinstance(v, dict) for v in obj):
+            return {prefix: len(obj)}
+        out = {}
+        for i, v in enumerate(obj):
+            out |= flatten(v, f"{prefix}[{i}]")
+        return out
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    return {prefix: obj}
+
+
+def matcher(patterns):
+    """A test name → bool: whether the name matches one of `patterns`, where `*` stands for any text and
+    every other character for itself (brackets too: `min_manipulability[*]`)."""
+    regex = re.compile("(?:" + "|".join(re.escape(p).replace(r"\*", ".*") for p in patterns) + r")\Z" if patterns
+                       else r"(?!)")
+    return lambda name: regex.match(name) is not None
+
+
+def select(flat: dict[str, Any], patterns) -> dict[str, Any]:
+    """The entries of `flat` whose names match one of `patterns` (`matcher`), in order."""
+    match = matcher(patterns)
+    return {k: v for k, v in flat.items() if match(k)}
+
+
+def study_row(summary: dict, study: Study) -> dict[str, Any]:
+    """The study's columns of a single-run summary (what `evaluate_point` puts in a row)."""
+    return select(flatten(summary), study.columns)
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: a coopsim error's own text, anything else prefixed by its type."""
+    text = " ".join(part.strip() for part in str(exc).splitlines()).strip()
+    return text if isinstance(exc, CoopsimError) else f"{type(exc).__name__}: {text}"
+
+
+def evaluate_point(sweep: Sweep, index: int) -> dict[str, Any]:
+    """The row of point `index`: point, the axis values, error (None, or the one-line reason it
+    failed: bad values, a failed run), then the study's columns. Deterministic; runs anywhere the
+    scenario's files are (a Dask worker)."""
+    row: dict[str, Any] = {"point": int(index)}
+    row |= {a.name: float(v) for a, v in zip(sweep.axes, sweep.points[index])}
+    try:
+        metrics = study_row(study_summary(sweep.model(index), sweep.study), sweep.study)
+        row["error"] = None
+    except Exception as exc:            # noqa: BLE001 — a failing point is a row, the sweep goes on
+        metrics = {}
+        row["error"] = one_line(exc)
+    return row | metrics
