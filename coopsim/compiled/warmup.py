@@ -5,9 +5,10 @@ is loaded by another instead of compiled, if it is on disk when that process nee
 kernel `chain_forward` is the largest piece, and the time loop (open and closed loop) and the
 evaluation entry all call it, so the work is split to compile it once:
   this process:    `chain_forward`, then the open-loop time loop (`integrate.run`, which loads the
-                   manifold kernels a child has cached by then) and the capacity kernel;
-  child "chain_free": the chain-free entries (projection, inverse kinematics, inverse-dynamics terms),
-                   then the evaluation entry once `chain_forward` is on disk (or after WAIT_S);
+                   manifold kernels a child has cached by then);
+  child "chain_free": the chain-free entries (projection, inverse kinematics, inverse-dynamics terms,
+                   the capacity objective), then the evaluation entry once `chain_forward` is on disk
+                   (or after WAIT_S);
   child "control" (with `control`; else `warm_up_control` on the first closed-loop run): the
                    controller entries, then the time loop with a controller in it (its second
                    compilation) once `chain_forward` is on disk.
@@ -54,26 +55,26 @@ def compile_chain(model) -> None:
 
 
 def compile_loop(model) -> None:
-    """The time loop, through a short integration of the model, and the capacity objective."""
+    """The time loop, through a short integration of the model."""
     from . import api
-    from .capacity import min_energy_mass_interval
 
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
-    z = np.zeros((1, 1, 1))
-    min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
-                             np.ones(1, bool), np.ones(1, bool), 1e-12)
 
 
 def compile_chain_free(model) -> None:
-    """The entries that do not call `chain_forward`: the consistent projection, inverse kinematics and
-    the inverse-dynamics terms."""
+    """The entries that do not call `chain_forward`: the consistent projection, inverse kinematics,
+    the inverse-dynamics terms and the capacity objective."""
     from . import api
+    from .capacity import min_energy_mass_interval
 
     y = _state(model)[None]
     n = model.n_total
     api.consistent_state(model, model.q0, model.qd0)
     api.inverse_terms(model, y[:, :n], y[:, n:], np.zeros((1, n)), n_threads=1)
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
+    z = np.zeros((1, 1, 1))
+    min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
+                             np.ones(1, bool), np.ones(1, bool), 1e-12)
 
 
 def compile_evaluations(model) -> None:
