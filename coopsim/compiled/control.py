@@ -28,7 +28,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 from numba.experimental import structref
 
 from .chain import OK, arm_terms, object_dynamics, object_pose
@@ -36,7 +36,7 @@ from .jit import entry, kernel
 from .linalg import bisect, copy1, copy2, gauss_solve
 from .sample import object_acceleration, object_wrench
 from .spatial import axis_rotation, matmul3, matmul3_T, rot_log
-from .structs import StructType
+from .structs import _F, _I, _f1, _f2, _f3, _i1, StructType
 
 JOINT_PD, COMPUTED_TORQUE = 0, 1
 COMP_NONE, COMP_GRAVITY, COMP_BIAS = 0, 1, 2
@@ -129,9 +129,6 @@ class PackedControl(NamedTuple):
     R3b: np.ndarray
 
 
-_F, _I = types.float64, types.int64
-_f1, _f2, _f3 = (types.Array(types.float64, d, "C") for d in (1, 2, 3))
-_i1 = types.Array(types.int64, 1, "C")
 _TYPES = {"law": _I, "compensation": _I, "reference": _I, "distribution": _I, "saturate": _I, "time_law": _I,
           "squeeze": _F, "count": _i1, "tr_q": _f2, "tr_qd": _f2, "tr_qdd": _f2, "om_p": _f2, "om_R": _f3,
           "om_axis": _f2, "om_w": _f2, "vinertia": _f3, "A": _f2, "JT": _f2, "kkt": _f2, "MA": _f2, "G": _f2,

@@ -100,13 +100,13 @@ def compile_control(model) -> None:
 
 
 def _chain_cached() -> bool:
-    """Whether `chain_forward`'s cache index was written after its source last changed."""
-    from . import chain
+    """Whether `chain_forward` is in numba's cache (whose folder is keyed by the compiled sources'
+    digest, `coopsim.compiled._cache_dir`: an index there is never stale)."""
+    from .chain import chain_forward
 
     try:
-        index = chain.chain_forward._cache._cache_file._index_path
-        return os.path.exists(index) and os.path.getmtime(index) >= os.path.getmtime(chain.__file__)
-    except (AttributeError, OSError):
+        return os.path.exists(chain_forward._cache._cache_file._index_path)
+    except AttributeError:
         return True
 
 
