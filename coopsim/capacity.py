@@ -234,8 +234,10 @@ def min_energy_interval(prob: InverseProblem, setup: MinEnergySetup, weights: np
     lo <= τ <= hi (N, n) on the joints act (n,) bool: compiled (`coopsim.compiled.capacity`, one pass
     over the samples), or through `min_energy_affine_torques` where that is not certified (rank lost
     or an ill-conditioned energy Hessian somewhere)."""
+    from .compiled.api import announce_compile
     from .compiled.capacity import min_energy_mass_interval
 
+    announce_compile("extras")
     mass, lower, certain = min_energy_mass_interval(setup.D, setup.u, np.where(setup.passive, 0.0, weights),
                                                     lo, hi, act, setup.regular, prob.rank_tol)
     if certain:

@@ -575,25 +575,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+COMPILE_NOTICES = {      # what a first run compiles, by compile group (`coopsim.compiled.api`)
+    "base": "the native model for this machine (first run only; about 20 s)",
+    "extras": "inverse kinematics and the capacity objective (first use only; a few seconds)",
+    "control": "the controllers for this machine (first closed-loop run only; about 20 s)",
+}
+
+
 def _announce_compile() -> None:
-    """Say so when the first run on this machine starts compiling the native model (tens of seconds)."""
+    """Say so when a first run on this machine starts compiling part of the native model, and compile
+    it on all cores (`coopsim.compiled.warmup`)."""
     from .compiled.api import set_compile_notice
 
-    def notice():
-        print("coopsim: compiling the native model for this machine (first run only; under a minute)...",
-              file=sys.stderr, flush=True)
-        from .compiled.warmup import warm_up
+    def notice(group):
+        def say():
+            print(f"coopsim: compiling {COMPILE_NOTICES[group]}...", file=sys.stderr, flush=True)
+            from .compiled.warmup import warm_up_group
 
-        warm_up()
+            warm_up_group(group)
+        return say
 
-    def control_notice():
-        print("coopsim: compiling the controllers for this machine (first closed-loop run only; under a minute)...",
-              file=sys.stderr, flush=True)
-        from .compiled.warmup import warm_up_control
-
-        warm_up_control()
-
-    set_compile_notice(notice, control_notice)
+    set_compile_notice(**{group: notice(group) for group in COMPILE_NOTICES})
 
 
 INTERRUPTED = 130   # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)

@@ -362,7 +362,7 @@ class Controller:
         from .compiled import api
         from .compiled.control import control_struct
 
-        api.announce_control_compile()
+        api.announce_compile("control")
         P = api.compiled(self.plant).P
         return api.compiled(self.plant).Ps, api.fresh_workspace(P), control_struct(self.packed)
 

@@ -192,15 +192,15 @@ def test_progress_is_reported_and_does_not_change_the_result(paper):
     assert seen and seen[-1] == pytest.approx(1.0) and all(np.diff(seen) >= 0)
 
 
-def test_the_controllers_compile_notice_fires_once_and_only_when_pending(monkeypatch):
-    """The command line's notices (`api.set_compile_notice`): the controllers' fires on the first
-    controller use while their code is missing, once; never while it is cached."""
+def test_a_groups_compile_notice_fires_once_and_only_when_pending(monkeypatch):
+    """The command line's notices (`api.set_compile_notice`): a group's fires on its first use while its
+    code is missing, once; never while it is cached, nor for another group."""
     calls = []
     for pending in (False, True):
-        monkeypatch.setattr(api, "compile_pending", lambda controllers=False, p=pending: controllers and p)
-        api.set_compile_notice(lambda: calls.append("base"), lambda: calls.append("control"))
-        api.announce_control_compile()
-        api.announce_control_compile()
-    api.set_compile_notice(None)
-    api._notice.clear()
-    assert calls == ["control"]
+        monkeypatch.setattr(api, "compile_pending", lambda group="base", p=pending: group != "base" and p)
+        api.set_compile_notice(base=lambda: calls.append("base"), extras=lambda: calls.append("extras"),
+                               control=lambda: calls.append("control"))
+        for group in ("control", "control", "extras", "base"):
+            api.announce_compile(group)
+    api.set_compile_notice()
+    assert calls == ["control", "extras"]

@@ -49,15 +49,22 @@ class Compiled(NamedTuple):
     Ws: Struct
 
 
-def compile_pending(controllers: bool = False) -> bool:
-    """True when some entry has no compiled code cached on this machine yet (the first run after
-    installing or editing the package compiles it): the entries every command uses, or with
-    `controllers` the controllers' (compiled on the first closed-loop run). Reads numba's cache index
-    files; False when they cannot be located."""
-    entries = ((control.commands, control.evaluate) if controllers else
-               (integrate.run, sample.evaluate, sample.inverse_terms, ik.arm_solve, capacity.min_energy_mass_interval))
+def _group_entries(group: str) -> tuple:
+    """The entries of a compile group: "base", what every native command uses (the first run compiles
+    it, `warmup.warm_up`); "extras", inverse kinematics and the capacity objective (`inverse`,
+    `capacity`: their first use compiles them, a few seconds); "control", the controllers (the first
+    closed-loop run)."""
+    return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
+            "extras": (ik.arm_solve, capacity.min_energy_mass_interval),
+            "control": (control.commands, control.evaluate)}[group]
+
+
+def compile_pending(group: str = "base") -> bool:
+    """True when some entry of the compile group (`_group_entries`) has no compiled code cached on this
+    machine yet (the first run after installing or editing the package compiles it). Reads numba's
+    cache index files; False when they cannot be located."""
     try:
-        return any(not os.path.exists(e._cache._cache_file._index_path) for e in entries)
+        return any(not os.path.exists(e._cache._cache_file._index_path) for e in _group_entries(group))
     except AttributeError:
         return False
 
@@ -65,21 +72,22 @@ def compile_pending(controllers: bool = False) -> bool:
 _notice: dict = {}
 
 
-def set_compile_notice(fn, control_fn=None) -> None:
-    """Call fn() once, just before this process first packs a model while compiled code is missing
-    from the cache, and control_fn() once before it first compiles a controller while the controllers'
-    code is missing (`announce_control_compile`): the command line uses them to say that the first run
-    compiles."""
+def set_compile_notice(**notices) -> None:
+    """For each compile group (`_group_entries`) given, call its function once, before this process
+    first needs the group's code while it is missing from the cache (`announce_compile`; "base": when
+    it first packs a model): the command line uses them to say that a first run compiles, and to
+    compile the group on all cores. `set_compile_notice()` clears them."""
     _notice.clear()
-    _notice["base"] = fn
-    if control_fn is not None:
-        _notice["control"] = control_fn
+    _notice.update(notices)
 
 
-def announce_control_compile() -> None:
-    """The control notice of `set_compile_notice`, if set and the controllers' code is not cached."""
-    if "control" in _notice and compile_pending(controllers=True):
-        _notice.pop("control")()
+def announce_compile(group: str) -> None:
+    """The notice of `set_compile_notice` for the group, if set and the group's code is not cached; the
+    notice is dropped either way (after this the group's code is on disk), so repeated calls cost a
+    dictionary lookup."""
+    notice = _notice.pop(group, None)
+    if notice is not None and compile_pending(group):
+        notice()
 
 
 def compiled(model: Model) -> Compiled:
@@ -90,8 +98,7 @@ def compiled(model: Model) -> Compiled:
     if hit is None:
         key = _content_key(model)
         entry = _BY_CONTENT.pop(key, None)
-        if "base" in _notice and compile_pending():
-            _notice.pop("base")()
+        announce_compile("base")
         if entry is None:
             P = pack(model)
             W = workspace(P)
@@ -334,6 +341,7 @@ def solve_arm(model: Model, m: int, p, R, twist, acc, guess: np.ndarray, tol: fl
     position, world axes; R (3, 3) world) in the model's rows S (Newton from the stacked `guess` (N,)),
     and its rates for the EE twist and acceleration (6,)."""
     P, W, Ps, Ws = compiled(model)
+    announce_compile("extras")
     q = _f(guess).copy()
     qd, qdd, info = np.zeros_like(q), np.zeros_like(q), np.zeros(3)
     st = ik.arm_solve(Ps, Ws, m, _f(P.rows), _f(p), _f(R), _f(twist), _f(acc), q, tol, max_iter, sing_tol,

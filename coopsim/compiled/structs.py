@@ -229,143 +229,57 @@ TABLEAU_FIELDS = (
 TABLEAU_T = StructType(list(TABLEAU_FIELDS))
 
 
+@intrinsic
+def from_record(typingctx, struct_type, record):
+    """A new StructRef of `struct_type` holding the fields of the NamedTuple `record` (same names in the
+    same order, arrays of the same types; a reference taken to each), built in one step: typing and
+    lowering ~50 field assignments one by one took most of the constructors' compile time."""
+    inst_type = struct_type.instance_type
+    fields = inst_type.field_dict
+    if not isinstance(record, types.BaseNamedTuple) or tuple(record.fields) != tuple(fields):
+        return None
+    if any(isinstance(t, types.Array) and t != fields[f] for f, t in zip(record.fields, record.types)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        from numba.experimental.jitclass.base import imp_dtor
+
+        alloc_type = context.data_model_manager[inst_type.get_data_type()].get_value_type()
+        meminfo = context.nrt.meminfo_alloc_dtor(builder,
+                                                 context.get_constant(types.uintp, context.get_abi_sizeof(alloc_type)),
+                                                 imp_dtor(context, builder.module, inst_type))
+        data_pointer = builder.bitcast(context.nrt.meminfo_data(builder, meminfo), alloc_type.as_pointer())
+        builder.store(cgutils.get_null_value(alloc_type), data_pointer)
+        inst = context.make_helper(builder, inst_type)
+        inst.meminfo = meminfo
+        data = structref._Utils(context, builder, inst_type).get_data_struct(inst._getvalue())
+        for i, (name, fromty) in enumerate(zip(record.fields, record.types)):
+            value = context.cast(builder, builder.extract_value(args[1], i), fromty, fields[name])
+            context.nrt.incref(builder, fields[name], value)
+            setattr(data, name, value)
+        return inst._getvalue()
+
+    return inst_type(struct_type, record), codegen
+
+
 @njit(cache=True)
 def _new_packed(r):
-    s = structref.new(PACKED_T)
-    s.dof = r.dof
-    s.base_pos = r.base_pos
-    s.base_rot = r.base_rot
-    s.joint_pos = r.joint_pos
-    s.joint_rot = r.joint_rot
-    s.joint_axis = r.joint_axis
-    s.joint_k1 = r.joint_k1
-    s.joint_k2 = r.joint_k2
-    s.joint_z = r.joint_z
-    s.joint_type = r.joint_type
-    s.link_mass = r.link_mass
-    s.link_com = r.link_com
-    s.link_inertia = r.link_inertia
-    s.ee_pos = r.ee_pos
-    s.ee_rot = r.ee_rot
-    s.obj_mass = r.obj_mass
-    s.obj_inertia = r.obj_inertia
-    s.grasp_pos = r.grasp_pos
-    s.grasp_rot = r.grasp_rot
-    s.carrier = r.carrier
-    s.gravity = r.gravity
-    s.rows = r.rows
-    s.rank_tol = r.rank_tol
-    s.rank_error = r.rank_error
-    s.stabilization = r.stabilization
-    s.alpha = r.alpha
-    s.beta = r.beta
-    s.projection_tol = r.projection_tol
-    s.projection_max_iter = r.projection_max_iter
-    s.tq_off = r.tq_off
-    s.tq_t = r.tq_t
-    s.tq_v = r.tq_v
-    return s
+    return from_record(PACKED_T, r)
 
 
 @njit(cache=True)
 def _new_workspace(r):
-    s = structref.new(WORKSPACE_T)
-    s.p = r.p
-    s.R = r.R
-    s.z = r.z
-    s.c = r.c
-    s.I = r.I
-    s.p_ee = r.p_ee
-    s.R_ee = r.R_ee
-    s.p_rel = r.p_rel
-    s.c_rel = r.c_rel
-    s.p_ee_rel = r.p_ee_rel
-    s.w = r.w
-    s.dw = r.dw
-    s.a = r.a
-    s.Mb = r.Mb
-    s.Lb = r.Lb
-    s.Lb_inv = r.Lb_inv
-    s.h = r.h
-    s.h_arm = r.h_arm
-    s.J = r.J
-    s.Jd_qd = r.Jd_qd
-    s.p_C = r.p_C
-    s.R_o = r.R_o
-    s.K_o = r.K_o
-    s.s = r.s
-    s.J_o = r.J_o
-    s.Jd_o_qd = r.Jd_o_qd
-    s.v_o = r.v_o
-    s.Y_bias = r.Y_bias
-    s.Lam = r.Lam
-    s.Lam_dot_qd = r.Lam_dot_qd
-    s.X = r.X
-    s.x0 = r.x0
-    s.A = r.A
-    s.A_f = r.A_f
-    s.b = r.b
-    s.F = r.F
-    s.res = r.res
-    s.perm = r.perm
-    s.yK = r.yK
-    s.phi = r.phi
-    s.qdd = r.qdd
-    s.tau = r.tau
-    s.cond = r.cond
-    s.rank = r.rank
-    s.dF = r.dF
-    s.vec6 = r.vec6
-    s.v3 = r.v3
-    s.m3 = r.m3
-    s.d_inv = r.d_inv
-    s.V = r.V
-    s.S = r.S
-    s.S_inv = r.S_inv
-    s.yN = r.yN
-    return s
+    return from_record(WORKSPACE_T, r)
 
 
 @njit(cache=True)
 def _new_loop(r):
-    s = structref.new(LOOP_T)
-    s.t = r.t
-    s.h = r.h
-    s.y = r.y
-    s.fy = r.fy
-    s.has_fy = r.has_fy
-    s.k_next = r.k_next
-    s.count = r.count
-    s.status = r.status
-    s.fail_t = r.fail_t
-    s.fail_y = r.fail_y
-    s.warn = r.warn
-    s.warn_t = r.warn_t
-    s.warn_cond = r.warn_cond
-    s.warn_y = r.warn_y
-    s.K = r.K
-    s.y_new = r.y_new
-    s.ytmp = r.ytmp
-    s.Fd = r.Fd
-    s.stab = r.stab
-    s.step = r.step
-    return s
+    return from_record(LOOP_T, r)
 
 
 @njit(cache=True)
 def _new_tableau(r):
-    s = structref.new(TABLEAU_T)
-    s.code = r.code
-    s.stages = r.stages
-    s.A = r.A
-    s.C = r.C
-    s.B = r.B
-    s.E5 = r.E5
-    s.E3 = r.E3
-    s.D = r.D
-    s.Pd = r.Pd
-    s.err_order = r.err_order
-    return s
+    return from_record(TABLEAU_T, r)
 
 
 _NEW = {"PackedModel": _new_packed, "Workspace": _new_workspace, "Loop": _new_loop, "Tableau": _new_tableau}

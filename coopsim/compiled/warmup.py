@@ -1,18 +1,20 @@
-"""Compile every entry of the native model on all cores at once (the first run on a machine).
+"""Compile the entries of the native model on all cores at once (the first run on a machine).
 
 numba compiles on one thread and caches per function and signature; a function cached by one process
-is loaded by another instead of compiled, if it is on disk when that process needs it. The closed-chain
-kernel `chain_forward` is the largest piece, and the time loop (open and closed loop) and the
-evaluation entry all call it, so the work is split to compile it once:
+is loaded by another instead of compiled, if it is on disk when that process needs it (a kernel is
+cached as LLVM IR, `linking`). The closed-chain kernel `chain_forward` is the largest piece, and the
+time loop (open and closed loop) and the evaluation entry all call it, so the work is split to type
+and lower it once:
   this process:    `chain_forward`, then the open-loop time loop (`integrate.run`, which loads the
                    manifold kernels a child has cached by then);
-  child "chain_free": the chain-free entries (projection, inverse kinematics, inverse-dynamics terms,
-                   the capacity objective), then the evaluation entry once `chain_forward` is on disk
-                   (or after WAIT_S);
-  child "control" (with `control`; else `warm_up_control` on the first closed-loop run): the
+  child "chain_free": the chain-free entries every command uses (projection, inverse-dynamics terms),
+                   then the evaluation entry once `chain_forward` is on disk (or after WAIT_S);
+  child "control" (with `control`): the extras (inverse kinematics, the capacity objective), the
                    controller entries, then the time loop with a controller in it (its second
                    compilation) once `chain_forward` is on disk.
-Then this process loads what the children wrote. `python -m coopsim.compiled.warmup` compiles everything.
+Then this process loads what the children wrote. Without `control` the extras compile on their first
+use (`inverse`, `capacity`), the controllers on the first closed-loop run (`warm_up_group`).
+`python -m coopsim.compiled.warmup` compiles everything.
 """
 
 from __future__ import annotations
@@ -62,15 +64,21 @@ def compile_loop(model) -> None:
 
 
 def compile_chain_free(model) -> None:
-    """The entries that do not call `chain_forward`: the consistent projection, inverse kinematics,
-    the inverse-dynamics terms and the capacity objective."""
+    """The entries every command uses that do not call `chain_forward`: the consistent projection and
+    the inverse-dynamics terms."""
     from . import api
-    from .capacity import min_energy_mass_interval
 
     y = _state(model)[None]
     n = model.n_total
     api.consistent_state(model, model.q0, model.qd0)
     api.inverse_terms(model, y[:, :n], y[:, n:], np.zeros((1, n)), n_threads=1)
+
+
+def compile_extras(model) -> None:
+    """The entries some commands use: inverse kinematics and the capacity objective."""
+    from . import api
+    from .capacity import min_energy_mass_interval
+
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
     z = np.zeros((1, 1, 1))
     min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
@@ -123,20 +131,27 @@ def chain_free_child(model) -> None:
     compile_evaluations(model)
 
 
-CHILDREN = {"chain_free": chain_free_child, "control": compile_control}
+def control_child(model) -> None:
+    """The "control" child's share (module docstring)."""
+    compile_extras(model)
+    compile_control(model)
+
+
+CHILDREN = {"chain_free": chain_free_child, "control": control_child}
 
 
 def warm_up(control: bool = False) -> None:
-    """Compile what every command uses, on two processes, and with `control` the controllers too, on a
-    third (a no-op for what is cached already). Needs the source checkout's scenarios/ folder; does
-    nothing without it."""
+    """Compile what every command uses, on two processes, and with `control` the extras and the
+    controllers too, on a third (a no-op for what is cached already). Needs the source checkout's
+    scenarios/ folder; does nothing without it."""
     from .api import compile_pending
 
     if not SCENARIO.exists():
         return
     if not compile_pending():
         if control:
-            warm_up_control()
+            warm_up_group("extras")
+            warm_up_group("control")
         return
     names = [name for name in CHILDREN if control or name != "control"]
     children = [subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", name],
@@ -151,17 +166,22 @@ def warm_up(control: bool = False) -> None:
     compile_chain_free(model)    # loads what the children cached (or compiles it, if a child failed)
     compile_evaluations(model)
     if control:
-        compile_control(model)
+        control_child(model)
 
 
-def warm_up_control() -> None:
-    """Compile the controllers and the closed time loop in this process (a no-op when cached), the
-    rest first if needed."""
+GROUPS = {"extras": compile_extras, "control": compile_control}
+
+
+def warm_up_group(group: str) -> None:
+    """Compile a compile group (`api._group_entries`): "base" by `warm_up`; "extras" or "control" in
+    this process (a no-op when cached), what every command uses first if needed."""
     from .api import compile_pending
 
-    if SCENARIO.exists() and compile_pending(controllers=True):
+    if group == "base":
         warm_up()
-        compile_control(_model())
+    elif SCENARIO.exists() and compile_pending(group):
+        warm_up()
+        GROUPS[group](_model())
 
 
 if __name__ == "__main__":
