@@ -2,19 +2,24 @@
 
 numba compiles on one thread and caches per function and signature; a function cached by one process
 is loaded by another instead of compiled, if it is on disk when that process needs it (a kernel is
-cached as LLVM IR, `linking`). The closed-chain kernel `chain_forward` is the largest piece, and the
-time loop (open and closed loop) and the evaluation entry all call it, so the work is split to type
-and lower it once:
-  this process:    `chain_forward`, then the open-loop time loop (`integrate.run`, which loads the
-                   manifold kernels a child has cached by then);
-  child "chain_free": the chain-free entries every command uses (projection, inverse-dynamics terms),
-                   then the evaluation entry once `chain_forward` is on disk (or after WAIT_S);
-  child "control" (with `control`): the extras (inverse kinematics, the capacity objective), the
-                   controller entries, then the time loop with a controller in it (its second
-                   compilation) once `chain_forward` is on disk.
-Then this process loads what the children wrote. Without `control` the extras compile on their first
-use (`inverse`, `capacity`), the controllers on the first closed-loop run (`warm_up_group`).
-`python -m coopsim.compiled.warmup` compiles everything.
+cached as LLVM IR, `linking`). The closed-chain kernel `chain_forward` is the largest piece: the time
+loop (open and closed loop) and the evaluation entry call it, the projection and the inverse-dynamics
+terms call its kinematic kernels. The work is split so that no kernel is compiled twice, each process
+waiting for what the other one compiles:
+  this process:      the kinematic kernels of `chain_forward` (`KINEMATICS`, by signature); once
+                     `chain_solve` is on disk, `chain_forward`; then the open-loop time loop
+                     (`integrate.run`, which compiles the projection kernels);
+  child "chain_free": the records' constructors, `chain_solve` (by signature) and the inverse-dynamics
+                     terms; once `chain_forward` is on disk, the evaluation entry; once the projection
+                     kernels are, the consistent projection;
+  child "control" (with `control`): once `chain_forward` is on disk, the extras (inverse kinematics,
+                     the capacity objective), the controller entries and the time loop with a
+                     controller in it.
+Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
+child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
+it needs itself. Without `control` the extras compile on their first use (`inverse`, `capacity`), the
+controllers on the first closed-loop run (`warm_up_group`). `python -m coopsim.compiled.warmup`
+compiles everything.
 """
 
 from __future__ import annotations
@@ -23,14 +28,13 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
-
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "paper_planar_2x3.yaml"
-WAIT_S = 120.0      # the child's longest wait for the parent's `chain_forward` before compiling it itself
+WAIT_S = 120.0      # the longest wait for a kernel another process compiles
 
 
 def _model():
@@ -43,17 +47,31 @@ def _state(model):
     return np.concatenate([model.q0, model.qd0])
 
 
-def compile_chain(model) -> None:
-    """`chain.chain_forward` for the packed model's types and contiguous float64 vectors (the
-    signature both callers use)."""
-    from numba import typeof, types
+def _signatures() -> dict:
+    """The kernels compiled by signature, as `chain_forward` calls them: the records' types, int64 arm
+    indices and contiguous float64 vectors (a test checks that no caller compiles another one)."""
+    from numba import types
 
-    from . import api
-    from .chain import chain_forward
+    from . import chain
 
-    c = api.compiled(model)
-    vec = types.float64[::1]
-    chain_forward.compile((typeof(c.Ps), typeof(c.Ws), vec, vec, vec, vec))
+    vec, i = types.float64[::1], types.int64
+    return {chain.arm_kinematics: (i, vec), chain.arm_jacobian: (i,), chain.arm_bias: (i, vec),
+            chain.arm_mass_matrix: (i,), chain.object_pose: (), chain.object_dynamics: (vec,),
+            chain.constraint_jacobian: (), chain.constraint_bias: (), chain.baumgarte_rhs: (vec, vec),
+            chain.chain_solve: (vec, vec), chain.chain_forward: (vec, vec, vec, vec)}
+
+
+def compile_kernels(names) -> None:
+    """The named kernels of `_signatures` (P, W first), from their types alone: no record needed."""
+    from .structs import PACKED_T, WORKSPACE_T
+
+    for kernel, rest in _signatures().items():
+        if kernel.__name__ in names:
+            kernel.compile((PACKED_T, WORKSPACE_T, *rest))
+
+
+KINEMATICS = ("arm_kinematics", "arm_jacobian", "arm_bias", "arm_mass_matrix", "object_pose",
+              "object_dynamics", "constraint_jacobian", "constraint_bias", "baumgarte_rhs")
 
 
 def compile_loop(model) -> None:
@@ -63,14 +81,19 @@ def compile_loop(model) -> None:
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
 
 
-def compile_chain_free(model) -> None:
-    """The entries every command uses that do not call `chain_forward`: the consistent projection and
-    the inverse-dynamics terms."""
+def compile_consistent(model) -> None:
+    """The consistent projection."""
+    from . import api
+
+    api.consistent_state(model, model.q0, model.qd0)
+
+
+def compile_inverse_terms(model) -> None:
+    """The inverse-dynamics terms."""
     from . import api
 
     y = _state(model)[None]
     n = model.n_total
-    api.consistent_state(model, model.q0, model.qd0)
     api.inverse_terms(model, y[:, :n], y[:, n:], np.zeros((1, n)), n_threads=1)
 
 
@@ -103,36 +126,45 @@ def compile_control(model) -> None:
     pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
     pd.compiled_commands(np.zeros(1), y[None, :n], y[None, n:])
     pd.compiled_call(0.0, y[:n], y[n:])
-    _wait_for_chain()
     api.integrate_chain(pd.model, y, np.array([0.0, 0.01]), "dop853", controller=pd.compiled_loop, land=True)
 
 
-def _chain_cached() -> bool:
-    """Whether `chain_forward` is in numba's cache (whose folder is keyed by the compiled sources'
-    digest, `coopsim.compiled._cache_dir`: an index there is never stale)."""
-    from .chain import chain_forward
-
+def cached(kernel) -> bool:
+    """Whether `kernel` is in numba's cache (whose folder is keyed by the compiled sources' digest,
+    `coopsim.compiled._cache_dir`: an index there is never stale)."""
     try:
-        return os.path.exists(chain_forward._cache._cache_file._index_path)
+        return os.path.exists(kernel._cache._cache_file._index_path)
     except AttributeError:
         return True
 
 
-def _wait_for_chain() -> None:
+def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
+    """Until `kernel` is cached, at most WAIT_S, and while `child` (the process compiling it) runs."""
     deadline = time.monotonic() + WAIT_S
-    while not _chain_cached() and time.monotonic() < deadline:
-        time.sleep(0.2)
+    while not cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
+        time.sleep(0.05)
 
 
 def chain_free_child(model) -> None:
     """The "chain_free" child's share (module docstring)."""
-    compile_chain_free(model)
-    _wait_for_chain()
+    from .chain import chain_forward
+    from .manifold import project_state
+    from . import api
+
+    api.compiled(model)
+    compile_kernels(("chain_solve",))
+    compile_inverse_terms(model)
+    wait_for(chain_forward)
     compile_evaluations(model)
+    wait_for(project_state)
+    compile_consistent(model)
 
 
 def control_child(model) -> None:
     """The "control" child's share (module docstring)."""
+    from .chain import chain_forward
+
+    wait_for(chain_forward)
     compile_extras(model)
     compile_control(model)
 
@@ -145,6 +177,7 @@ def warm_up(control: bool = False) -> None:
     controllers too, on a third (a no-op for what is cached already). Needs the source checkout's
     scenarios/ folder; does nothing without it."""
     from .api import compile_pending
+    from .chain import chain_solve
 
     if not SCENARIO.exists():
         return
@@ -158,13 +191,16 @@ def warm_up(control: bool = False) -> None:
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in names]
     model = _model()
     try:
-        compile_chain(model)
+        compile_kernels(KINEMATICS)
+        wait_for(chain_solve, children[0])
+        compile_kernels(("chain_forward",))
         compile_loop(model)
     finally:
         for child in children:
             child.wait()
-    compile_chain_free(model)    # loads what the children cached (or compiles it, if a child failed)
+    compile_inverse_terms(model)    # loads what the children cached (or compiles it, if a child failed)
     compile_evaluations(model)
+    compile_consistent(model)
     if control:
         control_child(model)
 
