@@ -69,9 +69,9 @@ def _warm_up() -> None:
     axis and a legend into memory (what a worker would otherwise do on its first job)."""
     import io
 
+    os.nice(WORKER_NICENESS)
     from matplotlib.figure import Figure
 
-    os.nice(WORKER_NICENESS)
     fig = Figure(figsize=(2, 2))
     ax = fig.subplots()
     ax.semilogy([0.0, 1.0], [1e-9, 1e-3], label="x")
