@@ -138,3 +138,9 @@ def test_a_failed_resolution_is_not_remembered():
     for _ in range(2):
         with pytest.raises(errors.TypingError):
             fnty.get_call_type(context, (types.float64, types.unicode_type), {})
+
+
+@pytest.mark.parametrize("version, ok", [("0.68.1", True), ("0.60.0", True), ("0.59.1", False), ("0.70.0", False),
+                                         ("1.0.0", False), ("0.69.0rc1", True)])
+def test_the_wrappers_install_only_on_the_numba_versions_they_follow(version, ok):
+    assert linking.supported_numba(version) is ok

@@ -16,9 +16,12 @@ An entry (`jit.entry`) is finalized as before: its module, with every kernel it 
 optimized at -O3 once and becomes machine code. The code that runs is what it was; compiling the
 paper scene's time loop and closed-chain kernel took 45.8 s before and 25.2 s after, one process.
 
-numba has no public hook for this, so `install()` wraps five methods of its code library and CPU
-context, each a no-op for a library that is not lazy. It checks that they exist first and otherwise
-installs nothing: kernels are then finalized as numba does by default (slower to compile, same code).
+numba has no public hook for this, so `install()` wraps six methods of its code library, code
+generator and CPU context, each unchanged for a library that is not lazy (but for setting the
+environment globals of the kernels linked into an entry, and ignoring a name the execution engine does
+not hold where numba would write through a null address). It installs nothing on a numba outside
+`NUMBA_RANGE` (tested: 0.68) or without these methods: kernels are then finalized as numba does by
+default (slower to compile, the same code).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from numba.core import codegen, compiler, compiler_machinery, cpu, typed_passes
 from numba.core.environment import lookup_environment
 
 KIND = "coopsim-ir"          # the cache's name for a lazy library's bitcode
+NUMBA_RANGE = ((0, 60), (0, 70))   # numba versions whose internals these wrappers follow: [low, high)
 _ENV_PREFIX = "_ZN08NumbaEnv"  # numba's mangled name of a function's environment global
 
 
@@ -38,7 +42,8 @@ def is_lazy(library) -> bool:
 
 @compiler_machinery.register_pass(mutates_CFG=False, analysis_only=True)
 class LazyLibrary(compiler_machinery.LoweringPass):
-    """Create the function's code library before lowering, marked lazy."""
+    """Create the function's code library before lowering, marked lazy (a library handed in by the
+    caller of the pipeline is left as it is)."""
 
     _name = "coopsim_lazy_library"
 
@@ -49,7 +54,7 @@ class LazyLibrary(compiler_machinery.LoweringPass):
         if state.library is None:
             state.library = state.targetctx.codegen().create_library(state.func_id.func_qualname)
             state.library.enable_object_caching()
-        state.library._coopsim_lazy = True
+            state.library._coopsim_lazy = True
         return False
 
 
@@ -99,8 +104,18 @@ def _set_environments(library) -> None:
                 library.codegen.set_env(gv.name, env)
 
 
+def supported_numba(version: str | None = None) -> bool:
+    """Whether numba's version (or `version`) is in NUMBA_RANGE."""
+    import numba
+
+    parts = tuple(int(p) for p in (version or numba.__version__).split(".")[:2] if p.isdigit())
+    return NUMBA_RANGE[0] <= parts < NUMBA_RANGE[1]
+
+
 def install() -> bool:
     """Wrap numba's methods (module docstring); True if installed (idempotent)."""
+    if not supported_numba():
+        return False
     lib, ctx = codegen.CPUCodeLibrary, cpu.CPUContext
     needed = [(codegen.CodeLibrary, "_ensure_finalized"), (lib, "_get_module_for_linking"),
               (lib, "serialize_using_object_code"), (lib, "_unserialize"), (ctx, "get_executable"),

@@ -12,7 +12,8 @@ set of flags: numba's own `_OverloadFunctionTemplate` keys its cache on them too
 signature found before and records the implementation it chose, as the first resolution did; only
 successful resolutions are kept, so a failure is always worked out (and reported) by numba. A type
 numba extends later (a new overload registered) is a new function type object, hence a new key.
-It checks that the method exists first and otherwise installs nothing (numba resolves as usual).
+It installs nothing on a numba outside `linking.NUMBA_RANGE` or without the method (numba then
+resolves as usual).
 """
 
 from __future__ import annotations
@@ -37,8 +38,10 @@ def _flags_key(flags):
 
 def install() -> bool:
     """Wrap `BaseFunction.get_call_type` (module docstring); True if installed (idempotent)."""
+    from .linking import supported_numba
+
     base = functions.BaseFunction
-    if not hasattr(base, "get_call_type") or not hasattr(targetconfig.ConfigStack, "top_or_none"):
+    if not supported_numba() or not hasattr(base, "get_call_type") or not hasattr(targetconfig.ConfigStack, "top_or_none"):
         return False
     if getattr(base.get_call_type, "_coopsim", False):
         return True
