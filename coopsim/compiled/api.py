@@ -59,14 +59,20 @@ def _group_entries(group: str) -> tuple:
             "control": (control.commands, control.evaluate)}[group]
 
 
+def is_cached(fn) -> bool:
+    """Whether the compiled function `fn` has code in numba's cache on this machine (its index file;
+    the cache folder is keyed by the compiled sources' digest, `coopsim.compiled._cache_dir`, so an
+    index there is never stale). True when the index cannot be located."""
+    try:
+        return os.path.exists(fn._cache._cache_file._index_path)
+    except AttributeError:
+        return True
+
+
 def compile_pending(group: str = "base") -> bool:
     """True when some entry of the compile group (`_group_entries`) has no compiled code cached on this
-    machine yet (the first run after installing or editing the package compiles it). Reads numba's
-    cache index files; False when they cannot be located."""
-    try:
-        return any(not os.path.exists(e._cache._cache_file._index_path) for e in _group_entries(group))
-    except AttributeError:
-        return False
+    machine yet (the first run after installing or editing the package compiles it), `is_cached`."""
+    return not all(is_cached(e) for e in _group_entries(group))
 
 
 _notice: dict = {}

@@ -24,7 +24,6 @@ compiles everything.
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
@@ -129,19 +128,13 @@ def compile_control(model) -> None:
     api.integrate_chain(pd.model, y, np.array([0.0, 0.01]), "dop853", controller=pd.compiled_loop, land=True)
 
 
-def cached(kernel) -> bool:
-    """Whether `kernel` is in numba's cache (whose folder is keyed by the compiled sources' digest,
-    `coopsim.compiled._cache_dir`: an index there is never stale)."""
-    try:
-        return os.path.exists(kernel._cache._cache_file._index_path)
-    except AttributeError:
-        return True
-
-
 def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
-    """Until `kernel` is cached, at most WAIT_S, and while `child` (the process compiling it) runs."""
+    """Until `kernel` is cached (`api.is_cached`), at most WAIT_S, and while `child` (the process
+    compiling it) runs."""
+    from .api import is_cached
+
     deadline = time.monotonic() + WAIT_S
-    while not cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
+    while not is_cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
         time.sleep(0.05)
 
 
