@@ -6,19 +6,21 @@ cached as LLVM IR, `linking`). The closed-chain kernel `chain_forward` is the la
 loop (open and closed loop) and the evaluation entry call it, the projection and the inverse-dynamics
 terms call its kinematic kernels. The work is split so that no kernel is compiled twice, each process
 waiting for what the other one compiles:
-  this process:      the kinematic kernels of `chain_forward` (`KINEMATICS`, by signature); once
-                     `chain_solve` is on disk, `chain_forward`; then the open-loop time loop
-                     (`integrate.run`, which compiles the projection kernels);
-  child "chain_free": the records' constructors, `chain_solve` (by signature) and the inverse-dynamics
-                     terms; once `chain_forward` is on disk, the evaluation entry; once the projection
-                     kernels are, the consistent projection;
+  this process:      the records' constructors and most of `chain_forward`'s kinematic kernels
+                     (`KINEMATICS`, by signature); once the child's share is on disk,
+                     `chain_forward`; then the open-loop time loop (`integrate.run`, which compiles
+                     the projection kernels);
+  child "chain_free": `chain_solve` and the other kinematic kernels (`CHILD_KERNELS`, by signature);
+                     once the constructors are on disk, the inverse-dynamics terms; once
+                     `chain_forward` is, the evaluation entry; once the projection kernels are, the
+                     consistent projection;
   child "control" (with `control`): once `chain_forward` is on disk, the extras (inverse kinematics,
                      the capacity objective), the controller entries and the time loop with a
                      controller in it.
 Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
-it needs itself. Without `control` the extras compile on their first use (`inverse`, `capacity`), the
-controllers on the first closed-loop run (`warm_up_group`). `python -m coopsim.compiled.warmup`
+it needs itself. Without `control` the extras compile on their first use (`capacity`, object-motion
+trajectories), the controllers on the first closed-loop run (`warm_up_group`). `python -m coopsim.compiled.warmup`
 compiles everything.
 """
 
@@ -69,8 +71,11 @@ def compile_kernels(names) -> None:
             kernel.compile((PACKED_T, WORKSPACE_T, *rest))
 
 
-KINEMATICS = ("arm_kinematics", "arm_jacobian", "arm_bias", "arm_mass_matrix", "object_pose",
-              "object_dynamics", "constraint_jacobian", "constraint_bias", "baumgarte_rhs")
+# `chain_forward`'s callees, by process: each share takes about as long with what else the process
+# compiles first (this one the records' constructors, the child nothing)
+KINEMATICS = ("arm_kinematics", "arm_jacobian", "arm_bias", "object_pose", "object_dynamics",
+              "constraint_jacobian", "baumgarte_rhs")
+CHILD_KERNELS = ("chain_solve", "arm_mass_matrix", "constraint_bias")
 
 
 def compile_loop(model) -> None:
@@ -142,10 +147,11 @@ def chain_free_child(model) -> None:
     """The "chain_free" child's share (module docstring)."""
     from .chain import chain_forward
     from .manifold import project_state
-    from . import api
 
-    api.compiled(model)
-    compile_kernels(("chain_solve",))
+    from .structs import _new_workspace
+
+    compile_kernels(CHILD_KERNELS)
+    wait_for(_new_workspace)
     compile_inverse_terms(model)
     wait_for(chain_forward)
     compile_evaluations(model)
@@ -169,8 +175,7 @@ def warm_up(control: bool = False) -> None:
     """Compile what every command uses, on two processes, and with `control` the extras and the
     controllers too, on a third (a no-op for what is cached already). Needs the source checkout's
     scenarios/ folder; does nothing without it."""
-    from .api import compile_pending
-    from .chain import chain_solve
+    from .api import compile_pending, compiled
 
     if not SCENARIO.exists():
         return
@@ -184,8 +189,11 @@ def warm_up(control: bool = False) -> None:
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in names]
     model = _model()
     try:
+        compiled(model)           # the records' constructors
         compile_kernels(KINEMATICS)
-        wait_for(chain_solve, children[0])
+        for kernel in _signatures():
+            if kernel.__name__ in CHILD_KERNELS:
+                wait_for(kernel, children[0])
         compile_kernels(("chain_forward",))
         compile_loop(model)
     finally:
