@@ -1,6 +1,7 @@
 """Lazy kernels (coopsim.compiled.linking): a kernel is compiled to LLVM IR only, cached as IR, and
-becomes machine code inside the entries that call it; and remembered call-type resolution
-(coopsim.compiled.resolution) gives numba's own answers. Each case runs in fresh processes over a
+becomes machine code inside the entries that call it; remembered call-type resolution
+(coopsim.compiled.resolution) gives numba's own answers; code loads from the cache without numba's
+compiler registries (coopsim.compiled.loading), and a later compile still has them. Each case runs in fresh processes over a
 kernel and two entries written to a temporary folder, with numba's cache there; results exact (the
 arithmetic is exact in binary floating point)."""
 
@@ -51,6 +52,8 @@ PROBE = textwrap.dedent('''
     from coopsim.compiled import linking
 
     out = {}
+    numba_np = lambda: sorted(m for m in ("numba.np.arraymath", "numba.np.linalg", "numba.np.npdatetime",
+                                          "numba.typed.typeddict", "scipy.linalg") if m in sys.modules)
     for name in sys.argv[1:]:
         fn = getattr(lazymod, name)
         out[name] = fn(0.5, np.array([1.0, 2.0, 4.0]), np.array([1.0, 1.0, 1.0]))
@@ -64,6 +67,10 @@ PROBE = textwrap.dedent('''
         (cres,) = kernel.overloads.values()
         out["kernel_lazy"] = linking.is_lazy(cres.library)
         out["kernel_finalized"] = cres.library._finalized
+    out["registries_before_compile"] = numba_np()
+    from numba import njit
+    out["fresh_compile"] = njit(lambda n: np.arange(n * 1.0).sum())(4)
+    out["registries_after_compile"] = len(numba_np()) > 0
     print(json.dumps(out))
 ''')
 
@@ -108,6 +115,15 @@ def test_cached_entries_load_without_the_kernel(runs):
     out = runs[2]
     assert (out["first"], out["second"]) == (6.5, 13.0)
     assert out["first_hits"] == out["second_hits"] == 1 and out["kernel_compiled"] == 0
+
+
+def test_cached_code_loads_without_numbas_registries_and_a_compile_still_has_them(runs):
+    """Third process: loading both entries imported none of the registries numba's refresh imports
+    (its NumPy math, linear algebra and datetime lowering, typed dict, SciPy's linear algebra); a function compiled afterwards in the same process (np.arange(4.0).sum() = 6)
+    gets them."""
+    out = runs[2]
+    assert out["registries_before_compile"] == []
+    assert out["fresh_compile"] == 6.0 and out["registries_after_compile"]
 
 
 def test_install_is_idempotent():
