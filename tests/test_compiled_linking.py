@@ -1,9 +1,9 @@
 """Lazy kernels (coopsim.compiled.linking): a kernel is compiled to LLVM IR only, cached as IR, and
 becomes machine code inside the entries that call it; remembered call-type resolution
 (coopsim.compiled.resolution) gives numba's own answers; code loads from the cache without numba's
-compiler registries (coopsim.compiled.loading), and a later compile still has them. Each case runs in fresh processes over a
-kernel and two entries written to a temporary folder, with numba's cache there; results exact (the
-arithmetic is exact in binary floating point)."""
+compiler registries (coopsim.compiled.loading), and a later compile still has them. Each case runs
+in fresh processes over a kernel and two entries written to a temporary folder, with numba's cache
+there; results exact (the arithmetic is exact in binary floating point)."""
 
 import json
 import operator
@@ -85,8 +85,8 @@ def runs(tmp_path_factory):
                PYTHONPATH=os.pathsep.join([str(folder), os.environ.get("PYTHONPATH", "")]))
 
     def run(*entries):
-        done = subprocess.run([sys.executable, str(folder / "probe.py"), *entries], env=env, capture_output=True,
-                              text=True, timeout=300)
+        done = subprocess.run([sys.executable, str(folder / "probe.py"), *entries], env=env,
+                              capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]
         return json.loads(done.stdout.splitlines()[-1])
 
@@ -119,8 +119,8 @@ def test_cached_entries_load_without_the_kernel(runs):
 
 def test_cached_code_loads_without_numbas_registries_and_a_compile_still_has_them(runs):
     """Third process: loading both entries imported none of the registries numba's refresh imports
-    (its NumPy math, linear algebra and datetime lowering, typed dict, SciPy's linear algebra); a function compiled afterwards in the same process (np.arange(4.0).sum() = 6)
-    gets them."""
+    (its NumPy math, linear algebra and datetime lowering, typed dict, SciPy's linear algebra); a
+    function compiled afterwards in the same process (np.arange(4.0).sum() = 6) gets them."""
     out = runs[2]
     assert out["registries_before_compile"] == []
     assert out["fresh_compile"] == 6.0 and out["registries_after_compile"]
@@ -156,7 +156,7 @@ def test_a_failed_resolution_is_not_remembered():
             fnty.get_call_type(context, (types.float64, types.unicode_type), {})
 
 
-@pytest.mark.parametrize("version, ok", [("0.68.1", True), ("0.60.0", True), ("0.59.1", False), ("0.70.0", False),
-                                         ("1.0.0", False), ("0.69.0rc1", True)])
+@pytest.mark.parametrize("version, ok", [("0.68.1", True), ("0.60.0", True), ("0.59.1", False),
+                                         ("0.70.0", False), ("1.0.0", False), ("0.69.0rc1", True)])
 def test_the_wrappers_install_only_on_the_numba_versions_they_follow(version, ok):
     assert linking.supported_numba(version) is ok

@@ -41,7 +41,8 @@ def install() -> bool:
     from .linking import supported_numba
 
     base = functions.BaseFunction
-    if not supported_numba() or not hasattr(base, "get_call_type") or not hasattr(targetconfig.ConfigStack, "top_or_none"):
+    if not (supported_numba() and hasattr(base, "get_call_type")
+            and hasattr(targetconfig.ConfigStack, "top_or_none")):
         return False
     if getattr(base.get_call_type, "_coopsim", False):
         return True

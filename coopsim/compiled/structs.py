@@ -245,9 +245,8 @@ def from_record(typingctx, struct_type, record):
         from numba.experimental.jitclass.base import imp_dtor
 
         alloc_type = context.data_model_manager[inst_type.get_data_type()].get_value_type()
-        meminfo = context.nrt.meminfo_alloc_dtor(builder,
-                                                 context.get_constant(types.uintp, context.get_abi_sizeof(alloc_type)),
-                                                 imp_dtor(context, builder.module, inst_type))
+        size = context.get_constant(types.uintp, context.get_abi_sizeof(alloc_type))
+        meminfo = context.nrt.meminfo_alloc_dtor(builder, size, imp_dtor(context, builder.module, inst_type))
         data_pointer = builder.bitcast(context.nrt.meminfo_data(builder, meminfo), alloc_type.as_pointer())
         builder.store(cgutils.get_null_value(alloc_type), data_pointer)
         inst = context.make_helper(builder, inst_type)

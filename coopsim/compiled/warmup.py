@@ -20,8 +20,8 @@ waiting for what the other one compiles:
 Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
 it needs itself. Without `control` the extras compile on their first use (`capacity`, object-motion
-trajectories), the controllers on the first closed-loop run (`warm_up_group`). `python -m coopsim.compiled.warmup`
-compiles everything.
+trajectories), the controllers on the first closed-loop run (`warm_up_group`).
+`python -m coopsim.compiled.warmup` compiles everything.
 """
 
 from __future__ import annotations
@@ -62,13 +62,17 @@ def _signatures() -> dict:
             chain.chain_solve: (vec, vec), chain.chain_forward: (vec, vec, vec, vec)}
 
 
+def _named(names) -> dict:
+    """The kernels of `_signatures` named in `names`, with their signatures after P, W."""
+    return {kernel: rest for kernel, rest in _signatures().items() if kernel.__name__ in names}
+
+
 def compile_kernels(names) -> None:
     """The named kernels of `_signatures` (P, W first), from their types alone: no record needed."""
     from .structs import PACKED_T, WORKSPACE_T
 
-    for kernel, rest in _signatures().items():
-        if kernel.__name__ in names:
-            kernel.compile((PACKED_T, WORKSPACE_T, *rest))
+    for kernel, rest in _named(names).items():
+        kernel.compile((PACKED_T, WORKSPACE_T, *rest))
 
 
 # `chain_forward`'s callees, by process: each share takes about as long with what else the process
@@ -147,7 +151,6 @@ def chain_free_child(model) -> None:
     """The "chain_free" child's share (module docstring)."""
     from .chain import chain_forward
     from .manifold import project_state
-
     from .structs import _new_workspace
 
     compile_kernels(CHILD_KERNELS)
@@ -191,9 +194,8 @@ def warm_up(control: bool = False) -> None:
     try:
         compiled(model)           # the records' constructors
         compile_kernels(KINEMATICS)
-        for kernel in _signatures():
-            if kernel.__name__ in CHILD_KERNELS:
-                wait_for(kernel, children[0])
+        for kernel in _named(CHILD_KERNELS):
+            wait_for(kernel, children[0])
         compile_kernels(("chain_forward",))
         compile_loop(model)
     finally:
