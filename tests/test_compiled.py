@@ -1,7 +1,9 @@
 """The compiled model (coopsim.compiled) against the plain-NumPy reference stages and integrator.
 
-Tolerances: stage terms and accelerations ≤ 1e-12 relative (max |a − b| / max(1, max |b|)) at random
-consistent states of every bundled scenario; trajectories of the two engines (different step
+Tolerances: stage terms ≤ 1e-12 relative (max |a − b| / max(1, max |b|)) at random consistent states
+of every bundled scenario, and accelerations within that plus eps·cond(Λ M⁻¹ Λᵀ) (the two engines
+solve the constraint system by different factorizations, whose forward errors scale with its
+condition number); trajectories of the two engines (different step
 sequences, both at rtol 1e-11) ≤ 1e-9 rad; dense output against the landing-on-output reference at
 the same tolerance ≤ 1e-9 rad.
 """
@@ -50,17 +52,26 @@ def test_stage_terms_and_accelerations_match_the_reference(scene):
     assert_compiled_terms_match_the_reference(scene, 10)
 
 
+def constraint_condition(T) -> float:
+    """cond(Λ M⁻¹ Λᵀ), the condition number of the closed chain's constraint system (eqs. 22–25) for
+    the reference `chain_terms` T."""
+    return float(np.linalg.cond(T.Lam @ np.linalg.solve(T.M, T.Lam.T)))
+
+
 def assert_compiled_terms_match_the_reference(scene, count: int):
-    """Every stage term and θ̈ of both engines at `count` random consistent states, ≤ TOL relative."""
+    """Every stage term of both engines at `count` random consistent states ≤ TOL relative, and θ̈ ≤
+    TOL + eps·cond(Λ M⁻¹ Λᵀ): a backward-stable solve's forward error is of order eps·cond (measured
+    below 1e-17·cond on the bundled scenes, CPU-specific or generic code alike, a margin of 20)."""
     rng = np.random.default_rng(11)
     worst = {}
+    eps = np.finfo(float).eps
     for q, qd in consistent_states(scene, count, seed=12):
         tau = rng.normal(scale=2.0, size=scene.n_total)
         T = chain_terms(scene, q, qd)
         acc = forward_dynamics(scene, T, tau)
         ev = api.forward(scene, q, qd, tau)
         W = api.compiled(scene).W
-        pairs = {"qdd": (ev.qdd, acc.qdd), "h": (W.h, T.h), "Lam": (W.Lam, T.Lam),
+        pairs = {"h": (W.h, T.h), "Lam": (W.Lam, T.Lam),
                  "Lam_dot_qd": (W.Lam_dot_qd, T.Lam_dot_qd), "J_o": (W.J_o[:, :T.J_o.shape[1]], T.J_o),
                  "v_o": (W.v_o, T.v_o), "p_C": (W.p_C, T.obj.p_C), "R_o": (W.R_o, T.obj.R_o)}
         for m, sl in enumerate(scene.dof_slices):
@@ -70,9 +81,13 @@ def assert_compiled_terms_match_the_reference(scene, count: int):
             pairs[f"Jd_qd[{m}]"] = (W.Jd_qd[m], T.Jd_qd[m])
         for name, (a, b) in pairs.items():
             worst[name] = max(worst.get(name, 0.0), rel_err(a, b))
+        bound = TOL + eps * constraint_condition(T)
+        qdd = worst.get("qdd", (0.0, bound))
+        if rel_err(ev.qdd, acc.qdd) / bound > qdd[0] / qdd[1]:
+            worst["qdd"] = (rel_err(ev.qdd, acc.qdd), bound)
         assert ev.status == 0
-    bad = {k: v for k, v in worst.items() if v > TOL}
-    assert not bad, f"compiled terms differ from the reference: {bad}"
+    bad = {k: v for k, v in worst.items() if (v[0] > v[1] if k == "qdd" else v > TOL)}
+    assert not bad, f"compiled terms differ from the reference (qdd: (error, bound)): {bad}"
 
 
 def test_batch_on_threads_equals_single_evaluations(paper):
