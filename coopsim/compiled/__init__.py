@@ -8,6 +8,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     linking.py     kernels compiled to LLVM IR only, made machine code inside the entries that call them
     resolution.py  numba's call-type resolution, remembered (each operation's signature found once)
     loading.py     compiled code loaded from numba's cache without numba's compiler registries
+    numba_range.py the numba versions those three follow (they act on coopsim's functions only)
     packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
     structs.py     both as numba StructRefs (passed by reference, fields read without reference
                    counting), built by cached constructors
@@ -27,7 +28,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     api.py         the Python entry points (batches on threads, parameter sets) and error reporting
     warmup.py      the first compile, on two cores, no kernel compiled twice
 
-Tested against the reference stages at random states of every bundled scenario (≤ 1e-12 relative).
+Tested against the reference stages at random states of every bundled scenario (stage terms ≤ 1e-12
+relative; accelerations within that plus eps·cond of the constraint system).
 """
 
 import hashlib as _hashlib

@@ -16,28 +16,70 @@ An entry (`jit.entry`) is finalized as before: its module, with every kernel it 
 optimized at -O3 once and becomes machine code. The code that runs is what it was; compiling the
 paper scene's time loop and closed-chain kernel took 45.8 s before and 25.2 s after, one process.
 
-numba has no public hook for this, so `install()` wraps six methods of its code library, code
-generator and CPU context, each unchanged for a library that is not lazy (but for setting the
-environment globals of the kernels linked into an entry, and ignoring a name the execution engine does
-not hold where numba would write through a null address). It installs nothing on a numba outside
-`NUMBA_RANGE` (tested: 0.68) or without these methods: kernels are then finalized as numba does by
-default (slower to compile, the same code).
+numba has no public hook for this, so `install()` wraps seven methods of its code library, code
+generator, CPU context and compile result. They act on coopsim's functions only; for any other
+function (a user's `@njit` code in the same process) each calls numba's own method and nothing else:
+  - finalizing, linking, serializing and loading a library differ only for a lazy library (or the
+    cache's "coopsim-ir" kind), which only `KernelCompiler` makes;
+  - making the executable of a library that links a lazy library, directly or through the libraries
+    it links (an entry, or compiled code of a user's that calls a kernel), also points the
+    environment globals of the kernels linked into it at their environment objects: their own
+    libraries never reach the execution engine, so numba sets none of them;
+  - while a lazy library's executable is made, compiled or loaded from the cache (numba's
+    `get_executable` and `CompileResult._rebuild`), setting an environment global that the
+    execution engine does not hold does nothing, where numba would write through a null address.
+It installs nothing on a numba outside `numba_range.NUMBA_RANGE` or without these methods: kernels
+are then finalized as numba does by default (slower to compile, the same code).
 """
 
 from __future__ import annotations
+
+import contextlib
+import threading
 
 import llvmlite.binding as ll
 from numba.core import codegen, compiler, compiler_machinery, cpu, typed_passes
 from numba.core.environment import lookup_environment
 
+from . import resolution
+from .numba_range import supported_numba
+
 KIND = "coopsim-ir"          # the cache's name for a lazy library's bitcode
-NUMBA_RANGE = ((0, 60), (0, 70))   # numba versions whose internals these wrappers follow: [low, high)
 _ENV_PREFIX = "_ZN08NumbaEnv"  # numba's mangled name of a function's environment global
+_MAKING = threading.local()    # .depth: > 0 while a lazy library's executable is made on this thread
 
 
 def is_lazy(library) -> bool:
     """Whether `library` is a kernel's lazy code library."""
     return getattr(library, "_coopsim_lazy", False)
+
+
+def links_lazy(library) -> bool:
+    """Whether `library` links a lazy library, directly or through the libraries it links."""
+    seen, todo = set(), list(getattr(library, "_linking_libraries", ()))
+    while todo:
+        linked = todo.pop()
+        if is_lazy(linked):
+            return True
+        if id(linked) not in seen:
+            seen.add(id(linked))
+            todo.extend(getattr(linked, "_linking_libraries", ()))
+    return False
+
+
+@contextlib.contextmanager
+def _making_lazy():
+    """Mark, on this thread, that a lazy library's executable is being made."""
+    depth = getattr(_MAKING, "depth", 0)
+    _MAKING.depth = depth + 1
+    try:
+        yield
+    finally:
+        _MAKING.depth = depth
+
+
+def _making() -> bool:
+    return getattr(_MAKING, "depth", 0) > 0
 
 
 @compiler_machinery.register_pass(mutates_CFG=False, analysis_only=True)
@@ -58,8 +100,9 @@ class LazyLibrary(compiler_machinery.LoweringPass):
         return False
 
 
-class KernelCompiler(compiler.CompilerBase):
-    """numba's nopython pipeline, with the code library made lazy (`LazyLibrary`) before lowering."""
+class KernelCompiler(resolution.CoopsimCompile, compiler.CompilerBase):
+    """numba's nopython pipeline, with the code library made lazy (`LazyLibrary`) before lowering; a
+    coopsim compile (`resolution.CoopsimCompile`)."""
 
     def define_pipelines(self):
         pm = compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)
@@ -95,31 +138,24 @@ def _unserialize_lazy(codegen_, name, data):
 
 def _set_environments(library) -> None:
     """Point every function environment global in a finalized library at its environment object (the
-    kernels' included: their own libraries never reach the execution engine). numba does the same
-    when it loads a library from its cache."""
+    kernels' included: their own libraries never reach the execution engine), those the execution
+    engine holds. numba does the same when it loads a library from its cache."""
+    engine = library.codegen._engine
     for gv in library._final_module.global_variables:
         if gv.name.startswith(_ENV_PREFIX) and not gv.is_declaration:
             env = lookup_environment(gv.name)
-            if env is not None:
+            if env is not None and engine.get_global_value_address(gv.name):
                 library.codegen.set_env(gv.name, env)
-
-
-def supported_numba(version: str | None = None) -> bool:
-    """Whether numba's version (or `version`) is in NUMBA_RANGE."""
-    import numba
-
-    parts = tuple(int(p) for p in (version or numba.__version__).split(".")[:2] if p.isdigit())
-    return NUMBA_RANGE[0] <= parts < NUMBA_RANGE[1]
 
 
 def install() -> bool:
     """Wrap numba's methods (module docstring); True if installed (idempotent)."""
     if not supported_numba():
         return False
-    lib, ctx = codegen.CPUCodeLibrary, cpu.CPUContext
+    lib, ctx, result = codegen.CPUCodeLibrary, cpu.CPUContext, compiler.CompileResult
     needed = [(codegen.CodeLibrary, "_ensure_finalized"), (lib, "_get_module_for_linking"),
               (lib, "serialize_using_object_code"), (lib, "_unserialize"), (ctx, "get_executable"),
-              (codegen.JITCPUCodegen, "set_env")]
+              (codegen.JITCPUCodegen, "set_env"), (result, "_rebuild")]
     if not all(hasattr(owner, name) for owner, name in needed):
         return False
     if getattr(ctx.get_executable, "_coopsim", False):
@@ -127,6 +163,7 @@ def install() -> bool:
     ensure_finalized, module_for_linking = codegen.CodeLibrary._ensure_finalized, lib._get_module_for_linking
     serialize, unserialize = lib.serialize_using_object_code, lib._unserialize.__func__
     get_executable, set_env = ctx.get_executable, codegen.JITCPUCodegen.set_env
+    rebuild = result._rebuild.__func__
 
     def _ensure_finalized(self):
         if not is_lazy(self):
@@ -147,13 +184,22 @@ def install() -> bool:
         return unserialize(cls, codegen_, state)
 
     def _get_executable(self, library, fndesc, env):
-        cfunc = get_executable(self, library, fndesc, env)   # a lazy library's: a null pointer
-        if not is_lazy(library):
+        if is_lazy(library):
+            with _making_lazy():
+                return get_executable(self, library, fndesc, env)   # a null function pointer
+        cfunc = get_executable(self, library, fndesc, env)
+        if links_lazy(library):
             _set_environments(library)
         return cfunc
 
+    def _rebuild(cls, target_context, libdata, *rest):
+        if isinstance(libdata, tuple) and len(libdata) == 3 and libdata[1] == KIND:
+            with _making_lazy():
+                return rebuild(cls, target_context, libdata, *rest)
+        return rebuild(cls, target_context, libdata, *rest)
+
     def _set_env(self, env_name, env):    # numba writes through a null address for a missing name
-        if self._engine.get_global_value_address(env_name):
+        if not _making() or self._engine.get_global_value_address(env_name):
             set_env(self, env_name, env)
 
     _get_executable._coopsim = True
@@ -162,5 +208,6 @@ def install() -> bool:
     lib.serialize_using_object_code = serialize_using_object_code
     lib._unserialize = classmethod(_unserialize)
     ctx.get_executable = _get_executable
+    result._rebuild = classmethod(_rebuild)
     codegen.JITCPUCodegen.set_env = _set_env
     return True

@@ -1,4 +1,5 @@
-"""numba's call-type resolution, remembered: each operation's signature is worked out once per process.
+"""numba's call-type resolution, remembered while coopsim's functions compile: each operation's
+signature is worked out once per process.
 
 To type `a * b` on two float64, or `A[i, j]`, numba's `BaseFunction.get_call_type` tries every
 template registered for the operator, in order, catching the failures, until one accepts the
@@ -12,17 +13,53 @@ set of flags: numba's own `_OverloadFunctionTemplate` keys its cache on them too
 signature found before and records the implementation it chose, as the first resolution did; only
 successful resolutions are kept, so a failure is always worked out (and reported) by numba. A type
 numba extends later (a new overload registered) is a new function type object, hence a new key.
-It installs nothing on a numba outside `linking.NUMBA_RANGE` or without the method (numba then
-resolves as usual).
+
+The table is used only while a coopsim function compiles: the pipelines of `jit.kernel` and
+`jit.entry` (`CoopsimCompile`) count, per thread, the coopsim compiles in progress, and what numba
+compiles for them meanwhile (their callees, the implementations of the operations they use) is in
+that scope too. Outside it (a user's `@njit` code compiled on its own) `get_call_type` is numba's,
+and the table is neither read nor filled. It installs nothing on a numba outside
+`numba_range.NUMBA_RANGE` or without the method (numba then resolves as usual).
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
+
 from numba.core import targetconfig
 from numba.core.types import functions
 
+from .numba_range import supported_numba
+
 _MEMO: dict = {}
 _FLAGS: dict = {}     # id(flags) → (flags, a hashable summary of their values)
+_SCOPE = threading.local()    # .depth: the coopsim compiles in progress on this thread
+
+
+@contextlib.contextmanager
+def coopsim_compile():
+    """The scope of a coopsim function's compile, on this thread (nested compiles count)."""
+    depth = getattr(_SCOPE, "depth", 0)
+    _SCOPE.depth = depth + 1
+    try:
+        yield
+    finally:
+        _SCOPE.depth = depth
+
+
+def in_coopsim_compile() -> bool:
+    """Whether a coopsim function is being compiled on this thread."""
+    return getattr(_SCOPE, "depth", 0) > 0
+
+
+class CoopsimCompile:
+    """Mixin for a numba compiler pipeline (a `compiler.CompilerBase` subclass, listed before it): its
+    whole run is a coopsim compile (`coopsim_compile`)."""
+
+    def _compile_core(self):
+        with coopsim_compile():
+            return super()._compile_core()
 
 
 def _flags_key(flags):
@@ -38,8 +75,6 @@ def _flags_key(flags):
 
 def install() -> bool:
     """Wrap `BaseFunction.get_call_type` (module docstring); True if installed (idempotent)."""
-    from .linking import supported_numba
-
     base = functions.BaseFunction
     if not (supported_numba() and hasattr(base, "get_call_type")
             and hasattr(targetconfig.ConfigStack, "top_or_none")):
@@ -49,6 +84,8 @@ def install() -> bool:
     get_call_type = base.get_call_type
 
     def remembered(self, context, args, kws):
+        if not getattr(_SCOPE, "depth", 0):    # not compiling a coopsim function: numba's own
+            return get_call_type(self, context, args, kws)
         key = (self, context, tuple(args), tuple(kws.items()) if kws else (),
                _flags_key(targetconfig.ConfigStack.top_or_none()))
         try:
