@@ -47,7 +47,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .model import CoopsimError, Model
+from coopsim.model import CoopsimError, Model
 
 
 class RenderUnavailable(CoopsimError):
@@ -66,8 +66,8 @@ except Exception as _exc:   # MUJOCO_GL names a backend whose library is missing
                             f"({_one_line(_exc)}); install that backend (EGL: Debian/Ubuntu libegl1 and "
                             f"libgl1-mesa-dri; OSMesa: libosmesa6) or unset MUJOCO_GL") from None
 
-from .atomic import atomic_path
-from .mjcf import build_spec, qpos_address
+from coopsim.atomic import atomic_path
+from coopsim.mjcf import build_spec, qpos_address
 
 SUFFIXES = (".gif", ".mp4")
 
@@ -125,7 +125,7 @@ def _log_scenario_path(log_path: Path, file: str) -> Path | None:
 
 
 def _read_log(log_path: Path):
-    from .log import read_mcap
+    from coopsim.log import read_mcap
 
     try:
         return read_mcap(log_path)
@@ -138,8 +138,8 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
     the joint angles but not the model's geometry: that comes from the scenario file named in its
     metadata (found relative to the current folder or a folder above the log, and checked against the
     recorded sha256), or from `scenario` when given. `log`: the file already read (`LogData`)."""
-    from .log import file_sha256
-    from .scenario import load_scenario
+    from coopsim.log import file_sha256
+    from coopsim.scenario import load_scenario
 
     log_path = Path(log_path)
     if log is None:
@@ -186,7 +186,7 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
 def motion_from_run(model: Model, duration: float | None = None, progress=None) -> Motion:
     """Run the native model and the twin (`harness.cross_validate`, as `coopsim run` does, nothing
     written) and take both models' angles."""
-    from .harness import cross_validate
+    from coopsim.harness import cross_validate
 
     cv = cross_validate(model, duration=duration, progress=progress)
     return Motion(model, cv.native.t, cv.native.q, cv.twin.q, "run")
@@ -201,7 +201,7 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
     """(path, LogData) of the scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when
     it was written from this very file (same sha256), holds both models and covers `duration` (default:
     the scenario's); else None."""
-    from .log import file_sha256
+    from coopsim.log import file_sha256
 
     log_path = default_log_path(model)
     if not log_path.is_file():
@@ -222,7 +222,7 @@ def scenario_motion(path: str | Path, duration: float | None = None, progress=No
     """The scenario's :func:`reusable_log` when there is one (never with `overrides`, the `--set`
     pairs of `coopsim.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
     models (`before_run()` is called first, e.g. to announce it)."""
-    from .scenario import load_scenario
+    from coopsim.scenario import load_scenario
 
     model = load_scenario(path, overrides=overrides)
     found = None if overrides else reusable_log(path, model, duration)
@@ -677,8 +677,8 @@ def view(source: str | Path, label: str | None = None, overrides=()) -> None:
     would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when the window is closed. Without a display: CoopsimError."""
     import tempfile
 
-    from .mjcf import launch_viewer, mjcf_text
-    from .scenario import load_scenario
+    from coopsim.mjcf import launch_viewer, mjcf_text
+    from coopsim.scenario import load_scenario
 
     source = Path(source)
     if not source.is_file():

@@ -37,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from .model import CoopsimError, IntegratorSettings, Model
+from coopsim.model import CoopsimError, IntegratorSettings, Model
 
 OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14
@@ -229,7 +229,7 @@ class Reference:
 def reference(model: Model) -> Reference:
     """Native DOP853 at REFERENCE_RTOL / REFERENCE_ATOL, and again CHECK_FACTOR looser, over
     model.duration on the OUTPUT_DT grid."""
-    from .simulate import simulate
+    from coopsim.simulate import simulate
 
     tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL))
     check = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL * CHECK_FACTOR,
@@ -239,7 +239,7 @@ def reference(model: Model) -> Reference:
 
 def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], object]:
     """The compiled time loop alone (as `simulate` runs it) from the reference's consistent state."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     m = replace(model, integrator=s)
     y0 = np.concatenate([ref.initial.q, ref.initial.qd])
@@ -250,7 +250,7 @@ def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], objec
 
 def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> RunRow:
     """Time `simulate(model, settings=s)` and its time loop alone; error against ref (SimResult)."""
-    from .simulate import simulate
+    from coopsim.simulate import simulate
 
     adaptive = s.method != "rk4"
     setting = f"rtol {s.rtol:.0e}, atol {s.atol:.0e}" if adaptive else f"step {s.step:g} s"
@@ -371,7 +371,7 @@ def native_eval_us(model: Model, Y: np.ndarray, TAU: np.ndarray, repeats: int = 
     (S, 2n), TAU (S, n), one thread) and 'python' (api.forward, one call from Python at Y[0], loops
     of `calls`), each the minimum over at least `repeats` timings, more (up to 10) while under
     EVAL_BUDGET_S; 'bad_states': evaluations with a non-zero status."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     n = model.n_total
     kw = dict(repeats=repeats, budget_s=EVAL_BUDGET_S, max_repeats=10)
@@ -545,7 +545,7 @@ def _synthetic_arm(m: int, r: int, n: int) -> dict:
 
 def synthetic_model(r: int, n: int) -> Model:
     """The frozen Model of `synthetic_scene(r, n)`."""
-    from .scenario import model_from_dict
+    from coopsim.scenario import model_from_dict
 
     return model_from_dict(synthetic_scene(r, n), where=f"synthetic_{r}x{n}")
 
@@ -700,8 +700,8 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     Returns {'scenarios': [bench_scenario dicts], 'scaling': scaling_study, 'startup': dict or None,
     'commands': command_times or None,
     'settings': what was run, 'environment': versions and machine}."""
-    from .scenario import load_scenario
-    from .simulate import simulate
+    from coopsim.scenario import load_scenario
+    from coopsim.simulate import simulate
 
     peers = peers or load_peers()
     models = [load_scenario(p) for p in scenarios]

@@ -27,12 +27,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .inverse import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
+from coopsim.inverse import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
                       internal_bound_components, internal_operator, min_energy_setup, min_energy_solve, nan_peak,
                       resolve, torques_of)
-from .model import Model, Motors
-from .qp import LPBatch, QPError, solve_lps
-from .resolutions import LINEAR_METHODS, resolution_method
+from coopsim.model import Model, Motors
+from coopsim.qp import LPBatch, QPError, solve_lps
+from coopsim.resolutions import LINEAR_METHODS, resolution_method
 
 MODES = ("scaled", "payload")
 
@@ -234,8 +234,8 @@ def min_energy_interval(prob: InverseProblem, setup: MinEnergySetup, weights: np
     lo <= τ <= hi (N, n) on the joints act (n,) bool: compiled (`coopsim.compiled.capacity`, one pass
     over the samples), or through `min_energy_affine_torques` where that is not certified (rank lost
     or an ill-conditioned energy Hessian somewhere)."""
-    from .compiled.api import announce_compile
-    from .compiled.capacity import min_energy_mass_interval
+    from coopsim.compiled.api import announce_compile
+    from coopsim.compiled.capacity import min_energy_mass_interval
 
     announce_compile("extras")
     mass, lower, certain = min_energy_mass_interval(setup.D, setup.u, np.where(setup.passive, 0.0, weights),
@@ -347,7 +347,7 @@ def brute_force_check(model: Model, traj, res: Resolution, mode: str, capacity: 
     carrying a payload of) capacity·(1 ∓ rel), rerun the inverse dynamics from scratch with the same
     resolution, and measure the largest excess of a torque over its motor line (N·m; < 0: within).
     Returns {below_excess, above_excess, above_joint, above_time, ok} (ok: below < 0 < above)."""
-    from .inverse import inverse_problem
+    from coopsim.inverse import inverse_problem
 
     lo, hi = torque_limits(model.motors, traj.qd)
     out = {}

@@ -7,16 +7,16 @@ import json
 import sys
 import warnings
 
-from . import __version__
-from .model import CoopsimError
-from .resolutions import METHODS, methods_help
+from coopsim import __version__
+from coopsim.model import CoopsimError
+from coopsim.resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
-    from .progress import ProgressBar
-    from .scenario import load_scenario
-    from .simulate import simulate
-    from .summary import format_simulation_summary, simulation_summary
+    from coopsim.progress import ProgressBar
+    from coopsim.scenario import load_scenario
+    from coopsim.simulate import simulate
+    from coopsim.summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     with ProgressBar(enabled=not args.json) as bar:
@@ -41,9 +41,9 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold). Returns (log path, plot paths)."""
-    from .atomic import previous_set, staged_folder, write_text_atomic
-    from .log import log_data, write_mcap
-    from .render import render_while
+    from coopsim.atomic import previous_set, staged_folder, write_text_atomic
+    from coopsim.log import log_data, write_mcap
+    from coopsim.render import render_while
 
     def work():
         during()
@@ -60,10 +60,10 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
 def _cmd_mjcf(args) -> int:
     from pathlib import Path
 
-    from .atomic import write_text_atomic
-    from .mjcf import mjcf_text
-    from .progress import ProgressBar
-    from .scenario import load_scenario
+    from coopsim.atomic import write_text_atomic
+    from coopsim.mjcf import mjcf_text
+    from coopsim.progress import ProgressBar
+    from coopsim.scenario import load_scenario
 
     _announce_compile()                     # the keyframes come from the native model's initial state
     overrides = _overrides(args)
@@ -82,14 +82,14 @@ def _cmd_mjcf(args) -> int:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .compare import format_comparison
-    from .harness import control_series, cross_validate
-    from .log import file_sha256, run_log
-    from .plots import comparison_plots
-    from .progress import ProgressBar
-    from .render import FigureWorkers
-    from .scenario import load_scenario
-    from .summary import run_summary
+    from coopsim.compare import format_comparison
+    from coopsim.harness import control_series, cross_validate
+    from coopsim.log import file_sha256, run_log
+    from coopsim.plots import comparison_plots
+    from coopsim.progress import ProgressBar
+    from coopsim.render import FigureWorkers
+    from coopsim.scenario import load_scenario
+    from coopsim.summary import run_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
@@ -124,9 +124,9 @@ def _cmd_run(args) -> int:
 def _cmd_plot(args) -> int:
     from pathlib import Path
 
-    from .log import read_run_log
-    from .plots import comparison_plots
-    from .progress import ProgressBar
+    from coopsim.log import read_run_log
+    from coopsim.plots import comparison_plots
+    from coopsim.progress import ProgressBar
 
     log_path = Path(args.log)
     if not log_path.is_file():
@@ -144,10 +144,10 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_validate(args) -> int:
-    from .compare import format_comparison
-    from .harness import cross_validate
-    from .progress import ProgressBar
-    from .scenario import load_scenario
+    from coopsim.compare import format_comparison
+    from coopsim.harness import cross_validate
+    from coopsim.progress import ProgressBar
+    from coopsim.scenario import load_scenario
 
     results, overrides = [], _overrides(args)
     for scenario in _scenario_paths(args.scenarios, hard=True):
@@ -171,12 +171,12 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from .inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
-    from .log import file_sha256, run_metadata
-    from .plots_inverse import inverse_plots
-    from .progress import ProgressBar
-    from .render import FigureWorkers
-    from .scenario import load_scenario
+    from coopsim.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
+    from coopsim.log import file_sha256, run_metadata
+    from coopsim.plots_inverse import inverse_plots
+    from coopsim.progress import ProgressBar
+    from coopsim.render import FigureWorkers
+    from coopsim.scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     methods = METHODS if args.method == "all" else (args.method,)
@@ -203,7 +203,7 @@ def _cmd_inverse(args) -> int:
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     if args.torques_csv is not None:
-        from .torque_csv import write_torque_csvs
+        from coopsim.torque_csv import write_torque_csvs
 
         res = study.results[args.method]
         paths = write_torque_csvs(args.torques_csv, model, res.t - res.t[0], res.tau)
@@ -213,7 +213,7 @@ def _cmd_inverse(args) -> int:
 
 def _summary_text(summary: dict, log_path, plots, index) -> str:
     """The JSON text of an inverse or capacity summary, its "files" (log, plots, the summary) set first."""
-    from .inverse_report import json_safe
+    from coopsim.inverse_report import json_safe
 
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(index)]
     return json.dumps(json_safe(summary), indent=2) + "\n"
@@ -224,13 +224,13 @@ def _cmd_capacity(args) -> int:
 
     import numpy as np
 
-    from .inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
+    from coopsim.inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
-    from .log import file_sha256, run_metadata
-    from .plots_inverse import capacity_plots
-    from .progress import ProgressBar
-    from .render import FigureWorkers
-    from .scenario import load_scenario, require_motor_limits
+    from coopsim.log import file_sha256, run_metadata
+    from coopsim.plots_inverse import capacity_plots
+    from coopsim.progress import ProgressBar
+    from coopsim.render import FigureWorkers
+    from coopsim.scenario import load_scenario, require_motor_limits
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
@@ -255,9 +255,9 @@ def _cmd_capacity(args) -> int:
 def _cmd_sweep(args) -> int:
     from pathlib import Path
 
-    from .progress import ProgressBar
-    from .sweep import load_sweep
-    from .sweep_run import require_packages, run_sweep, write_outputs
+    from coopsim.progress import ProgressBar
+    from coopsim.sweep import load_sweep
+    from coopsim.sweep_run import require_packages, run_sweep, write_outputs
 
     if sum([args.serial, args.scheduler is not None, args.workers is not None]) > 1:
         raise CoopsimError("--serial, --workers and --scheduler: give at most one")
@@ -281,9 +281,9 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from .bench import FULL, QUICK, run_bench
-    from .bench_report import json_text, markdown_report, write_outputs
-    from .progress import ProgressBar
+    from coopsim.bench import FULL, QUICK, run_bench
+    from coopsim.bench_report import json_text, markdown_report, write_outputs
+    from coopsim.progress import ProgressBar
 
     stage: list[str] = []
 
@@ -306,7 +306,7 @@ def _cmd_animate(args) -> int:
     import time
     from pathlib import Path
 
-    from .animate import check_output
+    from coopsim.animate import check_output
 
     source = Path(args.source)
     if args.out is not None:
@@ -318,8 +318,8 @@ def _cmd_animate(args) -> int:
             raise CoopsimError(f"--{name}: must be positive, got {getattr(args, name):g}")
     if args.duration is not None and not args.duration > 0:
         raise CoopsimError(f"--duration: must be positive, got {args.duration:g}")
-    from .animate import animate, motion_from_log, probe_renderer, scenario_motion
-    from .progress import ProgressBar
+    from coopsim.animate import animate, motion_from_log, probe_renderer, scenario_motion
+    from coopsim.progress import ProgressBar
 
     start = time.perf_counter()
     probe_renderer()                        # no OpenGL: one line now, not after running the models
@@ -358,7 +358,7 @@ def _cmd_animate(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from .animate import view
+    from coopsim.animate import view
 
     overrides = _overrides(args)
     if not args.source.lower().endswith(".xml"):
@@ -371,7 +371,7 @@ def _cmd_view(args) -> int:
 
 def _overrides(args) -> list:
     """The command's `--set PATH=VALUE` options as (PATH, value) pairs (`coopsim.overrides`), in order."""
-    from .overrides import parse_assignment
+    from coopsim.overrides import parse_assignment
 
     return [parse_assignment(text) for text in args.set or ()]
 
@@ -388,7 +388,7 @@ def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
     meaningful MuJoCo twin)."""
     from pathlib import Path
 
-    from .scenario import load_yaml
+    from coopsim.scenario import load_yaml
 
     if given:
         return given
@@ -585,12 +585,12 @@ COMPILE_NOTICES = {      # what a first run compiles, by compile group (`coopsim
 def _announce_compile() -> None:
     """Say so when a first run on this machine starts compiling part of the native model, and compile
     it on all cores (`coopsim.compiled.warmup`)."""
-    from .compiled.api import set_compile_notice
+    from coopsim.compiled.api import set_compile_notice
 
     def notice(group):
         def say():
             print(f"coopsim: compiling {COMPILE_NOTICES[group]}...", file=sys.stderr, flush=True)
-            from .compiled.warmup import warm_up_group
+            from coopsim.compiled.warmup import warm_up_group
 
             warm_up_group(group)
         return say

@@ -17,12 +17,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .gibbs_appell import arm_dynamics
-from .grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
+from coopsim.gibbs_appell import arm_dynamics
+from coopsim.grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
                     object_mass_matrix, object_pose)
-from .kinematics import ArmPose, arm_pose, ee_jacobian
-from .model import CoopsimError, Model
-from .spatial import rigid_acceleration, rot_log
+from coopsim.kinematics import ArmPose, arm_pose, ee_jacobian
+from coopsim.model import CoopsimError, Model
+from coopsim.spatial import rigid_acceleration, rot_log
 
 
 class ConstraintError(CoopsimError):

@@ -34,7 +34,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .model import CoopsimError, Model, TorqueFeedback, torque_at
+from coopsim.model import CoopsimError, Model, TorqueFeedback, torque_at
 
 LAWS = ("joint_pd", "computed_torque")
 COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
@@ -76,7 +76,7 @@ class Command:
 
 def saturate(motors, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
     """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.capacity.torque_limits`)."""
-    from .capacity import torque_limits
+    from coopsim.capacity import torque_limits
 
     lo, hi = torque_limits(motors, qd)
     return np.minimum(np.maximum(tau, lo), hi)
@@ -95,7 +95,7 @@ def object_acceleration(kp: np.ndarray, kd: np.ndarray, err: np.ndarray, rate_er
 
 def pose_error(p_ref, R_ref, p, R) -> np.ndarray:
     """[p_r − p; log(R_r Rᵀ)] (6,) m and rad, world axes."""
-    from .spatial import rot_log
+    from coopsim.spatial import rot_log
 
     return np.concatenate([p_ref - p, rot_log(R_ref @ R.T)])
 
@@ -106,7 +106,7 @@ def joint_accelerations(rows: np.ndarray, J: np.ndarray, Jd_qd: np.ndarray, rho:
     [v_C; ω] (6,): each grasp point ρ_m (r, 3) from C accelerates as a_C + ω̇ × ρ + ω × (ω × ρ), and
     S J_m θ̈_m = S (a_EE,m − J̇_m θ̇_m) in the rows S (k, 6) (square arms; J (r, 6, nmax), Jd_qd (r, 6),
     n: joints per arm)."""
-    from .spatial import rigid_acceleration
+    from coopsim.spatial import rigid_acceleration
 
     out = []
     for m, nm in enumerate(n):
@@ -121,7 +121,7 @@ def grasp_errors(grasp_pos: np.ndarray, grasp_rot: np.ndarray, p_C: np.ndarray, 
     e_m = [p_t − p_EE; log(R_t R_EEᵀ)] m, rad (world axes) with p_t = p_C + R_o g_m, R_t = R_o G_m (grasp
     g_m (r, 3), G_m (r, 3, 3) in the object frame; object pose p_C (3,), R_o (3, 3), twist [v_C; ω] (6,));
     ė_m = [v_C + ω × R_o g_m; ω] − [v_EE; ω_EE] (ee_twist (r, 6) = J_m θ̇_m). p_ee (r, 3), R_ee (r, 3, 3)."""
-    from .spatial import cross, rot_log
+    from coopsim.spatial import cross, rot_log
 
     rho = grasp_pos @ R_o.T
     e = np.concatenate([(p_C + rho) - p_ee, [rot_log(R_o @ G @ R.T) for G, R in zip(grasp_rot, R_ee)]], axis=1)
@@ -168,7 +168,7 @@ class Controller:
     def resolution(self):
         """The distribution's resolution (`coopsim.inverse.resolution_for`); 'bounded' with the bounds of
         inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
-        from .inverse import resolution_for
+        from coopsim.inverse import resolution_for
 
         inv = self.plant.inverse
         bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
@@ -185,8 +185,8 @@ class Controller:
         no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
         import warnings
 
-        from .diagnostics import describe_state
-        from .inverse import SampleFailureWarning, distribute, resolution_for
+        from coopsim.diagnostics import describe_state
+        from coopsim.inverse import SampleFailureWarning, distribute, resolution_for
 
         failures: list = []
         with warnings.catch_warnings():
@@ -206,8 +206,8 @@ class Controller:
         """The set-point on the loop-closure manifold: control.setpoint (default the scenario's initial
         angles) projected as the initial state is; ControlError when that moves it by more than
         integrator.max_initial_correction."""
-        from .closed_chain import ConstraintError
-        from .compiled.api import consistent_state
+        from coopsim.closed_chain import ConstraintError
+        from coopsim.compiled.api import consistent_state
 
         s = self.settings
         field, q = ("arms[].initial", self.model.q0) if s.setpoint is None else ("control.setpoint", s.setpoint)
@@ -223,7 +223,7 @@ class Controller:
 
     @cached_property
     def trajectory(self):
-        from .trajectory import object_motion_trajectory
+        from coopsim.trajectory import object_motion_trajectory
 
         return object_motion_trajectory(self.model, self.model.inverse.object_motion)
 
@@ -231,7 +231,7 @@ class Controller:
         """(θ_r, θ̇_r) (n,) of joint_pd at time t."""
         if self.settings.reference == "setpoint":
             return self.setpoint, np.zeros_like(self.setpoint)
-        from .trajectory import trajectory_at
+        from coopsim.trajectory import trajectory_at
 
         q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
         return q, qd
@@ -240,8 +240,8 @@ class Controller:
         """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
         messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
         the null space of the grasp matrix."""
-        from .inverse import inverse_problem, torques_of
-        from .trajectory import JointTrajectory
+        from coopsim.inverse import inverse_problem, torques_of
+        from coopsim.trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
@@ -252,9 +252,9 @@ class Controller:
 
     @cached_property
     def _kernel(self):
-        from .compiled import api
-        from .compiled.packing import workspace
-        from .compiled.structs import to_struct
+        from coopsim.compiled import api
+        from coopsim.compiled.packing import workspace
+        from coopsim.compiled.structs import to_struct
 
         P, _, Ps, _ = api.compiled(self.plant)
         W = workspace(P)
@@ -263,7 +263,7 @@ class Controller:
     def _terms(self, Q, QD, QDD):
         """The compiled inverse-dynamics terms of one state (Q, QD, QDD (1, n)) on this controller's own
         workspace (as `coopsim.compiled.api.inverse_terms`, without a workspace built per call)."""
-        from .compiled import sample
+        from coopsim.compiled import sample
 
         Ps, ws, _, n, r, nmax = self._kernel
         out = sample.new_inverse_terms(1, n, r, nmax)
@@ -288,7 +288,7 @@ class Controller:
         return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
 
     def _computed_torque(self, t, q, qd):
-        from .trajectory import object_motion_at
+        from coopsim.trajectory import object_motion_at
 
         s, m = self.settings, self.plant
         state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
@@ -334,7 +334,7 @@ class Controller:
     @cached_property
     def packed(self):
         """The controller's data for the compiled laws (`coopsim.compiled.control.PackedControl`)."""
-        from .compiled import control as cc
+        from coopsim.compiled import control as cc
 
         s, m = self.settings, self.model
         N, r, k = m.n_total, m.r, m.rows.shape[0]
@@ -359,8 +359,8 @@ class Controller:
     def compiled_loop(self) -> tuple:
         """(Pc, Wc, C): the controller's model, a workspace of its own and `packed`, as the StructRefs the
         compiled time loop takes (`coopsim.compiled.api.integrate_chain`)."""
-        from .compiled import api
-        from .compiled.control import control_struct
+        from coopsim.compiled import api
+        from coopsim.compiled.control import control_struct
 
         api.announce_compile("control")
         P = api.compiled(self.plant).P
@@ -368,8 +368,8 @@ class Controller:
 
     def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`, about 10 µs)."""
-        from .compiled import api
-        from .compiled.control import evaluate
+        from coopsim.compiled import api
+        from coopsim.compiled.control import evaluate
 
         Ps, Ws, C = self.compiled_loop
         tau = np.array(torque_at(self.model.torques, t), dtype=float)
@@ -386,9 +386,9 @@ class Controller:
     def compiled_commands(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
         """The compiled controller at every sample (t (N,), q, qd (N, n)): a Command of (N, …) arrays, as
         `record` gives (CoopsimError where its equations are singular)."""
-        from .compiled import api
-        from .compiled.control import commands
-        from .compiled.packing import tabulated_torques
+        from coopsim.compiled import api
+        from coopsim.compiled.control import commands
+        from coopsim.compiled.packing import tabulated_torques
 
         N, n = q.shape
         Ps, Ws, C = self.compiled_loop
@@ -407,8 +407,8 @@ class Controller:
 def _packed_motion(motion) -> dict:
     """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
     and R_a φ of `coopsim.trajectory.object_motion_at`)."""
-    from .compiled.control import LAW_CUBIC, LAW_QUINTIC
-    from .spatial import rot_log
+    from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
+    from coopsim.spatial import rot_log
 
     R = motion.rotations
     phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])

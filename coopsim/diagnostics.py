@@ -33,8 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .labels import arm_label
-from .model import Model, TorqueFunction, applied_torque
+from coopsim.labels import arm_label
+from coopsim.model import Model, TorqueFunction, applied_torque
 
 STEP_CHECK_SAMPLES = 64   # states at which a fixed rk4 step is checked by step doubling
 
@@ -85,7 +85,7 @@ class ArmTerms(NamedTuple):
 def arm_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> ArmTerms:
     """`ArmTerms` at the states (q, qd) (S, n): the compiled per-sample inverse-dynamics terms at θ̈ = θ̇
     and at θ̈ = 0, whose difference is 𝐈_m θ̇_m."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     with_rate = api.inverse_terms(model, q, qd, qd)
     without = api.inverse_terms(model, q, qd, np.zeros_like(qd))
@@ -196,8 +196,8 @@ def initial_correction(model: Model, init) -> list[RunWarning]:
     worst = float(abs(init.dq[j]))
     if worst <= s.initial_correction_warning:
         return []
-    from .joints import COORDINATE, joint_units
-    from .labels import joint_labels
+    from coopsim.joints import COORDINATE, joint_units
+    from coopsim.labels import joint_labels
 
     return [run_warning(
         "initial_correction", 0.0, model.q0,
@@ -220,7 +220,7 @@ def joint_limit_violation(model: Model, q: np.ndarray) -> tuple[int, int] | None
 
 def joint_limit_reason(model: Model, j: int, value: float) -> str:
     """'arm 1 (left) joint 4 at -3.1 rad is outside its range [-3.07, -0.07] rad' (stacked joint j)."""
-    from .labels import joint_labels
+    from coopsim.labels import joint_labels
 
     lo, hi = model.joint_range[j]
     return (f"{joint_labels(model)[j]} at {value:.6g} rad is outside its range "
@@ -242,7 +242,7 @@ def _torques(model: Model, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
     if isinstance(model.torques, TorqueFunction):
         n = model.n_total
         return np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t, Y)])
-    from .compiled.api import compiled, tabulated_torques
+    from coopsim.compiled.api import compiled, tabulated_torques
 
     return tabulated_torques(compiled(model).P, t)
 
@@ -250,7 +250,7 @@ def _torques(model: Model, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
 def rk4_local_error(model: Model, t: np.ndarray, Y: np.ndarray, h: float) -> np.ndarray:
     """Step-doubling estimate of one rk4 step's local error from the states Y (S, 2n) at times t (S,):
     16/15 |y_h − y_{h/2,h/2}| per component (S, 2n) (the h/2 pair is 16 times more accurate at order 4)."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     n = model.n_total
 

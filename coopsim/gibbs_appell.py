@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .joints import motion_subspace
-from .kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
-from .model import PRISMATIC, ArmModel
-from .spatial import cross
+from coopsim.joints import motion_subspace
+from coopsim.kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
+from coopsim.model import PRISMATIC, ArmModel
+from coopsim.spatial import cross
 
 
 def gibbs_gradient(arm: ArmModel, pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, g: np.ndarray) -> np.ndarray:

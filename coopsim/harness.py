@@ -10,10 +10,10 @@ from typing import Callable
 
 import numpy as np
 
-from .compare import Comparison, compare
-from .model import Model, TorqueTable, ValidationThresholds
-from .mujoco_run import TwinResult, run_twin
-from .simulate import SimResult, simulate
+from coopsim.compare import Comparison, compare
+from coopsim.model import Model, TorqueTable, ValidationThresholds
+from coopsim.mujoco_run import TwinResult, run_twin
+from coopsim.simulate import SimResult, simulate
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +56,7 @@ def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:
 
 def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> tuple | None:
     """The controllers of both runs evaluated at their samples (None without a controller)."""
-    from .control import closed_loop, controller_of, record
+    from coopsim.control import closed_loop, controller_of, record
 
     ctrl = controller_of(native.model)
     if ctrl is None:
@@ -68,7 +68,7 @@ def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> 
 def control_series(cv: CrossValidation) -> list:
     """The log channels of the controllers (`coopsim.log.control_series`): /native/control and
     /mujoco/control; none without a controller."""
-    from .log import control_series as series
+    from coopsim.log import control_series as series
 
     if cv.control is None:
         return []

@@ -47,14 +47,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .grasp import grasp_matrix
-from .model import CoopsimError, Model, TorqueFunction, TorqueTable
-from .qp import solve_qps
-from .resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
-from .simulate import ConstraintRankWarning, describe_state
-from .spatial import cross, rigid_acceleration
-from .stress import grasp_line_axes, line_frame
-from .trajectory import JointTrajectory, trajectory_at_times
+from coopsim.grasp import grasp_matrix
+from coopsim.model import CoopsimError, Model, TorqueFunction, TorqueTable
+from coopsim.qp import solve_qps
+from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
+from coopsim.simulate import ConstraintRankWarning, describe_state
+from coopsim.spatial import cross, rigid_acceleration
+from coopsim.stress import grasp_line_axes, line_frame
+from coopsim.trajectory import JointTrajectory, trajectory_at_times
 
 
 class InverseError(CoopsimError):
@@ -174,7 +174,7 @@ def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.nd
     """Evaluate the terms of eqs. 28–32 at every sample of `traj`: the per-sample kinematics and arm
     dynamics from the compiled kernel (`coopsim.compiled.api.inverse_terms`, batched over threads, or
     `terms` when the caller has them), assembled here with array operations."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     S, g = model.rows, model.gravity
     N, r, k = len(traj.t), model.r, model.rows.shape[0]
@@ -695,8 +695,8 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     the trajectory's (uniform) sample times: DOP853 at fixed steps of one sample interval, the torques
     evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
     time loop meets every stage on a knot of the table."""
-    from .compiled.integrate import stage_times, tableau
-    from .simulate import output_times, simulate
+    from coopsim.compiled.integrate import stage_times, tableau
+    from coopsim.simulate import output_times, simulate
 
     tr = traj.t - traj.t[0]
     dt = float(tr[1])

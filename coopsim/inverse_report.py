@@ -14,16 +14,16 @@ from typing import Callable
 
 import numpy as np
 
-from . import capacity as cap
-from .inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
+from coopsim import capacity as cap
+from coopsim.inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
                       inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
-from .joints import type_names
-from .labels import joint_labels
-from .log import Series, nonfinite_name
-from .model import Model
-from .resolutions import LINEAR_METHODS, METHODS
-from .stress import SectionLoads, decompose_internal, section_loads
-from .trajectory import JointTrajectory, from_simulation, object_motion_trajectory
+from coopsim.joints import type_names
+from coopsim.labels import joint_labels
+from coopsim.log import Series, nonfinite_name
+from coopsim.model import Model
+from coopsim.resolutions import LINEAR_METHODS, METHODS
+from coopsim.stress import SectionLoads, decompose_internal, section_loads
+from coopsim.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
 DEFINITIONS = ("paper", "nonsqueezing")
 Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.progress.ProgressBar`
@@ -43,7 +43,7 @@ def trajectory_of(model: Model, duration: float | None = None, progress: Progres
         traj = object_motion_trajectory(model, model.inverse.object_motion)
         _report(progress, "ik", 1.0)
         return traj, None
-    from .simulate import simulate
+    from coopsim.simulate import simulate
 
     res = simulate(model, duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res

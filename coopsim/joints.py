@@ -20,8 +20,8 @@ import numpy as np
 
 from collections.abc import Sequence
 
-from .model import JOINT_TYPES, PRISMATIC, REVOLUTE
-from .spatial import axis_angle_to_rot, cross, skew
+from coopsim.model import JOINT_TYPES, PRISMATIC, REVOLUTE
+from coopsim.spatial import axis_angle_to_rot, cross, skew
 
 TYPE_NAMES = {code: name for name, code in JOINT_TYPES.items()}          # 0 → "revolute", 1 → "prismatic"
 UNITS = {"revolute": ("rad", "rad/s", "N·m"), "prismatic": ("m", "m/s", "N")}

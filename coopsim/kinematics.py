@@ -18,9 +18,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .joints import joint_transform, joint_transforms, motion_subspace, revolute_mask
-from .model import ArmModel
-from .spatial import cross, rigid_acceleration
+from coopsim.joints import joint_transform, joint_transforms, motion_subspace, revolute_mask
+from coopsim.model import ArmModel
+from coopsim.spatial import cross, rigid_acceleration
 
 
 class ArmPose(NamedTuple):

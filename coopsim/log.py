@@ -45,12 +45,12 @@ from typing import Any, Sequence
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from .atomic import atomic_path
-from .kinematics import arm_frames
-from .joints import type_names
-from .labels import joint_labels
-from .model import CoopsimError, Model
-from .spatial import rot_to_quat, rots_to_quats
+from coopsim.atomic import atomic_path
+from coopsim.kinematics import arm_frames
+from coopsim.joints import type_names
+from coopsim.labels import joint_labels
+from coopsim.model import CoopsimError, Model
+from coopsim.spatial import rot_to_quat, rots_to_quats
 
 LIBRARY = "coopsim.log"
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"

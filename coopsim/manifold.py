@@ -11,11 +11,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
+from coopsim.closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
                            position_residual)
-from .grasp import grasp_matrix_inv_T
-from .kinematics import ee_jacobian
-from .model import Model
+from coopsim.grasp import grasp_matrix_inv_T
+from coopsim.kinematics import ee_jacobian
+from coopsim.model import Model
 
 
 class Projection(NamedTuple):

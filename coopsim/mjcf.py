@@ -21,9 +21,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .control import closed_loop
-from .model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
-from .spatial import axis_angle_to_rot, rot_to_quat
+from coopsim.control import closed_loop
+from coopsim.model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
+from coopsim.spatial import axis_angle_to_rot, rot_to_quat
 
 
 _INTEGRATORS = {"RK4": mujoco.mjtIntegrator.mjINT_RK4, "Euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -228,7 +228,7 @@ def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
 def mjcf_spec(model: Model) -> mujoco.MjSpec:
     """The spec of a file in `models/`: the twin, its keyframe at the consistent initial state of
     `coopsim run` (`simulate.initial_state`) and the scene (light, floor, camera), saved as written."""
-    from .simulate import initial_state
+    from coopsim.simulate import initial_state
 
     init = initial_state(model)
     spec = build_spec(model, initial=(init.q, init.qd), scene=True)

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from .mjcf import build_spec, dof_address, qpos_address
-from .model import CoopsimError, Model, TorqueFunction, applied_torque, torque_at
-from .results import SampledMotion
+from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.model import CoopsimError, Model, TorqueFunction, applied_torque, torque_at
+from coopsim.results import SampledMotion
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +42,7 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         yield
         return
 
-    from .control import controller_of
+    from coopsim.control import controller_of
 
     ctrl = controller_of(model)
     if ctrl is not None:                         # compiled where it can be (`Controller.fastest`)
@@ -73,7 +73,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
     model.mujoco.timestep); `progress(fraction)` is called after each sample. A `control:` section runs
     its controller in the loop (`coopsim.control.closed_loop`), fed the twin's state at every RK4 stage."""
-    from .control import closed_loop
+    from coopsim.control import closed_loop
 
     model = closed_loop(model)
     m = build_spec(model).compile()

@@ -18,7 +18,7 @@ import copy
 import re
 from typing import Any, Iterable
 
-from .model import CoopsimError
+from coopsim.model import CoopsimError
 
 _KEY = re.compile(r"[^.\[\]=\s]+")
 _INDEX = re.compile(r"\[(\d+)\]")
@@ -61,7 +61,7 @@ def format_path(parts: Iterable[str | int]) -> str:
 
 def parse_assignment(text: str, where: str = "--set") -> tuple[str, Any]:
     """'PATH=VALUE' → (PATH, the YAML value); OverrideError naming `where` otherwise."""
-    from .scenario import parse_yaml_text
+    from coopsim.scenario import parse_yaml_text
 
     path, eq, value = text.partition("=")
     path = path.strip()

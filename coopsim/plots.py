@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .joints import COORDINATE, RATE, units_of
-from .labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
-from .log import LogData
-from .render import FigureWorkers, render_figures
+from coopsim.joints import COORDINATE, RATE, units_of
+from coopsim.labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
+from coopsim.log import LogData
+from coopsim.render import FigureWorkers, render_figures
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -54,7 +54,7 @@ def panel_grid(fig: Figure, rows: int, cols: int, size: tuple[float, float], leg
     last column; `legend` 0: none): an empty grid column, so the panels, the legends and the next
     column's labels never meet. Sets the figure size for `coopsim.render.fixed_layout`'s margins and
     gaps (`suptitle`: the figure will have one)."""
-    from .render import MARGIN
+    from coopsim.render import MARGIN
 
     after = set(range(cols)[-1:] if legend_after is None else legend_after) if legend > 0 else set()
     spare = max(legend + LEGEND_GAP - MARGIN["wgap"], 0.05)   # the legend starts inside the gap before its column
@@ -236,7 +236,7 @@ def _object_figure(log: LogData) -> Figure:
     and its centre-of-mass velocity; one legend beside the last column."""
     from matplotlib.figure import Figure
 
-    from .spatial import orientation_error, quat_to_rot, rotation_from
+    from coopsim.spatial import orientation_error, quat_to_rot, rotation_from
 
     nat = log.topics[NATIVE + "/object"]
     t = nat["t"]
@@ -285,7 +285,7 @@ def _constraint_figure(log: LogData) -> Figure:
 def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[tuple]:
     """The figures of `comparison_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE); a closed
     loop's log adds `coopsim.plots_control`'s tracking_error.png and internal_force.png."""
-    from .plots_control import control_jobs
+    from coopsim.plots_control import control_jobs
 
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)

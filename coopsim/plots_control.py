@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .log import LogData
-from .plots import NATIVE, TWIN, _arm_groups, _finish_log_axis, _log_plot, run_title
+from coopsim.log import LogData
+from coopsim.plots import NATIVE, TWIN, _arm_groups, _finish_log_axis, _log_plot, run_title
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

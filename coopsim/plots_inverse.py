@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .joints import EFFORT, units_of
-from .labels import metadata_arms, metadata_joint_labels, metadata_joint_types
-from .log import LogData
-from .plots import legend_beside, legend_width, panel_grid, run_title
-from .render import FigureWorkers, render_figures
-from .resolutions import RESOLUTIONS
+from coopsim.joints import EFFORT, units_of
+from coopsim.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
+from coopsim.log import LogData
+from coopsim.plots import legend_beside, legend_width, panel_grid, run_title
+from coopsim.render import FigureWorkers, render_figures
+from coopsim.resolutions import RESOLUTIONS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -17,25 +17,25 @@ from typing import Callable, NamedTuple
 
 
 def _paper(prob, y, res):
-    from .inverse import paper_distribution
+    from coopsim.inverse import paper_distribution
 
     return paper_distribution(prob, y), ()
 
 
 def _nonsqueezing(prob, y, res):
-    from .inverse import nonsqueezing_distribution, nonsqueezing_metric
+    from coopsim.inverse import nonsqueezing_distribution, nonsqueezing_metric
 
     return nonsqueezing_distribution(prob, y, nonsqueezing_metric(prob, res.masses, res.inertias)), ()
 
 
 def _min_energy(prob, y, res):
-    from .inverse import min_energy_distribution
+    from coopsim.inverse import min_energy_distribution
 
     return min_energy_distribution(prob, y, res.weights, res.passive), ()
 
 
 def _bounded(prob, y, res):
-    from .inverse import bounded_min_energy_distribution, nonsqueezing_metric
+    from coopsim.inverse import bounded_min_energy_distribution, nonsqueezing_metric
 
     failures: list = []
     f = bounded_min_energy_distribution(prob, y, res, nonsqueezing_metric(prob, res.masses, res.inertias), failures)

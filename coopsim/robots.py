@@ -46,8 +46,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
-from .spatial import quat_to_rot
+from coopsim.model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
+from coopsim.spatial import quat_to_rot
 
 MAX_ROBOT_FILE_BYTES = 64 << 20
 ROBOTS_EXTRA = "pip install 'coopsim[robots]'"

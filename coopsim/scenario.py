@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .joints import COORDINATE, joint_units
-from .kinematics import arm_pose, reach_check
-from .model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
+from coopsim.joints import COORDINATE, joint_units
+from coopsim.kinematics import arm_pose, reach_check
+from coopsim.model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
                     InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable,
                     ValidationThresholds)
-from .spatial import box_inertia, quat_to_rot, rpy_to_rot
+from coopsim.spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
 
@@ -354,7 +354,7 @@ def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> 
     """An arm read from a robot file (`robots.read_chain`): `robot` (a bundled robot, `robots.ROBOTS`)
     or `file` (URDF or MJCF, relative to the scenario's folder); `chain` {base, tip, lock} (defaults
     from the bundled robot); `end_effector` in the tip link's frame (default: that frame)."""
-    from . import robots
+    from coopsim import robots
 
     try:
         if sec.has("robot"):
@@ -653,8 +653,8 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
     """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
     if sec is None:
         return None
-    from .control import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
-    from .resolutions import METHODS
+    from coopsim.control import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
+    from coopsim.resolutions import METHODS
 
     law = sec.string("law", LAWS)
     if np.any(passive):
@@ -890,7 +890,7 @@ def load_scenario(path: str | Path, duration: float | None = None, overrides=())
         raise ScenarioError(f"{path}: scenario file not found")
     data = load_yaml(path)
     if overrides:
-        from .overrides import apply_overrides
+        from coopsim.overrides import apply_overrides
 
         data = apply_overrides(data, overrides, where=f"{path}: --set")
     return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem, duration=duration)

@@ -28,17 +28,17 @@ from functools import cached_property
 
 import numpy as np
 
-from . import diagnostics
-from .closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
+from coopsim import diagnostics
+from coopsim.closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
                            forward_dynamics, position_residual)
-from .diagnostics import RunWarning, describe_state, run_warning
-from .grasp import grasp_matrix, internal_wrench
-from .integrate import IntegrationError, IntegratorStats, integrate
-from .manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
-from .model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
+from coopsim.diagnostics import RunWarning, describe_state, run_warning
+from coopsim.grasp import grasp_matrix, internal_wrench
+from coopsim.integrate import IntegrationError, IntegratorStats, integrate
+from coopsim.manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
+from coopsim.model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
                     torque_at)
-from .results import SampledMotion
-from .spatial import rot_to_quat
+from coopsim.results import SampledMotion
+from coopsim.spatial import rot_to_quat
 
 
 class SimulationError(CoopsimError):
@@ -109,7 +109,7 @@ def initial_state(model: Model, engine: str = "compiled") -> Projection:
     the compiled engine or the NumPy reference (`engine`). Raises ConstraintError naming the fields
     when the grasps cannot be reached from there."""
     if engine == "compiled":
-        from .compiled.api import consistent_state as project
+        from coopsim.compiled.api import consistent_state as project
     else:
         project = consistent_state
     try:
@@ -206,7 +206,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    from .control import closed_loop, controller_of
+    from coopsim.control import closed_loop, controller_of
 
     model = closed_loop(model)
     ctrl = controller_of(model)
@@ -246,7 +246,7 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
     compiled sampling of every reported quantity. With a `coopsim.control.Controller` (model being its
     closed loop) the loop evaluates it at every stage over its scenario's torque tables, lands on every
     output time, and the samples' torques are the controller's there."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     s = model.integrator
     kernel_model = model if controller is None else controller.model
@@ -288,7 +288,7 @@ def _sampled_result(model: Model, t_out, Y, smp, init: Projection, stats, start:
 
 def _compiled_reason(model: Model, run) -> str:
     """The one-line reason of a compiled run's failure (as the reference engine words it)."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     reason = api.REASONS.get(run.status, f"failure code {run.status}")
     n = model.n_total
@@ -326,7 +326,7 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
     """The 'stages' engine: the reference time loop (`coopsim.integrate`, landing on every output) with
     the compiled closed-chain evaluation (`coopsim.compiled.api.forward`) and projection at each stage,
     the torques evaluated in Python there (a controller in the loop); the compiled sampler reports."""
-    from .compiled import api
+    from coopsim.compiled import api
 
     s, n = model.integrator, model.n_total
     events: list = []
@@ -364,7 +364,7 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
 def _fallback_events(model: Model) -> list[RunWarning]:
     """A `distribution_fallback` RunWarning when the run's controller fell back from 'bounded' (at its
     first evaluation that did, with their count), else none."""
-    from .control import controller_of
+    from coopsim.control import controller_of
 
     ctrl = controller_of(model)
     if ctrl is None or not ctrl.fallbacks:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .joints import COORDINATE, type_names, units_of
-from .simulate import SimResult
+from coopsim.joints import COORDINATE, type_names, units_of
+from coopsim.simulate import SimResult
 
 
 def kinetic_energy_summary(res: SimResult) -> dict:

@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from .model import CoopsimError
-from .overrides import apply_overrides, parse_path
-from .scenario import ScenarioError, _Section, load_yaml, model_from_dict
+from coopsim.model import CoopsimError
+from coopsim.overrides import apply_overrides, parse_path
+from coopsim.scenario import ScenarioError, _Section, load_yaml, model_from_dict
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
 DESIGNS = ("grid", "sobol", "halton")
@@ -245,7 +245,7 @@ def _study(sec: _Section) -> Study:
                 sec.fail(key, f"expected true or false, got {v!r}")
             options[key] = v
     if kind == "inverse":
-        from .resolutions import METHODS
+        from coopsim.resolutions import METHODS
 
         methods = sec.raw("methods", list(METHODS))
         if not isinstance(methods, list) or not methods or any(m not in METHODS for m in methods):
@@ -272,7 +272,7 @@ def _patterns(sec: _Section, key: str, default) -> list[str]:
 def _check_base(sweep: Sweep, root: _Section) -> None:
     """The base scenario with the fixed overrides and each axis's first value must make a model (each
     point's own values are checked when it runs: a bad one is that row's error)."""
-    from .scenario import require_motor_limits
+    from coopsim.scenario import require_motor_limits
 
     try:
         apply_overrides(sweep.base, sweep.fixed, where=f"{sweep.scenario}: set:")
@@ -294,22 +294,22 @@ def study_summary(model, study: Study) -> dict:
     files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
     without its trade-off curve, `capacity_summary`."""
     if study.kind == "simulate":
-        from .simulate import simulate
-        from .summary import simulation_summary
+        from coopsim.simulate import simulate
+        from coopsim.summary import simulation_summary
 
         return simulation_summary(simulate(model, duration=study.duration))
     if study.kind == "validate":
-        from .harness import cross_validate
+        from coopsim.harness import cross_validate
 
         return cross_validate(model, duration=study.duration).comparison.as_dict()
     if study.kind == "inverse":
-        from .inverse_report import add_checks, inverse_summary, solve_study
+        from coopsim.inverse_report import add_checks, inverse_summary, solve_study
 
         s = solve_study(model, study.option("methods"), duration=study.duration,
                         bounds=(study.option("bound_force"), study.option("bound_moment")))
         return inverse_summary(add_checks(s, study.option("replay"), curve=False))
-    from .inverse_report import capacity_study, capacity_summary
-    from .scenario import require_motor_limits
+    from coopsim.inverse_report import capacity_study, capacity_summary
+    from coopsim.scenario import require_motor_limits
 
     require_motor_limits(model, model.name)
     return capacity_summary(capacity_study(model, duration=study.duration, with_lp=study.option("lp"),

@@ -28,8 +28,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from .model import CoopsimError
-from .sweep import Sweep, evaluate_point, matcher, one_line
+from coopsim.model import CoopsimError
+from coopsim.sweep import Sweep, evaluate_point, matcher, one_line
 
 CHECKPOINT = "points.jsonl"
 # Dask's housekeeping on the embedded cluster, made sparse for points that take about a second: no
@@ -90,7 +90,7 @@ class Checkpoint:
     def __init__(self, path: Path, sweep: Sweep, resume: bool):
         path.parent.mkdir(parents=True, exist_ok=True)
         if not resume or not path.is_file():
-            from .atomic import write_text_atomic
+            from coopsim.atomic import write_text_atomic
 
             write_text_atomic(path, json.dumps({"sweep": sweep.digest, "points": len(sweep.points),
                                                 "name": sweep.name}) + "\n")
@@ -317,7 +317,7 @@ def summary(sweep: Sweep, run: SweepRun, files: list[str]) -> dict:
 
 
 def _json_value(v: Any) -> Any:
-    from .log import nonfinite_name
+    from coopsim.log import nonfinite_name
 
     return nonfinite_name(v) if isinstance(v, float) and not math.isfinite(v) else v
 
@@ -333,7 +333,7 @@ def field_name(column: str) -> str:
 def point_log(sweep: Sweep, rows: list[dict]):
     """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
     (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
-    from .log import JsonTopic, stamp, time_ns
+    from coopsim.log import JsonTopic, stamp, time_ns
 
     names = columns_of(rows)
     fields = {c: field_name(c) for c in names}
@@ -353,10 +353,10 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
     """Write the sweep's outputs into folder `out` as one set (module docstring); returns their paths."""
     import pyarrow.parquet as pq
 
-    from .atomic import previous_set, staged_folder
-    from .inverse_report import json_safe
-    from .log import write_mcap
-    from .plots_sweep import sweep_figures
+    from coopsim.atomic import previous_set, staged_folder
+    from coopsim.inverse_report import json_safe
+    from coopsim.log import write_mcap
+    from coopsim.plots_sweep import sweep_figures
 
     out = Path(out)
     with staged_folder(out, replaces=previous_set(INDEX)) as stage:

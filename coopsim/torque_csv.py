@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import write_text_atomic
-from .model import Model
+from coopsim.atomic import write_text_atomic
+from coopsim.model import Model
 
 
 def torque_csv_text(t: np.ndarray, tau: np.ndarray, names: list[str]) -> str:

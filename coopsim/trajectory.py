@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .closed_chain import ConstraintError, arm_poses
-from .kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
-from .model import ArmModel, CoopsimError, Model, ObjectMotion
-from .spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
+from coopsim.closed_chain import ConstraintError, arm_poses
+from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
+from coopsim.model import ArmModel, CoopsimError, Model, ObjectMotion
+from coopsim.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 
 class TrajectoryError(CoopsimError):
@@ -193,7 +193,7 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     chosen at the start is kept. Raises TrajectoryError naming the time and arm when a target is out
     of reach, an arm's Jacobian is singular, det(S J) changes sign between samples (a singularity is
     crossed), or a target leaves the plane of motion of a planar scene."""
-    from .simulate import output_times
+    from coopsim.simulate import output_times
 
     S = model.rows
     redundant = _check_joint_counts(model, S)
@@ -237,7 +237,7 @@ def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
 
 
 def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
-    from .diagnostics import joint_limit_reason, joint_limit_violation
+    from coopsim.diagnostics import joint_limit_reason, joint_limit_violation
 
     hit = joint_limit_violation(model, q)
     if hit is not None:
@@ -384,7 +384,7 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
     """Arm m at the targets (p relative to its base point; compiled Newton and differential kinematics,
     `coopsim.compiled.api.solve_arm`, the same steps as `arm_ik` and `arm_rates`), with one-line errors
     naming the arm and the time (p_C: the object's world position, for the message)."""
-    from .compiled import api, ik
+    from coopsim.compiled import api, ik
 
     arm = model.arms[m]
     dist, reach, ok = reach_check(arm, p)
@@ -405,7 +405,7 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
 
 def object_pose_of(model: Model, q: np.ndarray):
     """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q."""
-    from .closed_chain import carrier_object
+    from coopsim.closed_chain import carrier_object
 
     obj = carrier_object(model, arm_poses(model, q))
     return obj.p_C, obj.R_o

@@ -57,7 +57,7 @@ def _import_kernels() -> None:
     previous = _numba_config.CACHE_DIR
     _numba_config.CACHE_DIR = _cache_dir()
     try:
-        from . import api, chain, control, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
+        from coopsim.compiled import api, chain, control, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
     finally:
         _numba_config.CACHE_DIR = previous
 

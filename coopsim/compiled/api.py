@@ -17,12 +17,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..closed_chain import ConstraintError
-from ..manifold import Projection
-from ..model import Model
-from . import capacity, chain, control, ik, integrate, manifold, sample
-from .packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
-from .structs import Struct, to_struct
+from coopsim.closed_chain import ConstraintError
+from coopsim.manifold import Projection
+from coopsim.model import Model
+from coopsim.compiled import capacity, chain, control, ik, integrate, manifold, sample
+from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
+from coopsim.compiled.structs import Struct, to_struct
 
 _CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
 

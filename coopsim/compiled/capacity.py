@@ -17,7 +17,7 @@ takes the NumPy path, which handles rank loss.
 
 import numpy as np
 
-from .jit import entry, kernel
+from coopsim.compiled.jit import entry, kernel
 
 
 @kernel

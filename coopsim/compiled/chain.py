@@ -23,14 +23,14 @@ RANK_DEFICIENT (Λ𝐈⁻¹Λᵀ lost rank: minimum-norm grasp wrenches were use
 from __future__ import annotations
 
 import numpy as np
-from .jit import kernel
+from coopsim.compiled.jit import kernel
 
-from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
-from ..model import PRISMATIC
-from .packing import STAB_BAUMGARTE
-from .schur import constraint_trace, group_arm, schur_factor, schur_solve
-from .spatial import rot_log
-from .structs import borrow
+from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from coopsim.model import PRISMATIC
+from coopsim.compiled.packing import STAB_BAUMGARTE
+from coopsim.compiled.schur import constraint_trace, group_arm, schur_factor, schur_solve
+from coopsim.compiled.spatial import rot_log
+from coopsim.compiled.structs import borrow
 
 OK, NOT_PD, RANK_DEFICIENT, NON_FINITE = 0, 1, 2, 3
 EIGEN, DENSE, SCHUR = 0, 1, 2   # the constraint solve's paths (`chain_solve`)

@@ -31,12 +31,12 @@ import numpy as np
 from numba import njit
 from numba.experimental import structref
 
-from .chain import OK, arm_terms, object_dynamics, object_pose
-from .jit import entry, kernel
-from .linalg import bisect, copy1, copy2, gauss_solve
-from .sample import object_acceleration, object_wrench
-from .spatial import axis_rotation, matmul3, matmul3_T, rot_log
-from .structs import _F, _I, _f1, _f2, _f3, _i1, StructType
+from coopsim.compiled.chain import OK, arm_terms, object_dynamics, object_pose
+from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.linalg import bisect, copy1, copy2, gauss_solve
+from coopsim.compiled.sample import object_acceleration, object_wrench
+from coopsim.compiled.spatial import axis_rotation, matmul3, matmul3_T, rot_log
+from coopsim.compiled.structs import _F, _I, _f1, _f2, _f3, _i1, StructType
 
 JOINT_PD, COMPUTED_TORQUE = 0, 1
 COMP_NONE, COMP_GRAVITY, COMP_BIAS = 0, 1, 2

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import arm_bias, arm_jacobian, arm_kinematics
-from .jit import entry, kernel
-from .linalg import lu_solve, singular_ratio
-from .manifold import max_abs
-from .spatial import matmul3_T, rot_log
+from coopsim.compiled.chain import arm_bias, arm_jacobian, arm_kinematics
+from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.linalg import lu_solve, singular_ratio
+from coopsim.compiled.manifold import max_abs
+from coopsim.compiled.spatial import matmul3_T, rot_log
 
 SOLVED, SINGULAR, NOT_CONVERGED = 0, 1, 2
 

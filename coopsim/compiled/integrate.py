@@ -30,13 +30,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import tableaux
-from .chain import OK, RANK_DEFICIENT, chain_forward
-from .control import feedback
-from .jit import entry, kernel
-from .linalg import bisect, copy1
-from .manifold import project_state
-from .packing import STAB_PROJECTION
+from coopsim.compiled import tableaux
+from coopsim.compiled.chain import OK, RANK_DEFICIENT, chain_forward
+from coopsim.compiled.control import feedback
+from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.linalg import bisect, copy1
+from coopsim.compiled.manifold import project_state
+from coopsim.compiled.packing import STAB_PROJECTION
 
 DOP853, DOPRI5, RK4 = 0, 1, 2
 NON_FINITE_STATE, STEP_COLLAPSED, MAX_STEPS = 4, 5, 6

@@ -29,7 +29,7 @@ import os
 from numba import njit
 from numba.core import compiler, config
 
-from . import linking, loading, resolution
+from coopsim.compiled import linking, loading, resolution
 
 STOCK = os.environ.get("COOPSIM_STOCK_NUMBA", "") not in ("", "0")   # install none of the patches
 

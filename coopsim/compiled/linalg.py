@@ -13,8 +13,8 @@ solve borrow their array arguments on entry (`structs.borrow`): no reference cou
 from __future__ import annotations
 
 import numpy as np
-from .jit import kernel
-from .structs import borrow
+from coopsim.compiled.jit import kernel
+from coopsim.compiled.structs import borrow
 
 
 @kernel

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
-from .jit import entry, kernel
-from .linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
-from .schur import constraint_trace, schur_factor, schur_solve
-from .structs import borrow
+from coopsim.compiled.chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
+from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from coopsim.compiled.schur import constraint_trace, schur_factor, schur_solve
+from coopsim.compiled.structs import borrow
 
 PROJECTION_FAILED = 7
 

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..model import Model, TorqueFunction, TorqueTable
+from coopsim.model import Model, TorqueFunction, TorqueTable
 
 STAB_NONE, STAB_PROJECTION, STAB_BAUMGARTE = 0, 1, 2
 _STAB = {"none": STAB_NONE, "projection": STAB_PROJECTION, "baumgarte": STAB_BAUMGARTE}

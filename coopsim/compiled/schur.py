@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import kernel
-from .linalg import inverse_factor_norm2
+from coopsim.compiled.jit import kernel
+from coopsim.compiled.linalg import inverse_factor_norm2
 
 SCHUR_MIN_RATIO = 1e-10
 

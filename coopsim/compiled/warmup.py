@@ -39,7 +39,7 @@ WAIT_S = 120.0      # the longest wait for a kernel another process compiles
 
 
 def _model():
-    from ..scenario import load_scenario
+    from coopsim.scenario import load_scenario
 
     return load_scenario(SCENARIO)
 
@@ -53,7 +53,7 @@ def _signatures() -> dict:
     indices and contiguous float64 vectors (a test checks that no caller compiles another one)."""
     from numba import types
 
-    from . import chain
+    from coopsim.compiled import chain
 
     vec, i = types.float64[::1], types.int64
     return {chain.arm_kinematics: (i, vec), chain.arm_jacobian: (i,), chain.arm_bias: (i, vec),
@@ -69,7 +69,7 @@ def _named(names) -> dict:
 
 def compile_kernels(names) -> None:
     """The named kernels of `_signatures` (P, W first), from their types alone: no record needed."""
-    from .structs import PACKED_T, WORKSPACE_T
+    from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 
     for kernel, rest in _named(names).items():
         kernel.compile((PACKED_T, WORKSPACE_T, *rest))
@@ -84,21 +84,21 @@ CHILD_KERNELS = ("chain_solve", "arm_mass_matrix", "constraint_bias")
 
 def compile_loop(model) -> None:
     """The time loop, through a short integration of the model."""
-    from . import api
+    from coopsim.compiled import api
 
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
 
 
 def compile_consistent(model) -> None:
     """The consistent projection."""
-    from . import api
+    from coopsim.compiled import api
 
     api.consistent_state(model, model.q0, model.qd0)
 
 
 def compile_inverse_terms(model) -> None:
     """The inverse-dynamics terms."""
-    from . import api
+    from coopsim.compiled import api
 
     y = _state(model)[None]
     n = model.n_total
@@ -107,8 +107,8 @@ def compile_inverse_terms(model) -> None:
 
 def compile_extras(model) -> None:
     """The entries some commands use: inverse kinematics and the capacity objective."""
-    from . import api
-    from .capacity import min_energy_mass_interval
+    from coopsim.compiled import api
+    from coopsim.compiled.capacity import min_energy_mass_interval
 
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
     z = np.zeros((1, 1, 1))
@@ -118,16 +118,16 @@ def compile_extras(model) -> None:
 
 def compile_evaluations(model) -> None:
     """The evaluation entry (every reported quantity)."""
-    from . import api
+    from coopsim.compiled import api
 
     api.evaluate_states(model, _state(model)[None], np.zeros((1, model.n_total)), full=True, n_threads=1)
 
 
 def compile_control(model) -> None:
     """The controller entries and the time loop with a controller in it."""
-    from ..control import Controller
-    from ..model import ControlSettings
-    from . import api
+    from coopsim.control import Controller
+    from coopsim.model import ControlSettings
+    from coopsim.compiled import api
 
     n = model.n_total
     y = _state(model)
@@ -140,7 +140,7 @@ def compile_control(model) -> None:
 def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
     """Until `kernel` is cached (`api.is_cached`), at most WAIT_S, and while `child` (the process
     compiling it) runs."""
-    from .api import is_cached
+    from coopsim.compiled.api import is_cached
 
     deadline = time.monotonic() + WAIT_S
     while not is_cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
@@ -149,9 +149,9 @@ def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
 
 def chain_free_child(model) -> None:
     """The "chain_free" child's share (module docstring)."""
-    from .chain import chain_forward
-    from .manifold import project_state
-    from .structs import _new_workspace
+    from coopsim.compiled.chain import chain_forward
+    from coopsim.compiled.manifold import project_state
+    from coopsim.compiled.structs import _new_workspace
 
     compile_kernels(CHILD_KERNELS)
     wait_for(_new_workspace)
@@ -164,7 +164,7 @@ def chain_free_child(model) -> None:
 
 def control_child(model) -> None:
     """The "control" child's share (module docstring)."""
-    from .chain import chain_forward
+    from coopsim.compiled.chain import chain_forward
 
     wait_for(chain_forward)
     compile_extras(model)
@@ -178,7 +178,7 @@ def warm_up(control: bool = False) -> None:
     """Compile what every command uses, on two processes, and with `control` the extras and the
     controllers too, on a third (a no-op for what is cached already). Needs the source checkout's
     scenarios/ folder; does nothing without it."""
-    from .api import compile_pending, compiled
+    from coopsim.compiled.api import compile_pending, compiled
 
     if not SCENARIO.exists():
         return
@@ -214,7 +214,7 @@ GROUPS = {"extras": compile_extras, "control": compile_control}
 def warm_up_group(group: str) -> None:
     """Compile a compile group (`api._group_entries`): "base" by `warm_up`; "extras" or "control" in
     this process (a no-op when cached), what every command uses first if needed."""
-    from .api import compile_pending
+    from coopsim.compiled.api import compile_pending
 
     if group == "base":
         warm_up()
