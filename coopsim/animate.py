@@ -47,7 +47,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from coopsim.model import CoopsimError, Model
+from coopsim.core.model import CoopsimError, Model
 
 
 class RenderUnavailable(CoopsimError):

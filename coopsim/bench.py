@@ -37,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim.model import CoopsimError, IntegratorSettings, Model
+from coopsim.core.model import CoopsimError, IntegratorSettings, Model
 
 OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14

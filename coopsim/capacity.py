@@ -30,7 +30,7 @@ import numpy as np
 from coopsim.inverse import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
                       internal_bound_components, internal_operator, min_energy_setup, min_energy_solve, nan_peak,
                       resolve, torques_of)
-from coopsim.model import Model, Motors
+from coopsim.core.model import Model, Motors
 from coopsim.qp import LPBatch, QPError, solve_lps
 from coopsim.resolutions import LINEAR_METHODS, resolution_method
 

@@ -21,8 +21,8 @@ from coopsim.gibbs_appell import arm_dynamics
 from coopsim.grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
                     object_mass_matrix, object_pose)
 from coopsim.kinematics import ArmPose, arm_pose, ee_jacobian
-from coopsim.model import CoopsimError, Model
-from coopsim.spatial import rigid_acceleration, rot_log
+from coopsim.core.model import CoopsimError, Model
+from coopsim.core.spatial import rigid_acceleration, rot_log
 
 
 class ConstraintError(CoopsimError):

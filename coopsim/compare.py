@@ -6,12 +6,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from coopsim.joints import COORDINATE, RATE, joint_units
-from coopsim.labels import joint_labels
-from coopsim.model import ValidationThresholds
+from coopsim.core.joints import COORDINATE, RATE, joint_units
+from coopsim.core.labels import joint_labels
+from coopsim.core.model import ValidationThresholds
 from coopsim.mujoco_run import TwinResult
 from coopsim.simulate import SimResult
-from coopsim.spatial import orientation_error  # noqa: F401  (the metric; re-exported for the tests)
+from coopsim.core.spatial import orientation_error  # noqa: F401  (the metric; re-exported for the tests)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Controllers in the loop (scenario `control:`, `coopsim.model.ControlSettings`).
+"""Controllers in the loop (scenario `control:`, `coopsim.core.model.ControlSettings`).
 
 Each law is a pure function of the time and the state the integrator evaluates, τ = u(t, θ, θ̇); the
 scenario's torque tables are added to it (they act as a disturbance), then the motor lines of eq. 36
@@ -34,7 +34,7 @@ from functools import cached_property
 
 import numpy as np
 
-from coopsim.model import CoopsimError, Model, TorqueFeedback, torque_at
+from coopsim.core.model import CoopsimError, Model, TorqueFeedback, torque_at
 
 LAWS = ("joint_pd", "computed_torque")
 COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
@@ -95,7 +95,7 @@ def object_acceleration(kp: np.ndarray, kd: np.ndarray, err: np.ndarray, rate_er
 
 def pose_error(p_ref, R_ref, p, R) -> np.ndarray:
     """[p_r − p; log(R_r Rᵀ)] (6,) m and rad, world axes."""
-    from coopsim.spatial import rot_log
+    from coopsim.core.spatial import rot_log
 
     return np.concatenate([p_ref - p, rot_log(R_ref @ R.T)])
 
@@ -106,7 +106,7 @@ def joint_accelerations(rows: np.ndarray, J: np.ndarray, Jd_qd: np.ndarray, rho:
     [v_C; ω] (6,): each grasp point ρ_m (r, 3) from C accelerates as a_C + ω̇ × ρ + ω × (ω × ρ), and
     S J_m θ̈_m = S (a_EE,m − J̇_m θ̇_m) in the rows S (k, 6) (square arms; J (r, 6, nmax), Jd_qd (r, 6),
     n: joints per arm)."""
-    from coopsim.spatial import rigid_acceleration
+    from coopsim.core.spatial import rigid_acceleration
 
     out = []
     for m, nm in enumerate(n):
@@ -121,7 +121,7 @@ def grasp_errors(grasp_pos: np.ndarray, grasp_rot: np.ndarray, p_C: np.ndarray, 
     e_m = [p_t − p_EE; log(R_t R_EEᵀ)] m, rad (world axes) with p_t = p_C + R_o g_m, R_t = R_o G_m (grasp
     g_m (r, 3), G_m (r, 3, 3) in the object frame; object pose p_C (3,), R_o (3, 3), twist [v_C; ω] (6,));
     ė_m = [v_C + ω × R_o g_m; ω] − [v_EE; ω_EE] (ee_twist (r, 6) = J_m θ̇_m). p_ee (r, 3), R_ee (r, 3, 3)."""
-    from coopsim.spatial import cross, rot_log
+    from coopsim.core.spatial import cross, rot_log
 
     rho = grasp_pos @ R_o.T
     e = np.concatenate([(p_C + rho) - p_ee, [rot_log(R_o @ G @ R.T) for G, R in zip(grasp_rot, R_ee)]], axis=1)
@@ -408,7 +408,7 @@ def _packed_motion(motion) -> dict:
     """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
     and R_a φ of `coopsim.trajectory.object_motion_at`)."""
     from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
-    from coopsim.spatial import rot_log
+    from coopsim.core.spatial import rot_log
 
     R = motion.rotations
     phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])

@@ -6,7 +6,7 @@ and Appell's equations ∂S/∂θ̈ = τ with S = Σ S_i give, since ∂a_ci/∂
 ∂ω̇_i/∂θ̈_j = z_j (j ≤ i) for a revolute joint j,
     ∂S/∂θ̈_j = z_j · Σ_{i≥j} [(c_i − p_j) × m_i a_ci + I_i ω̇_i + ω_i × I_i ω_i],
 and, since ∂a_ci/∂θ̈_j = z_j and ∂ω̇_i/∂θ̈_j = 0 for a prismatic joint j (its motion subspace,
-`coopsim.joints`), ∂S/∂θ̈_j = z_j · Σ_{i≥j} m_i a_ci (a force, N).
+`coopsim.core.joints`), ∂S/∂θ̈_j = z_j · Σ_{i≥j} m_i a_ci (a force, N).
 ∂S/∂θ̈ is affine in θ̈: ∂S/∂θ̈ = I_m θ̈ − Re_m, where the mass matrix I_m = ∂²S/∂θ̈² is the Gram
 matrix of the partial accelerations and −Re_m (velocity and gravity terms, "bias forces" h) is
 ∂S/∂θ̈ evaluated at θ̈ = 0. Arm m alone: I_m θ̈_m = Re_m + τ_m − J_mᵀ F_e^m (eq. 10).
@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.joints import motion_subspace
+from coopsim.core.joints import motion_subspace
 from coopsim.kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
-from coopsim.model import PRISMATIC, ArmModel
-from coopsim.spatial import cross
+from coopsim.core.model import PRISMATIC, ArmModel
+from coopsim.core.spatial import cross
 
 
 def gibbs_gradient(arm: ArmModel, pose: ArmPose, qd: np.ndarray, qdd: np.ndarray, g: np.ndarray) -> np.ndarray:

@@ -10,8 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.model import ObjectModel
-from coopsim.spatial import cross, skew
+from coopsim.core.model import ObjectModel
+from coopsim.core.spatial import cross, skew
 
 
 class ObjectPose(NamedTuple):

@@ -11,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from coopsim.compare import Comparison, compare
-from coopsim.model import Model, TorqueTable, ValidationThresholds
+from coopsim.core.model import Model, TorqueTable, ValidationThresholds
 from coopsim.mujoco_run import TwinResult, run_twin
 from coopsim.simulate import SimResult, simulate
 

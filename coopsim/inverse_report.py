@@ -17,10 +17,10 @@ import numpy as np
 from coopsim import capacity as cap
 from coopsim.inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
                       inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
-from coopsim.joints import type_names
-from coopsim.labels import joint_labels
+from coopsim.core.joints import type_names
+from coopsim.core.labels import joint_labels
 from coopsim.log import Series, nonfinite_name
-from coopsim.model import Model
+from coopsim.core.model import Model
 from coopsim.resolutions import LINEAR_METHODS, METHODS
 from coopsim.stress import SectionLoads, decompose_internal, section_loads
 from coopsim.trajectory import JointTrajectory, from_simulation, object_motion_trajectory

@@ -1,5 +1,5 @@
 """Stage 1 — arm kinematics: frame poses, link motion recursion, Jacobians and J̇θ̇, for revolute and
-prismatic joints (the joint model: `coopsim.joints`).
+prismatic joints (the joint model: `coopsim.core.joints`).
 
 All outputs are in world axes. The twist of a point P of the last link is [v_P; ω] and its
 "acceleration" is [a_P; ω̇] with a_P = dv_P/dt (classical point acceleration), so that
@@ -18,9 +18,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.joints import joint_transform, joint_transforms, motion_subspace, revolute_mask
-from coopsim.model import ArmModel
-from coopsim.spatial import cross, rigid_acceleration
+from coopsim.core.joints import joint_transform, joint_transforms, motion_subspace, revolute_mask
+from coopsim.core.model import ArmModel
+from coopsim.core.spatial import cross, rigid_acceleration
 
 
 class ArmPose(NamedTuple):

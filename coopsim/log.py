@@ -47,10 +47,10 @@ from mcap.writer import CompressionType, Writer
 
 from coopsim.atomic import atomic_path
 from coopsim.kinematics import arm_frames
-from coopsim.joints import type_names
-from coopsim.labels import joint_labels
-from coopsim.model import CoopsimError, Model
-from coopsim.spatial import rot_to_quat, rots_to_quats
+from coopsim.core.joints import type_names
+from coopsim.core.labels import joint_labels
+from coopsim.core.model import CoopsimError, Model
+from coopsim.core.spatial import rot_to_quat, rots_to_quats
 
 LIBRARY = "coopsim.log"
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"

@@ -15,7 +15,7 @@ from coopsim.closed_chain import (ConstraintError, _constraints, arm_poses, carr
                            position_residual)
 from coopsim.grasp import grasp_matrix_inv_T
 from coopsim.kinematics import ee_jacobian
-from coopsim.model import Model
+from coopsim.core.model import Model
 
 
 class Projection(NamedTuple):

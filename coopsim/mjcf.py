@@ -22,8 +22,8 @@ import mujoco
 import numpy as np
 
 from coopsim.control import closed_loop
-from coopsim.model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
-from coopsim.spatial import axis_angle_to_rot, rot_to_quat
+from coopsim.core.model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
+from coopsim.core.spatial import axis_angle_to_rot, rot_to_quat
 
 
 _INTEGRATORS = {"RK4": mujoco.mjtIntegrator.mjINT_RK4, "Euler": mujoco.mjtIntegrator.mjINT_EULER,

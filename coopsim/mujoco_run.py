@@ -14,8 +14,8 @@ import mujoco
 import numpy as np
 
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.model import CoopsimError, Model, TorqueFunction, applied_torque, torque_at
-from coopsim.results import SampledMotion
+from coopsim.core.model import CoopsimError, Model, TorqueFunction, applied_torque, torque_at
+from coopsim.core.results import SampledMotion
 
 
 @dataclass(frozen=True, eq=False)

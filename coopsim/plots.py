@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from coopsim.joints import COORDINATE, RATE, units_of
-from coopsim.labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
+from coopsim.core.joints import COORDINATE, RATE, units_of
+from coopsim.core.labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
 from coopsim.log import LogData
 from coopsim.render import FigureWorkers, render_figures
 
@@ -236,7 +236,7 @@ def _object_figure(log: LogData) -> Figure:
     and its centre-of-mass velocity; one legend beside the last column."""
     from matplotlib.figure import Figure
 
-    from coopsim.spatial import orientation_error, quat_to_rot, rotation_from
+    from coopsim.core.spatial import orientation_error, quat_to_rot, rotation_from
 
     nat = log.topics[NATIVE + "/object"]
     t = nat["t"]
@@ -301,7 +301,7 @@ def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] |
     """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for
     a closed loop, `coopsim.plots_control`'s tracking_error.png and internal_force.png) into out_dir
     (created if missing; each file replaced atomically) and return their paths. joint_names
-    (n,) labels the joints (default: `coopsim.labels` of the log's model metadata, else joint 1, joint 2,
+    (n,) labels the joints (default: `coopsim.core.labels` of the log's model metadata, else joint 1, joint 2,
     …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
     jobs = comparison_jobs(log, out_dir, joint_names)
     Path(out_dir).mkdir(parents=True, exist_ok=True)

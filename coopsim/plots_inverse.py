@@ -4,7 +4,7 @@ Every function takes a :class:`coopsim.log.LogData` read back from the MCAP file
 fresh study and a stored log are drawn by the same code. Topics: /inverse/trajectory,
 /inverse/<method>/{torque,internal,stress} (`coopsim inverse`), /capacity/limits,
 /capacity/<method>/<mode>, /capacity/lp/<mode> and the capacity.<method>.<mode> metadata records
-(`coopsim capacity`). Joint labels come from the log's "model" metadata record (`coopsim.labels`); the
+(`coopsim capacity`). Joint labels come from the log's "model" metadata record (`coopsim.core.labels`); the
 resolutions' labels, colours and order from the registry `coopsim.resolutions.RESOLUTIONS`.
 """
 
@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from coopsim.joints import EFFORT, units_of
-from coopsim.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
+from coopsim.core.joints import EFFORT, units_of
+from coopsim.core.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
 from coopsim.log import LogData
 from coopsim.plots import legend_beside, legend_width, panel_grid, run_title
 from coopsim.render import FigureWorkers, render_figures

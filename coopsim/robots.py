@@ -9,7 +9,7 @@ scenario. Fixed bodies are kept apart (`fusestatic` off) so that every link keep
 
 The chain runs from the `base` body (link) to the `tip` body, which must lie below it. Along it:
 - a body with one hinge joint (URDF revolute or continuous) or one slide joint (URDF prismatic) starts
-  a link of the arm, a revolute or a prismatic joint (`coopsim.joints`); its frame is the body frame
+  a link of the arm, a revolute or a prismatic joint (`coopsim.core.joints`); its frame is the body frame
   moved to the joint's anchor (MuJoCo's `pos`, zero in a URDF), so the link frame turns about its own
   origin as coopsim's convention asks (`model.ArmModel`; a slide moves every point of the link alike,
   so for it the anchor changes nothing but where the frame sits);
@@ -46,8 +46,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from coopsim.model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
-from coopsim.spatial import quat_to_rot
+from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
+from coopsim.core.spatial import quat_to_rot
 
 MAX_ROBOT_FILE_BYTES = 64 << 20
 ROBOTS_EXTRA = "pip install 'coopsim[robots]'"

@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from coopsim.joints import COORDINATE, joint_units
+from coopsim.core.joints import COORDINATE, joint_units
 from coopsim.kinematics import arm_pose, reach_check
-from coopsim.model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
+from coopsim.core.model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
                     InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable,
                     ValidationThresholds)
-from coopsim.spatial import box_inertia, quat_to_rot, rpy_to_rot
+from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
 

@@ -35,10 +35,10 @@ from coopsim.diagnostics import RunWarning, describe_state, run_warning
 from coopsim.grasp import grasp_matrix, internal_wrench
 from coopsim.integrate import IntegrationError, IntegratorStats, integrate
 from coopsim.manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
-from coopsim.model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
+from coopsim.core.model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
                     torque_at)
-from coopsim.results import SampledMotion
-from coopsim.spatial import rot_to_quat
+from coopsim.core.results import SampledMotion
+from coopsim.core.spatial import rot_to_quat
 
 
 class SimulationError(CoopsimError):

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.spatial import box_inertia, cross, rigid_acceleration
+from coopsim.core.spatial import box_inertia, cross, rigid_acceleration
 
 
 class SectionLoads(NamedTuple):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.joints import COORDINATE, type_names, units_of
+from coopsim.core.joints import COORDINATE, type_names, units_of
 from coopsim.simulate import SimResult
 
 

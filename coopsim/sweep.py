@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from coopsim.model import CoopsimError
+from coopsim.core.model import CoopsimError
 from coopsim.overrides import apply_overrides, parse_path
 from coopsim.scenario import ScenarioError, _Section, load_yaml, model_from_dict
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from coopsim.atomic import write_text_atomic
-from coopsim.model import Model
+from coopsim.core.model import Model
 
 
 def torque_csv_text(t: np.ndarray, tau: np.ndarray, names: list[str]) -> str:

@@ -24,8 +24,8 @@ import numpy as np
 
 from coopsim.closed_chain import ConstraintError, arm_poses
 from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
-from coopsim.model import ArmModel, CoopsimError, Model, ObjectMotion
-from coopsim.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
+from coopsim.core.model import ArmModel, CoopsimError, Model, ObjectMotion
+from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 
 class TrajectoryError(CoopsimError):

@@ -8,7 +8,7 @@ import pytest
 
 from coopsim import capacity as cap
 from coopsim import inverse as inv
-from coopsim.model import Motors
+from coopsim.core.model import Motors
 from coopsim.qp import QPError
 from conftest import MujocoReference, mujoco_kkt_acceleration
 from inverse_cases import BUNDLED, PAYLOAD, problem, run

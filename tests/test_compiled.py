@@ -19,7 +19,7 @@ from coopsim.compiled.packing import tabulated_torques
 from coopsim.compiled.structs import PACKED_FIELDS, LOOP_FIELDS, TABLEAU_FIELDS, WORKSPACE_FIELDS
 from coopsim.compiled.packing import PackedModel, Workspace
 from coopsim import integrate as ref_integrate
-from coopsim.model import TorqueTable, torque_at
+from coopsim.core.model import TorqueTable, torque_at
 from coopsim.simulate import SimulationError, simulate
 from conftest import SCENARIOS, consistent_states, rel_err
 from coopsim.scenario import load_scenario

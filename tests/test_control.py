@@ -16,7 +16,7 @@ from coopsim.harness import control_series, cross_validate
 from coopsim.log import log_data
 from coopsim.summary import control_summary
 from coopsim.mujoco_run import run_twin
-from coopsim.model import CoopsimError, TorqueFeedback
+from coopsim.core.model import CoopsimError, TorqueFeedback
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from coopsim.simulate import simulate
 from conftest import SCENARIOS
@@ -118,7 +118,7 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
 def test_computed_torque_on_redundant_arms_is_refused_by_name():
     """Differential kinematics per arm needs square arms: a 4-joint arm in a 3-row planar scene is named."""
     from coopsim.control import ControlError
-    from coopsim.model import ControlSettings
+    from coopsim.core.model import ControlSettings
 
     m = load_scenario(SCENARIOS / "hard" / "planar_4arm_mixed.yaml")
     with pytest.raises(ControlError, match=r"^control\.law: computed_torque needs as many joints per arm as "
@@ -197,7 +197,7 @@ def carry():
 
 def _object_errors(model, res):
     """(position m, orientation rad) (N,) of a run's object against the prescribed motion."""
-    from coopsim.spatial import quat_to_rot, rot_log
+    from coopsim.core.spatial import quat_to_rot, rot_log
     from coopsim.trajectory import object_motion_at
 
     om = model.inverse.object_motion
@@ -214,7 +214,7 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     (measured 7e-13 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 4.4e-16 m)
     and the internal force changes by exactly the command along each grasp line (≤ 1e-6 N)."""
     from coopsim import inverse as inv
-    from coopsim.spatial import quat_to_rot
+    from coopsim.core.spatial import quat_to_rot
 
     model, perfect, traj = carry
     res = simulate(perfect)
@@ -257,7 +257,7 @@ def test_joint_pd_reference_follows_the_object_motion(carry):
     prescribed motion: the object pose it carries (`object_pose_of`, forward kinematics) is the
     prescribed one to 1e-12 m, at a sample of the IK trajectory and between samples (its quintic
     Hermite interpolant; measured 3e-16 to 4e-15 m), and its rates start at zero (rest at waypoint 1)."""
-    from coopsim.model import ControlSettings
+    from coopsim.core.model import ControlSettings
     from coopsim.trajectory import object_motion_at, object_pose_of
 
     model, perfect, traj = carry

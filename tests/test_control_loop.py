@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from coopsim.control import Controller, ControlError
-from coopsim.model import ControlSettings, TorqueTable
+from coopsim.core.model import ControlSettings, TorqueTable
 from coopsim.scenario import load_scenario
 from coopsim.simulate import simulate
 from conftest import SCENARIOS

@@ -3,7 +3,7 @@
 import numpy as np
 
 from coopsim.grasp import grasp_matrix, grasp_matrix_inv_T, internal_wrench, net_object_wrench
-from coopsim.spatial import skew
+from coopsim.core.spatial import skew
 
 
 def test_grasp_matrix_moves_wrenches_and_twists_consistently():

@@ -11,7 +11,7 @@ import yaml
 from coopsim import inverse as inv
 from coopsim.compare import orientation_error
 from coopsim.harness import cross_validate
-from coopsim.model import TorqueTable
+from coopsim.core.model import TorqueTable
 from coopsim.scenario import load_scenario
 from coopsim.trajectory import object_motion_trajectory, trajectory_at_times
 from conftest import SCENARIOS

@@ -29,7 +29,7 @@ import yaml
 from coopsim.closed_chain import chain_terms
 from coopsim.compiled import api
 from coopsim.kinematics import arm_pose
-from coopsim.model import torque_at
+from coopsim.core.model import torque_at
 from coopsim.scenario import load_scenario
 from coopsim.simulate import forward, simulate
 from conftest import SCENARIOS

@@ -9,7 +9,7 @@ from scipy.optimize import minimize
 
 from coopsim import inverse as inv
 from coopsim.closed_chain import chain_terms, forward_dynamics
-from coopsim.spatial import cross
+from coopsim.core.spatial import cross
 from inverse_cases import problem, run
 
 PAPER = "paper_planar_2x3"
@@ -252,7 +252,7 @@ def test_torque_function_drives_the_forward_simulation():
     """The small change to the model: torques given as a function of time (TorqueFunction) drive
     `simulate` exactly like the equivalent table (the paper's constant torques, 0.3 s, bit for bit on
     the reference engine, which is where a TorqueFunction runs)."""
-    from coopsim.model import TorqueFunction, torque_at
+    from coopsim.core.model import TorqueFunction, torque_at
     from coopsim.simulate import simulate
 
     m = run(PAPER)[0]

@@ -1,4 +1,4 @@
-"""The joint model (coopsim.joints): prismatic joints beside revolute ones, end to end.
+"""The joint model (coopsim.core.joints): prismatic joints beside revolute ones, end to end.
 
 Against MuJoCo's own algorithms (the twin built with slide joints): link frames ≤ 1e-12 m, each open
 arm's mass matrix (mj_fullM) and bias forces (qfrc_bias) ≤ 1e-10 relative, end-effector Jacobians and
@@ -24,9 +24,9 @@ from coopsim.closed_chain import chain_terms, forward_dynamics
 from coopsim.compiled import api
 from coopsim.gibbs_appell import bias_forces, mass_matrix
 from coopsim.inverse_report import capacity_study, inverse_study
-from coopsim.joints import joint_units
+from coopsim.core.joints import joint_units
 from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
-from coopsim.model import PRISMATIC, REVOLUTE
+from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from conftest import (SCENARIOS, MujocoReference, consistent_states, mujoco_kkt_acceleration, mutated,
                       rel_err)
@@ -238,8 +238,8 @@ def test_units_follow_the_joint_types(gantry):
     axis units from them; a log without them is revolute), the agreement table takes its worst joint's
     unit, the text summary both."""
     from coopsim.compare import _metric
-    from coopsim.joints import COORDINATE, EFFORT, RATE, units_of
-    from coopsim.labels import metadata_joint_types
+    from coopsim.core.joints import COORDINATE, EFFORT, RATE, units_of
+    from coopsim.core.labels import metadata_joint_types
     from coopsim.log import run_metadata
 
     meta = run_metadata(gantry)

@@ -15,7 +15,7 @@ from coopsim import log as L
 from coopsim.closed_chain import arm_poses
 from coopsim.mujoco_run import run_twin
 from coopsim.simulate import simulate
-from coopsim.spatial import quat_to_rot
+from coopsim.core.spatial import quat_to_rot
 
 from conftest import SCENARIOS
 

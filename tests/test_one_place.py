@@ -16,10 +16,10 @@ from coopsim import kinematics, scenario, trajectory
 from coopsim.cli import build_parser
 from coopsim.compare import compare
 from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study
-from coopsim.labels import joint_labels, metadata_joint_labels
+from coopsim.core.labels import joint_labels, metadata_joint_labels
 from coopsim.log import LogData, run_metadata
 from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method
-from coopsim.spatial import axis_angle_to_rot, box_inertia, rigid_acceleration
+from coopsim.core.spatial import axis_angle_to_rot, box_inertia, rigid_acceleration
 from inverse_cases import model, problem
 
 PAPER = "paper_planar_2x3"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from coopsim.manifold import consistent_state
-from coopsim.model import torque_at
+from coopsim.core.model import torque_at
 from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario
 from coopsim.simulate import forward, simulate

@@ -73,7 +73,7 @@ def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
 def test_every_figure_names_its_scenario_and_settings(logs):
     """Titles carry the scenario's name and the integrator settings the log records (issue 10)."""
     from coopsim import plots
-    from coopsim.joints import COORDINATE
+    from coopsim.core.joints import COORDINATE
 
     both, native = logs
     labels = [f"j{i}" for i in range(6)]
@@ -159,7 +159,7 @@ def test_joint_angles_are_drawn_unwrapped(logs):
     both models, with 'unwrapped' in the axis label, and its difference panel stays at the models'
     difference (not 2π)."""
     from coopsim import plots
-    from coopsim.joints import COORDINATE
+    from coopsim.core.joints import COORDINATE
 
     both, _ = logs
     fig = plots._joint_figure(_wrapped_log(both), "angle", "angle", COORDINATE, [f"j{i}" for i in range(6)])
@@ -179,7 +179,7 @@ def test_prismatic_coordinates_are_not_unwrapped(logs):
     import json
 
     from coopsim import plots
-    from coopsim.joints import COORDINATE
+    from coopsim.core.joints import COORDINATE
 
     both, _ = logs
     log = _wrapped_log(both)

@@ -16,9 +16,9 @@ from coopsim.diagnostics import joint_limits
 from coopsim.manifold import constraint_jacobian
 from coopsim.compiled import api
 from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate
-from coopsim.model import ObjectMotion
+from coopsim.core.model import ObjectMotion
 from coopsim.robots import robots_folder
-from coopsim.spatial import rot_log
+from coopsim.core.spatial import rot_log
 from coopsim.trajectory import (JointTrajectory, TrajectoryError, grasp_targets, object_motion_at,
                                 object_motion_trajectory, object_pose_of)
 from inverse_cases import model, run

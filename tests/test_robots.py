@@ -30,10 +30,10 @@ from coopsim.closed_chain import arm_poses
 from coopsim.harness import cross_validate
 from coopsim.log import link_frame_names, native_link_poses, scene_update
 from coopsim.mjcf import build_spec, qpos_address
-from coopsim.model import PRISMATIC, REVOLUTE
+from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.robots import ROBOTS, read_chain, robot_file, robots_folder
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
-from coopsim.spatial import quat_to_rot
+from coopsim.core.spatial import quat_to_rot
 from conftest import ROOT, SCENARIOS, mutated
 from independent.pinocchio_urdf import RobotScene
 from test_independent import Report, check_arm_dynamics, check_chain, check_poses, consistent_states, random_states

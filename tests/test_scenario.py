@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.model import torque_at
+from coopsim.core.model import torque_at
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from coopsim.simulate import initial_state
 from coopsim.closed_chain import ConstraintError

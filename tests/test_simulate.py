@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import simpson
 
 from coopsim.closed_chain import chain_terms, forward_dynamics
-from coopsim.model import TorqueTable
+from coopsim.core.model import TorqueTable
 from coopsim.simulate import ConstraintRankWarning, SimulationError, simulate
 from conftest import MujocoReference
 

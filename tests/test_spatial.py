@@ -1,4 +1,4 @@
-"""coopsim.spatial against references that share none of its code: scipy.spatial.transform.Rotation,
+"""coopsim.core.spatial against references that share none of its code: scipy.spatial.transform.Rotation,
 MuJoCo's quaternion routines, NumPy's cross product and elementary rotation matrices written out here.
 
 Conventions under test (module docstring, scenario `rpy`/`quat` keys): R maps body to world
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coopsim.spatial import axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rots_to_quats, rpy_to_rot, skew
+from coopsim.core.spatial import axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rots_to_quats, rpy_to_rot, skew
 
 RNG_SEED = 20240508
 PI = np.pi
@@ -280,7 +280,7 @@ def _check_compiled(near_pi: bool):
         ref_q = rot_to_quat(R)
         worst_quat = max(worst_quat, min(_max(q - ref_q), _max(q + ref_q)) if ang >= PI - SIGN_FREE else _max(q - ref_q))
         worst_log = max(worst_log, min(_max(got - phi), _max(got + phi)) if ang >= PI - SIGN_FREE else _max(got - phi))
-    assert worst_quat <= 2e-15, f"compiled rot_to_quat vs coopsim.spatial: max component error {worst_quat:.3g}"
+    assert worst_quat <= 2e-15, f"compiled rot_to_quat vs coopsim.core.spatial: max component error {worst_quat:.3g}"
     assert worst_log <= 1e-12, f"compiled rot_log vs the rotation vector: error {worst_log:.3g} rad"
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from coopsim import inverse as inv
-from coopsim.spatial import box_inertia, cross
+from coopsim.core.spatial import box_inertia, cross
 from coopsim.stress import decompose_internal, grasp_line_axes, line_frame, section_loads
 from inverse_cases import problem, run
 

@@ -8,10 +8,10 @@ import pytest
 import yaml
 
 from coopsim.closed_chain import position_residual
-from coopsim.model import ObjectMotion
+from coopsim.core.model import ObjectMotion
 from coopsim.scenario import ScenarioError, model_from_dict
 from coopsim.simulate import simulate
-from coopsim.spatial import rot_log, rpy_to_rot
+from coopsim.core.spatial import rot_log, rpy_to_rot
 from coopsim.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
                                 object_pose_of, time_law, trajectory_at)
 from conftest import SCENARIOS, mutated

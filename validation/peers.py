@@ -2,7 +2,7 @@
 `mujoco.rollout`, and the same closed chain built in Pinocchio and solved with `constraintDynamics`.
 
 Conventions are coopsim's (README, "Model and conventions"): SI units, rad; joint vectors stacked
-arm after arm (`Model.dof_slices`); torques τ(t) (n,) N·m from `coopsim.model.torque_at`.
+arm after arm (`Model.dof_slices`); torques τ(t) (n,) N·m from `coopsim.core.model.torque_at`.
 
 MuJoCo peer (`mujoco_twin`, `twin_rollout`, `mujoco_rollout`, `mujoco_forward_us`): the twin of
 `coopsim.mjcf.build_spec` with the integrator, step and weld time constant chosen per call. The
@@ -30,7 +30,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.model import Model, torque_at
+from coopsim.core.model import Model, torque_at
 
 INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
 

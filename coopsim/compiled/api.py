@@ -19,7 +19,7 @@ import numpy as np
 
 from coopsim.closed_chain import ConstraintError
 from coopsim.manifold import Projection
-from coopsim.model import Model
+from coopsim.core.model import Model
 from coopsim.compiled import capacity, chain, control, ik, integrate, manifold, sample
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct

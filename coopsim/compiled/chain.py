@@ -10,7 +10,7 @@ into the buffers of a `Workspace` (world axes, SI). Two algorithmic differences,
     I_m[j, l] = z_j · (n − p_j × f) for j ≤ l — the same entries ∂²S/∂θ̈_j∂θ̈_l;
   * 𝐈 is block diagonal (one block per arm, the object in the carrier's), factored block by block,
     and Λ𝐈⁻¹Λᵀ is formed as YᵀY with Y = L⁻¹Λᵀ (`chain_solve`).
-Joints are revolute or prismatic (P.joint_type, the joint model of `coopsim.joints`): each kernel
+Joints are revolute or prismatic (P.joint_type, the joint model of `coopsim.core.joints`): each kernel
 below branches on the type where a prismatic joint differs — its frame slides θ z along its axis
 instead of turning, its Jacobian column is [z; 0], its link motion gains z θ̈ + 2ω × z θ̇ in place of
 an angular term, its bias and mass-matrix rows are z · (force) instead of z · (moment).
@@ -26,7 +26,7 @@ import numpy as np
 from coopsim.compiled.jit import kernel
 
 from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
-from coopsim.model import PRISMATIC
+from coopsim.core.model import PRISMATIC
 from coopsim.compiled.packing import STAB_BAUMGARTE
 from coopsim.compiled.schur import constraint_trace, group_arm, schur_factor, schur_solve
 from coopsim.compiled.spatial import rot_log

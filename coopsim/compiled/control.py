@@ -261,7 +261,7 @@ def gram_solve(C, k):
 
 @kernel
 def rigid_point_acceleration(a_O, w, dw, r, out):
-    """out (3,) ← a_O + ω̇ × r + ω × (ω × r) (`coopsim.spatial.rigid_acceleration`)."""
+    """out (3,) ← a_O + ω̇ × r + ω × (ω × r) (`coopsim.core.spatial.rigid_acceleration`)."""
     c0 = w[1] * r[2] - w[2] * r[1]
     c1 = w[2] * r[0] - w[0] * r[2]
     c2 = w[0] * r[1] - w[1] * r[0]

@@ -2,7 +2,7 @@
 
 A `PackedModel` is a NamedTuple of NumPy arrays and scalars (numba passes it to compiled code as one
 typed tuple). Joints of all arms are stacked arm after arm: arm m owns rows dof[m]:dof[m+1] of every
-per-joint array. Units SI, frames as in `coopsim.model`. A `Workspace` holds the buffers the kernels
+per-joint array. Units SI, frames as in `coopsim.core.model`. A `Workspace` holds the buffers the kernels
 write into, so that no evaluation allocates.
 """
 
@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.model import Model, TorqueFunction, TorqueTable
+from coopsim.core.model import Model, TorqueFunction, TorqueTable
 
 STAB_NONE, STAB_PROJECTION, STAB_BAUMGARTE = 0, 1, 2
 _STAB = {"none": STAB_NONE, "projection": STAB_PROJECTION, "baumgarte": STAB_BAUMGARTE}
@@ -26,7 +26,7 @@ class PackedModel(NamedTuple):
     joint_pos (N, 3) in the parent frame; joint_rot (N, 3, 3) parent←joint frame at θ = 0;
     joint_axis (N, 3) unit, joint frame; joint_k1, joint_k2 (N, 3, 3) R0[a×] and R0[a×]² (so that
     R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2), joint_z (N, 3) R0 a (parent frame); joint_type (N,)
-    int: REVOLUTE or PRISMATIC (`coopsim.model`; a prismatic joint slides its frame θ m along a, and
+    int: REVOLUTE or PRISMATIC (`coopsim.core.model`; a prismatic joint slides its frame θ m along a, and
     its rows of the kernels are a force, N); link_mass (N,) kg; link_com (N, 3) link frame;
     link_inertia (N, 3, 3) about the centre of mass, link axes; ee_pos (r, 3), ee_rot (r, 3, 3)
     end-effector frame in the last link frame; obj_mass kg; obj_inertia (3, 3) about C, object axes;

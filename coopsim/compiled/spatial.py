@@ -1,4 +1,4 @@
-"""3-vector and rotation helpers for the compiled kernels (same conventions as `coopsim.spatial`:
+"""3-vector and rotation helpers for the compiled kernels (same conventions as `coopsim.core.spatial`:
 R maps body to world coordinates, quaternions [w, x, y, z] with w ≥ 0)."""
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def rotate_inertia(R, I, tmp, out):
 @kernel
 def rot_log(R, out):
     """out (3,) ← rotation vector φ (|φ| ≤ π) with exp([φ×]) = R, through the quaternion (Shepperd's
-    branches, w ≥ 0) as `coopsim.spatial.rot_log`: φ = 2 atan2(|v|, w) v/|v|, ~1e-15 rad at every
+    branches, w ≥ 0) as `coopsim.core.spatial.rot_log`: φ = 2 atan2(|v|, w) v/|v|, ~1e-15 rad at every
     angle, near π included."""
     t = R[0, 0] + R[1, 1] + R[2, 2]
     if t > 0.0:
@@ -90,7 +90,7 @@ def rot_log(R, out):
 @kernel
 def rot_to_quat(R, q):
     """q (4,) ← unit quaternion [w, x, y, z], w ≥ 0, of R (Shepperd's method, as
-    `coopsim.spatial.rot_to_quat`)."""
+    `coopsim.core.spatial.rot_to_quat`)."""
     t = R[0, 0] + R[1, 1] + R[2, 2]
     if t > 0:
         s = 2.0 * np.sqrt(1.0 + t)

@@ -126,7 +126,7 @@ def compile_evaluations(model) -> None:
 def compile_control(model) -> None:
     """The controller entries and the time loop with a controller in it."""
     from coopsim.control import Controller
-    from coopsim.model import ControlSettings
+    from coopsim.core.model import ControlSettings
     from coopsim.compiled import api
 
     n = model.n_total

@@ -1,6 +1,6 @@
 """The joint model: what a joint of each type does to its link (as Featherstone's `jcalc`, or
 Pinocchio's JointModel), for the reference stages; the compiled kernels branch on the same type codes
-(`coopsim.model.REVOLUTE`, `PRISMATIC`, packed per joint).
+(`coopsim.core.model.REVOLUTE`, `PRISMATIC`, packed per joint).
 
 A joint i of arm m has a unit axis a_i in its own frame i (placed by `joint_pos`, `joint_rot` at θ = 0)
 and one coordinate θ_i:
@@ -20,8 +20,8 @@ import numpy as np
 
 from collections.abc import Sequence
 
-from coopsim.model import JOINT_TYPES, PRISMATIC, REVOLUTE
-from coopsim.spatial import axis_angle_to_rot, cross, skew
+from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE
+from coopsim.core.spatial import axis_angle_to_rot, cross, skew
 
 TYPE_NAMES = {code: name for name, code in JOINT_TYPES.items()}          # 0 → "revolute", 1 → "prismatic"
 UNITS = {"revolute": ("rad", "rad/s", "N·m"), "prismatic": ("m", "m/s", "N")}

@@ -4,7 +4,7 @@ Units are SI throughout (m, kg, s, N, N·m, rad). Frames: "world" is Σ; each ar
 one frame per link, attached at the link's joint (MuJoCo's body convention: frame i sits at
 `joint_pos[i]` in the parent frame, rotated by `joint_rot[i]`, then moved by the joint coordinate θ_i
 along `joint_axis[i]`, given in frame i: turned by θ_i rad about it (revolute joint) or slid θ_i m
-along it (prismatic joint; `coopsim.joints`). The object frame Σ_o sits at the object's centre of mass
+along it (prismatic joint; `coopsim.core.joints`). The object frame Σ_o sits at the object's centre of mass
 C. Joint vectors of all arms are stacked arm after arm (`Model.dof_slices`); a joint's coordinate,
 rate and effort are rad, rad/s, N·m (revolute) or m, m/s, N (prismatic).
 """
