@@ -206,7 +206,7 @@ class Controller:
         """The set-point on the loop-closure manifold: control.setpoint (default the scenario's initial
         angles) projected as the initial state is; ControlError when that moves it by more than
         integrator.max_initial_correction."""
-        from coopsim.closed_chain import ConstraintError
+        from coopsim.dynamics.closed_chain import ConstraintError
         from coopsim.compiled.api import consistent_state
 
         s = self.settings

@@ -189,7 +189,7 @@ def arm_singularities(model: Model, t, q, J) -> list[RunWarning]:
 
 def initial_correction(model: Model, init) -> list[RunWarning]:
     """An `initial_correction` warning when closing the loop at t = 0 moved a joint by more than
-    integrator.initial_correction_warning (init: the `coopsim.manifold.Projection`; the configuration
+    integrator.initial_correction_warning (init: the `coopsim.dynamics.manifold.Projection`; the configuration
     named is the scenario's, before the correction)."""
     s = model.integrator
     j = int(np.argmax(np.abs(init.dq)))

@@ -47,7 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.grasp import grasp_matrix
+from coopsim.dynamics.grasp import grasp_matrix
 from coopsim.core.model import CoopsimError, Model, TorqueFunction, TorqueTable
 from coopsim.qp import solve_qps
 from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)

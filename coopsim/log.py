@@ -46,7 +46,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from coopsim.atomic import atomic_path
-from coopsim.kinematics import arm_frames
+from coopsim.dynamics.kinematics import arm_frames
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.core.model import CoopsimError, Model

@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from coopsim.core.joints import COORDINATE, joint_units
-from coopsim.kinematics import arm_pose, reach_check
+from coopsim.dynamics.kinematics import arm_pose, reach_check
 from coopsim.core.model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
                     InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable,
                     ValidationThresholds)

@@ -10,7 +10,7 @@
       → sample             every reported quantity at the output times
 
 Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the whole time loop in
-compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.integrate`, which lands on
+compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.dynamics.integrate`, which lands on
 every output time; used for torques given as a Python function, and as the readable reference the
 compiled engine is tested against). A controller in the loop (`coopsim.control`, torques that read the
 state) runs in the compiled time loop (`coopsim.compiled.control`, evaluated at every stage; the
@@ -29,12 +29,12 @@ from functools import cached_property
 import numpy as np
 
 from coopsim import diagnostics
-from coopsim.closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
+from coopsim.dynamics.closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
                            forward_dynamics, position_residual)
 from coopsim.diagnostics import RunWarning, describe_state, run_warning
-from coopsim.grasp import grasp_matrix, internal_wrench
-from coopsim.integrate import IntegrationError, IntegratorStats, integrate
-from coopsim.manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
+from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
+from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
+from coopsim.dynamics.manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
 from coopsim.core.model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
                     torque_at)
 from coopsim.core.results import SampledMotion
@@ -304,7 +304,7 @@ def _compiled_reason(model: Model, run) -> str:
 
 def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
                         stages: bool = False) -> SimResult:
-    """The reference engine: `coopsim.integrate` over the plain-NumPy stages, landing on every output
+    """The reference engine: `coopsim.dynamics.integrate` over the plain-NumPy stages, landing on every output
     (stages: over the compiled stage kernels, sampled by the compiled sampler — the 'stages' engine)."""
     s = model.integrator
     if stages:
@@ -323,7 +323,7 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
 
 
 def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress, start: float) -> SimResult:
-    """The 'stages' engine: the reference time loop (`coopsim.integrate`, landing on every output) with
+    """The 'stages' engine: the reference time loop (`coopsim.dynamics.integrate`, landing on every output) with
     the compiled closed-chain evaluation (`coopsim.compiled.api.forward`) and projection at each stage,
     the torques evaluated in Python there (a controller in the loop); the compiled sampler reports."""
     from coopsim.compiled import api

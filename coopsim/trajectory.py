@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coopsim.closed_chain import ConstraintError, arm_poses
-from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
+from coopsim.dynamics.closed_chain import ConstraintError, arm_poses
+from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
 from coopsim.core.model import ArmModel, CoopsimError, Model, ObjectMotion
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
@@ -405,7 +405,7 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
 
 def object_pose_of(model: Model, q: np.ndarray):
     """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q."""
-    from coopsim.closed_chain import carrier_object
+    from coopsim.dynamics.closed_chain import carrier_object
 
     obj = carrier_object(model, arm_poses(model, q))
     return obj.p_C, obj.R_o

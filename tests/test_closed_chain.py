@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from coopsim.closed_chain import ConstraintError, chain_terms, forward_dynamics
-from coopsim.grasp import grasp_matrix
+from coopsim.dynamics.closed_chain import ConstraintError, chain_terms, forward_dynamics
+from coopsim.dynamics.grasp import grasp_matrix
 from conftest import MujocoReference, consistent_states, mujoco_kkt_acceleration, rel_err
 
 TOL_QDD = 1e-9        # relative to max(1, |θ̈|)

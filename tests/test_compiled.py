@@ -13,12 +13,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim.closed_chain import chain_terms, forward_dynamics
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.compiled import api, integrate as cint, tableaux
 from coopsim.compiled.packing import tabulated_torques
 from coopsim.compiled.structs import PACKED_FIELDS, LOOP_FIELDS, TABLEAU_FIELDS, WORKSPACE_FIELDS
 from coopsim.compiled.packing import PackedModel, Workspace
-from coopsim import integrate as ref_integrate
+from coopsim.dynamics import integrate as ref_integrate
 from coopsim.core.model import TorqueTable, torque_at
 from coopsim.simulate import SimulationError, simulate
 from conftest import SCENARIOS, consistent_states, rel_err

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from coopsim.gibbs_appell import bias_forces, gibbs_gradient, mass_matrix
-from coopsim.kinematics import arm_pose
+from coopsim.dynamics.gibbs_appell import bias_forces, gibbs_gradient, mass_matrix
+from coopsim.dynamics.kinematics import arm_pose
 from conftest import MujocoReference, random_states, rel_err
 
 TOL = 1e-10  # relative to max(1, |reference|)

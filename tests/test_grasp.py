@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from coopsim.grasp import grasp_matrix, grasp_matrix_inv_T, internal_wrench, net_object_wrench
+from coopsim.dynamics.grasp import grasp_matrix, grasp_matrix_inv_T, internal_wrench, net_object_wrench
 from coopsim.core.spatial import skew
 
 

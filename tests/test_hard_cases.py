@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from coopsim import cli
-from coopsim.closed_chain import ConstraintError
+from coopsim.dynamics.closed_chain import ConstraintError
 from coopsim.harness import cross_validate
 from coopsim.log import read_mcap, write_run_log
 from coopsim.mjcf import build_spec, dof_address, qpos_address

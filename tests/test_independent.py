@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.closed_chain import chain_terms
+from coopsim.dynamics.closed_chain import chain_terms
 from coopsim.compiled import api
-from coopsim.kinematics import arm_pose
+from coopsim.dynamics.kinematics import arm_pose
 from coopsim.core.model import torque_at
 from coopsim.scenario import load_scenario
 from coopsim.simulate import forward, simulate

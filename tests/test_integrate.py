@@ -1,4 +1,4 @@
-"""Tests for coopsim.integrate (explicit RK integrators with output-time landing and projection)."""
+"""Tests for coopsim.dynamics.integrate (explicit RK integrators with output-time landing and projection)."""
 
 import math
 import pickle
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from coopsim.integrate import IntegrationError, IntegratorStats, integrate
+from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
 
 
 def oscillator(t, y):
@@ -110,7 +110,7 @@ def test_matches_scipy_dop853_at_output_times():
 from scipy.integrate._ivp import dop853_coefficients as _d853  # noqa: E402
 from scipy.integrate._ivp.rk import DOP853 as _SciDOP853, RK45 as _SciRK45  # noqa: E402
 
-from coopsim import integrate as _ref  # noqa: E402
+from coopsim.dynamics import integrate as _ref# noqa: E402
 from coopsim.compiled import integrate as _cint, tableaux as _ctab  # noqa: E402
 
 TABLEAU_TOL = 1e-15  # absolute; every coefficient is O(1..500), measured differences are exactly 0
@@ -124,7 +124,7 @@ def _same(name, ours, scipy_value, tol=TABLEAU_TOL):
 
 
 def test_reference_dopri5_tableau_is_scipys_rk45():
-    """coopsim.integrate's Dormand–Prince 5(4): A, B, C, E (FSAL stage included) and the error order
+    """coopsim.dynamics.integrate's Dormand–Prince 5(4): A, B, C, E (FSAL stage included) and the error order
     equal SciPy's RK45 (A is stored 6x6 here, 6x5 in SciPy: the last column is the zero diagonal)."""
     t = _ref._DOPRI5
     _same("DOPRI5 A", t.a[:, :5], _SciRK45.A)
@@ -137,7 +137,7 @@ def test_reference_dopri5_tableau_is_scipys_rk45():
 
 
 def test_reference_dop853_tableau_is_scipys():
-    """coopsim.integrate's DOP853 step: A, B, C (12 stages), E3 and E5 (SciPy's 13th weight, that of
+    """coopsim.dynamics.integrate's DOP853 step: A, B, C (12 stages), E3 and E5 (SciPy's 13th weight, that of
     f(t + h, y_new), is 0 and dropped here) equal SciPy's, and the error order is 7."""
     t = _ref._DOP853
     _same("DOP853 A", t.a, _SciDOP853.A)
@@ -204,7 +204,7 @@ def test_dopri5_dense_output_ends_on_the_step():
 
 @pytest.mark.parametrize("name", ["_DOP853", "_DOPRI5", "_RK4"])
 def test_tableau_consistency(name):
-    from coopsim import integrate as m
+    from coopsim.dynamics import integrate as m
     tab = getattr(m, name)
     assert abs(tab.b.sum() - 1.0) <= 1e-14                        # order-1 condition
     np.testing.assert_allclose(tab.a.sum(axis=1), tab.c, rtol=0, atol=1e-14)   # row sums = c

@@ -8,7 +8,7 @@ import pytest
 from scipy.optimize import minimize
 
 from coopsim import inverse as inv
-from coopsim.closed_chain import chain_terms, forward_dynamics
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.spatial import cross
 from inverse_cases import problem, run
 

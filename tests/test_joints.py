@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.closed_chain import chain_terms, forward_dynamics
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.compiled import api
-from coopsim.gibbs_appell import bias_forces, mass_matrix
+from coopsim.dynamics.gibbs_appell import bias_forces, mass_matrix
 from coopsim.inverse_report import capacity_study, inverse_study
 from coopsim.core.joints import joint_units
-from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
+from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from conftest import (SCENARIOS, MujocoReference, consistent_states, mujoco_kkt_acceleration, mutated,

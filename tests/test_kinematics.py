@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from coopsim.kinematics import arm_frames, arm_pose, ee_bias_acceleration, ee_jacobian
+from coopsim.dynamics.kinematics import arm_frames, arm_pose, ee_bias_acceleration, ee_jacobian
 from coopsim.scenario import load_scenario
 from conftest import SCENARIOS, MujocoReference, random_states, rel_err
 

@@ -12,7 +12,7 @@ import pytest
 from mcap.reader import make_reader
 
 from coopsim import log as L
-from coopsim.closed_chain import arm_poses
+from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.mujoco_run import run_twin
 from coopsim.simulate import simulate
 from coopsim.core.spatial import quat_to_rot

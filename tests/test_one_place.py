@@ -12,7 +12,8 @@ import pytest
 
 from coopsim import capacity as cap
 from coopsim import inverse as inv
-from coopsim import kinematics, scenario, trajectory
+from coopsim import scenario, trajectory
+from coopsim.dynamics import kinematics
 from coopsim.cli import build_parser
 from coopsim.compare import compare
 from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim.manifold import consistent_state
+from coopsim.dynamics.manifold import consistent_state
 from coopsim.core.model import torque_at
 from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario

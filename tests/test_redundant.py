@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from coopsim import inverse as inv
-from coopsim.closed_chain import position_residual
+from coopsim.dynamics.closed_chain import position_residual
 from coopsim.diagnostics import joint_limits
-from coopsim.manifold import constraint_jacobian
+from coopsim.dynamics.manifold import constraint_jacobian
 from coopsim.compiled import api
-from coopsim.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate
+from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate
 from coopsim.core.model import ObjectMotion
 from coopsim.robots import robots_folder
 from coopsim.core.spatial import rot_log

@@ -26,7 +26,7 @@ import pytest
 import yaml
 
 from coopsim import robots
-from coopsim.closed_chain import arm_poses
+from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.harness import cross_validate
 from coopsim.log import link_frame_names, native_link_poses, scene_update
 from coopsim.mjcf import build_spec, qpos_address

@@ -8,7 +8,7 @@ import yaml
 from coopsim.core.model import torque_at
 from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
 from coopsim.simulate import initial_state
-from coopsim.closed_chain import ConstraintError
+from coopsim.dynamics.closed_chain import ConstraintError
 from conftest import SCENARIOS, mutated, paper_residual_by_hand
 
 PAPER = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import simpson
 
-from coopsim.closed_chain import chain_terms, forward_dynamics
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.model import TorqueTable
 from coopsim.simulate import ConstraintRankWarning, SimulationError, simulate
 from conftest import MujocoReference

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.closed_chain import position_residual
+from coopsim.dynamics.closed_chain import position_residual
 from coopsim.core.model import ObjectMotion
 from coopsim.scenario import ScenarioError, model_from_dict
 from coopsim.simulate import simulate

@@ -26,10 +26,10 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.closed_chain import chain_terms, forward_dynamics, position_residual
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics, position_residual
 from coopsim.compiled import api
-from coopsim.grasp import grasp_matrix, internal_wrench
-from coopsim.kinematics import arm_pose
+from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
+from coopsim.dynamics.kinematics import arm_pose
 from coopsim.scenario import model_from_dict
 from coopsim.simulate import initial_state, simulate
 from conftest import SCENARIOS, consistent_states, rel_err

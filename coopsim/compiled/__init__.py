@@ -1,6 +1,6 @@
 """Compiled native model (numba): the same algorithms as the plain-NumPy stages, over flat arrays.
 
-The plain-NumPy modules (`coopsim.kinematics`, `gibbs_appell`, `grasp`, `closed_chain`, `manifold`,
+The plain-NumPy modules (`coopsim.dynamics.kinematics`, `gibbs_appell`, `grasp`, `closed_chain`, `manifold`,
 `integrate`) are the readable reference; this package runs the same equations compiled, with no
 Python and no allocation per evaluation, and is what the commands use. Stages, in the order they run:
 

@@ -17,8 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.closed_chain import ConstraintError
-from coopsim.manifold import Projection
+from coopsim.dynamics.closed_chain import ConstraintError
+from coopsim.dynamics.manifold import Projection
 from coopsim.core.model import Model
 from coopsim.compiled import capacity, chain, control, ik, integrate, manifold, sample
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
@@ -312,7 +312,7 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,
                      max_iter: int = PROJECTION_MAX_ITER) -> Projection:
-    """(q, qd) (N,) projected onto the loop-closure manifold as `coopsim.manifold.consistent_state`
+    """(q, qd) (N,) projected onto the loop-closure manifold as `coopsim.dynamics.manifold.consistent_state`
     does (Gauss–Newton to max |Φ| ≤ tol, default the scenario's projection_tol, then the rates),
     compiled. Raises ConstraintError when the positions do not converge in max_iter steps."""
     P, W, Ps, Ws = compiled(model)

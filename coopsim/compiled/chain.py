@@ -1,6 +1,6 @@
 """Compiled stages 1–4: kinematics → Gibbs–Appell arm terms → object/grasp terms → closed-chain solve.
 
-The equations are those of the reference modules (`coopsim.kinematics`, `gibbs_appell`, `grasp`,
+The equations are those of the reference modules (`coopsim.dynamics.kinematics`, `gibbs_appell`, `grasp`,
 `closed_chain`; paper eqs. 9–10, 11–13, 17–27), evaluated over the flat arrays of a `PackedModel`
 into the buffers of a `Workspace` (world axes, SI). Two algorithmic differences, both exact:
   * the arm mass matrix I_m is formed by the composite-rigid-body recursion (O(n²)) instead of the
@@ -174,7 +174,7 @@ def arm_bias(P, W, m, qd):
     ω_i = ω_{i−1} + z_i θ̇_i, ω̇_i = ω̇_{i−1} + ω_{i−1} × z_i θ̇_i, a_{i+1} = a_i + ω̇_i × d + ω_i × (ω_i × d);
     F_j = m_j a_cj + F_{j+1}, N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1}
     + (p_{j+1} − p_j) × F_{j+1}, h_j = z_j · N_j. A prismatic joint j leaves ω, ω̇ and adds
-    2 ω_{j−1} × z_j θ̇_j to a_j (`coopsim.kinematics.link_motion`); its h_j = z_j · F_j."""
+    2 ω_{j−1} × z_j θ̇_j to a_j (`coopsim.dynamics.kinematics.link_motion`); its h_j = z_j · F_j."""
     dof, g, lm, jt = P.dof, P.gravity, P.link_mass, P.joint_type
     p, z, cw, Iw, Ww, DW, Aw = W.p_rel, W.z, W.c_rel, W.I, W.w, W.dw, W.a
     h, h_arm, Jd_qd, p_ee = W.h, W.h_arm, W.Jd_qd, W.p_ee_rel

@@ -1,6 +1,6 @@
 """Compiled stage 6: the whole time loop of the closed chain, with no Python per step.
 
-Methods and step control are those of the reference `coopsim.integrate` (Hairer, Nørsett & Wanner,
+Methods and step control are those of the reference `coopsim.dynamics.integrate` (Hairer, Nørsett & Wanner,
 *Solving ODEs I*, 2nd ed., Sec. II.4–II.5): DOP853 (Hairer's 5th/3rd-order error estimate, exponent
 1/8), Dormand–Prince 5(4) (FSAL, exponent 1/5), classical RK4 at a fixed step; Hairer's starting step;
 h_new = h·min(10, max(0.2, 0.9·err^(−1/(p̂+1)))), no growth right after a rejection. Unlike the
@@ -398,7 +398,7 @@ def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_
     projection of the initial state (output 0), then adaptive steps, or fixed steps of at most
     fixed_step s when fixed_step > 0. Stops early on a failure (L.status). ctl = (Pc, Wc, C): the
     controller in the loop (`rhs`). land: adaptive steps end on every output time (as the reference
-    `coopsim.integrate` does) instead of reaching them by dense output.
+    `coopsim.dynamics.integrate` does) instead of reaching them by dense output.
 
     This is the only function that evaluates the right-hand side (every stage, probe and dense-output
     stage is evaluated here): each compiled function that calls the closed-chain kernel compiles it

@@ -1,4 +1,4 @@
-"""Compiled stage 5: the loop-closure manifold (as `coopsim.manifold`).
+"""Compiled stage 5: the loop-closure manifold (as `coopsim.dynamics.manifold`).
 
 Positions are projected by Gauss–Newton steps of minimum norm, Δθ = −Λ⁺Φ(θ) with
 Λ⁺ = Λᵀ(ΛΛᵀ)⁺ (ΛΛᵀ solved by its block structure in O(r) (`schur`), or by a pivoted Cholesky, or

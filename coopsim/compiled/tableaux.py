@@ -4,7 +4,7 @@ DOP853 (Prince & Dormand 1981; Hairer's DOP853 with its 7th-order dense output, 
 Dormand–Prince 5(4) (with Shampine's 4th-order dense output), with the coefficients of SciPy's
 `scipy/integrate/_ivp/dop853_coefficients.py` and `RK45.P` (BSD-3-Clause, Copyright (c) SciPy
 Developers; themselves from Hairer's Fortran code), printed at full precision. The reference
-`coopsim.integrate` holds the same step tableaux; a test checks that they agree.
+`coopsim.dynamics.integrate` holds the same step tableaux; a test checks that they agree.
 """
 
 import numpy as np

@@ -11,7 +11,7 @@ and p_i the origin of frame i:
   * revolute: [z_i × (P − p_i); z_i];   * prismatic: [z_i; 0].
 The Jacobian columns, the partial accelerations of the Gibbs–Appell terms and the mass matrix are
 built from these; the velocity-product terms of the link motion follow from differentiating them
-(`coopsim.kinematics.link_motion`).
+(`coopsim.dynamics.kinematics.link_motion`).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from coopsim.core.joints import motion_subspace
-from coopsim.kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
+from coopsim.dynamics.kinematics import ArmPose, LinkMotion, ee_acceleration, link_com_accelerations, link_motion
 from coopsim.core.model import PRISMATIC, ArmModel
 from coopsim.core.spatial import cross
 

@@ -11,10 +11,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
+from coopsim.dynamics.closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
                            position_residual)
-from coopsim.grasp import grasp_matrix_inv_T
-from coopsim.kinematics import ee_jacobian
+from coopsim.dynamics.grasp import grasp_matrix_inv_T
+from coopsim.dynamics.kinematics import ee_jacobian
 from coopsim.core.model import Model
 
 
