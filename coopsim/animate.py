@@ -47,7 +47,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError, Model
+from coopsim.core.model import Model
+from coopsim.core.errors import CoopsimError
 
 
 class RenderUnavailable(CoopsimError):

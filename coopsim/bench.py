@@ -37,7 +37,8 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError, IntegratorSettings, Model
+from coopsim.core.model import IntegratorSettings, Model
+from coopsim.core.errors import CoopsimError
 
 OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14

@@ -8,7 +8,7 @@ import sys
 import warnings
 
 from coopsim import __version__
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError
 from coopsim.resolutions import METHODS, methods_help
 
 

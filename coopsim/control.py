@@ -34,7 +34,8 @@ from functools import cached_property
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError, Model, TorqueFeedback, torque_at
+from coopsim.core.model import Model, TorqueFeedback, torque_at
+from coopsim.core.errors import CoopsimError
 
 LAWS = ("joint_pd", "computed_torque")
 COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
@@ -206,7 +207,7 @@ class Controller:
         """The set-point on the loop-closure manifold: control.setpoint (default the scenario's initial
         angles) projected as the initial state is; ControlError when that moves it by more than
         integrator.max_initial_correction."""
-        from coopsim.dynamics.closed_chain import ConstraintError
+        from coopsim.core.errors import ConstraintError
         from coopsim.compiled.api import consistent_state
 
         s = self.settings

@@ -48,10 +48,11 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.dynamics.grasp import grasp_matrix
-from coopsim.core.model import CoopsimError, Model, TorqueFunction, TorqueTable
+from coopsim.core.model import Model, TorqueFunction, TorqueTable
+from coopsim.core.errors import ConstraintRankWarning, CoopsimError
 from coopsim.qp import solve_qps
 from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
-from coopsim.simulate import ConstraintRankWarning, describe_state
+from coopsim.simulate import describe_state
 from coopsim.core.spatial import cross, rigid_acceleration
 from coopsim.stress import grasp_line_axes, line_frame
 from coopsim.trajectory import JointTrajectory, trajectory_at_times

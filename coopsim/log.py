@@ -49,7 +49,8 @@ from coopsim.atomic import atomic_path
 from coopsim.dynamics.kinematics import arm_frames
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
-from coopsim.core.model import CoopsimError, Model
+from coopsim.core.model import Model
+from coopsim.core.errors import CoopsimError
 from coopsim.core.spatial import rot_to_quat, rots_to_quats
 
 LIBRARY = "coopsim.log"

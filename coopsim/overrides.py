@@ -18,7 +18,7 @@ import copy
 import re
 from typing import Any, Iterable
 
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError
 
 _KEY = re.compile(r"[^.\[\]=\s]+")
 _INDEX = re.compile(r"\[(\d+)\]")

@@ -38,7 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError
 
 CHUNK_COLUMNS = 96         # variables per HiGHS QP (whole problems, at least one)
 SEED_STRIDE = 8            # every 8th problem to HiGHS first; the others start from a neighbour's working set

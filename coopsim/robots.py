@@ -46,7 +46,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel, CoopsimError
+from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel
+from coopsim.core.errors import CoopsimError
 from coopsim.core.spatial import quat_to_rot
 
 MAX_ROBOT_FILE_BYTES = 64 << 20

@@ -26,11 +26,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
 from coopsim.dynamics.kinematics import arm_pose, reach_check
-from coopsim.core.model import (JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, CoopsimError, IntegratorSettings,
-                    InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable,
-                    ValidationThresholds)
+from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 
 _REQUIRED = object()
@@ -44,10 +43,6 @@ MAX_STEPS = 10_000_000          # duration / step of rk4, of max_step, of the Mu
 MAX_ITERATIONS = 10_000         # mujoco.iterations
 MAX_NAME = 100                  # characters of `name`
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
-
-
-class ScenarioError(CoopsimError):
-    """A scenario that cannot be turned into a model; the message names the field."""
 
 
 def _show(v, limit: int = 60) -> str:

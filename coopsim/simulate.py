@@ -29,24 +29,16 @@ from functools import cached_property
 import numpy as np
 
 from coopsim import diagnostics
-from coopsim.dynamics.closed_chain import (ChainAcceleration, ChainTerms, ConstraintError, chain_terms,
-                           forward_dynamics, position_residual)
+from coopsim.core.errors import ConstraintError, ConstraintRankWarning, SimulationError
+from coopsim.dynamics.closed_chain import ChainAcceleration, ChainTerms, chain_terms, forward_dynamics, position_residual
 from coopsim.diagnostics import RunWarning, describe_state, run_warning
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
-from coopsim.dynamics.manifold import Projection, baumgarte_term, consistent_state, project_positions, project_velocities
-from coopsim.core.model import (CoopsimError, IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque,
-                    torque_at)
+from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
+from coopsim.core.results import Projection
+from coopsim.core.model import IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque, torque_at
 from coopsim.core.results import SampledMotion
 from coopsim.core.spatial import rot_to_quat
-
-
-class SimulationError(CoopsimError):
-    """The simulation stopped; the message gives the time, the configuration and the reason."""
-
-
-class ConstraintRankWarning(RuntimeWarning):
-    """The constraint matrix Λ𝐈⁻¹Λᵀ lost rank; grasp wrenches are the minimum-norm ones."""
 
 
 @dataclass(frozen=True, eq=False)

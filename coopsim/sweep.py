@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.overrides import apply_overrides, parse_path
-from coopsim.scenario import ScenarioError, _Section, load_yaml, model_from_dict
+from coopsim.scenario import _Section, load_yaml, model_from_dict
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
 DESIGNS = ("grid", "sobol", "halton")

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError
 from coopsim.sweep import Sweep, evaluate_point, matcher, one_line
 
 CHECKPOINT = "points.jsonl"

@@ -22,9 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coopsim.dynamics.closed_chain import ConstraintError, arm_poses
+from coopsim.dynamics.closed_chain import arm_poses
+from coopsim.core.errors import ConstraintError, CoopsimError
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
-from coopsim.core.model import ArmModel, CoopsimError, Model, ObjectMotion
+from coopsim.core.model import ArmModel, Model, ObjectMotion
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
 

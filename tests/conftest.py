@@ -174,7 +174,7 @@ def rel_err(a, b) -> float:
 def consistent_states(model, count: int, seed: int, spread: float = 0.4):
     """`count` random states on the loop-closure manifold: q0 + N(0, spread²) and N(0, 1) rates,
     projected with coopsim's Gauss–Newton projection (draws that do not converge are skipped)."""
-    from coopsim.dynamics.closed_chain import ConstraintError
+    from coopsim.core.errors import ConstraintError
     from coopsim.dynamics.manifold import project_positions, project_velocities
 
     rng = np.random.default_rng(seed)

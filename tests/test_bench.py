@@ -17,7 +17,7 @@ from coopsim import bench, bench_report
 from coopsim.bench import Ladders, RunRow
 from coopsim.bench_report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
 from coopsim.cli import build_parser, main
-from coopsim.core.model import CoopsimError
+from coopsim.core.errors import CoopsimError
 from conftest import SCENARIOS
 
 # Tiny ladders: enough to exercise every family and table, a second or two per scenario.

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from coopsim.dynamics.closed_chain import ConstraintError, chain_terms, forward_dynamics
+from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
+from coopsim.core.errors import ConstraintError
 from coopsim.dynamics.grasp import grasp_matrix
 from conftest import MujocoReference, consistent_states, mujoco_kkt_acceleration, rel_err
 

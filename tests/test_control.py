@@ -16,8 +16,9 @@ from coopsim.harness import control_series, cross_validate
 from coopsim.log import log_data
 from coopsim.summary import control_summary
 from coopsim.mujoco_run import run_twin
-from coopsim.core.model import CoopsimError, TorqueFeedback
-from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
+from coopsim.core.model import TorqueFeedback
+from coopsim.core.errors import CoopsimError, ScenarioError
+from coopsim.scenario import load_scenario, model_from_dict
 from coopsim.simulate import simulate
 from conftest import SCENARIOS
 

@@ -1239,7 +1239,7 @@ def test_loop_closure_errors_are_one_line_and_leave_no_output(tmp_path, capfd):
 
 def test_a_multiline_error_prints_as_one_line(tmp_path, capfd, monkeypatch):
     from coopsim import cli as C
-    from coopsim.core.model import CoopsimError
+    from coopsim.core.errors import CoopsimError
 
     def boom(args):
         raise CoopsimError("first\n  second\nthird")

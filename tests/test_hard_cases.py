@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from coopsim import cli
-from coopsim.dynamics.closed_chain import ConstraintError
+from coopsim.core.errors import ConstraintError, ScenarioError, SimulationError
 from coopsim.harness import cross_validate
 from coopsim.log import read_mcap, write_run_log
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.scenario import ScenarioError, load_scenario, load_yaml, model_from_dict
-from coopsim.simulate import SimulationError, simulate
+from coopsim.scenario import load_scenario, load_yaml, model_from_dict
+from coopsim.simulate import simulate
 from coopsim.summary import simulation_summary
 from conftest import SCENARIOS
 

@@ -27,7 +27,8 @@ from coopsim.inverse_report import capacity_study, inverse_study
 from coopsim.core.joints import joint_units
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
 from coopsim.core.model import PRISMATIC, REVOLUTE
-from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
+from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.core.errors import ScenarioError
 from conftest import (SCENARIOS, MujocoReference, consistent_states, mujoco_kkt_acceleration, mutated,
                       rel_err)
 from test_compiled import assert_compiled_terms_match_the_reference

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from coopsim.dynamics.closed_chain import ConstraintError, position_residual
+from coopsim.dynamics.closed_chain import position_residual
+from coopsim.core.errors import ConstraintError
 from coopsim.dynamics.manifold import (baumgarte_term, constraint_jacobian, consistent_state, project_positions,
                               project_velocities)
 from conftest import paper_residual_by_hand

@@ -32,7 +32,8 @@ from coopsim.log import link_frame_names, native_link_poses, scene_update
 from coopsim.mjcf import build_spec, qpos_address
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.robots import ROBOTS, read_chain, robot_file, robots_folder
-from coopsim.scenario import ScenarioError, load_scenario, model_from_dict
+from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.core.errors import ScenarioError
 from coopsim.core.spatial import quat_to_rot
 from conftest import ROOT, SCENARIOS, mutated
 from independent.pinocchio_urdf import RobotScene

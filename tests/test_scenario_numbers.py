@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.scenario import ScenarioError, model_from_dict
+from coopsim.scenario import model_from_dict
+from coopsim.core.errors import ScenarioError
 from conftest import SCENARIOS, mutated, run_cli
 
 PAPER = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())

@@ -8,7 +8,8 @@ from scipy.integrate import simpson
 
 from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.model import TorqueTable
-from coopsim.simulate import ConstraintRankWarning, SimulationError, simulate
+from coopsim.simulate import simulate
+from coopsim.core.errors import ConstraintRankWarning, SimulationError
 from conftest import MujocoReference
 
 

@@ -17,8 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.dynamics.closed_chain import ConstraintError
-from coopsim.dynamics.manifold import Projection
+from coopsim.core.errors import ConstraintError
+from coopsim.core.results import Projection
 from coopsim.core.model import Model
 from coopsim.compiled import capacity, chain, control, ik, integrate, manifold, sample
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace

@@ -3,6 +3,7 @@
     model.py    the frozen `Model` (arms, object, motors, settings) and torque sources
     joints.py   revolute and prismatic joints: transform, motion subspace, units
     spatial.py  rotations, cross products, rigid-body kinematics helpers
-    results.py  sampled motions shared by the forward and inverse sides
+    errors.py   CoopsimError and the errors and warnings every layer raises
+    results.py  sampled motions and projections shared by the engines and both sides
     labels.py   the names of arms and joints in messages and figures
 """

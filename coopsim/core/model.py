@@ -18,10 +18,6 @@ from typing import Callable
 import numpy as np
 
 
-class CoopsimError(Exception):
-    """Base class of every error coopsim reports to a user as one line."""
-
-
 REVOLUTE, PRISMATIC = 0, 1                        # joint type codes (ArmModel.joint_type)
 JOINT_TYPES = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
 

@@ -1,8 +1,9 @@
-"""Result containers shared by the native model and the MuJoCo twin."""
+"""Result containers shared by the engines, the forward and inverse sides and the MuJoCo twin."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -21,3 +22,16 @@ class SampledMotion:
     object_pos: np.ndarray
     object_quat: np.ndarray
     object_twist: np.ndarray
+
+
+class Projection(NamedTuple):
+    """Result of a projection: q, qd the consistent state; dq, dqd the corrections applied;
+    residual_before / residual_after: max |Φ| (m or rad); iterations: Gauss–Newton steps."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    dq: np.ndarray
+    dqd: np.ndarray
+    residual_before: float
+    residual_after: float
+    iterations: int

@@ -17,16 +17,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from coopsim.core.errors import ConstraintError
 from coopsim.dynamics.gibbs_appell import arm_dynamics
 from coopsim.dynamics.grasp import (ObjectPose, grasp_matrix, grasp_matrix_inv_T, object_bias_wrench,
                     object_mass_matrix, object_pose)
 from coopsim.dynamics.kinematics import ArmPose, arm_pose, ee_jacobian
-from coopsim.core.model import CoopsimError, Model
+from coopsim.core.model import Model
 from coopsim.core.spatial import rigid_acceleration, rot_log
-
-
-class ConstraintError(CoopsimError):
-    """The closed chain cannot be solved (singular mass or constraint matrix, unreachable loop)."""
 
 
 class ChainTerms(NamedTuple):

@@ -7,28 +7,14 @@ Moore–Penrose inverse, so redundant or rank-deficient rows are harmless), velo
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
-from coopsim.dynamics.closed_chain import (ConstraintError, _constraints, arm_poses, carrier_object, grasp_offsets,
-                           position_residual)
+from coopsim.dynamics.closed_chain import _constraints, arm_poses, carrier_object, grasp_offsets, position_residual
+from coopsim.core.errors import ConstraintError
 from coopsim.dynamics.grasp import grasp_matrix_inv_T
 from coopsim.dynamics.kinematics import ee_jacobian
 from coopsim.core.model import Model
-
-
-class Projection(NamedTuple):
-    """Result of a projection: q, qd the consistent state; dq, dqd the corrections applied;
-    residual_before / residual_after: max |Φ| (m or rad); iterations: Gauss–Newton steps."""
-
-    q: np.ndarray
-    qd: np.ndarray
-    dq: np.ndarray
-    dqd: np.ndarray
-    residual_before: float
-    residual_after: float
-    iterations: int
+from coopsim.core.results import Projection
 
 
 def constraint_jacobian(model: Model, q: np.ndarray) -> np.ndarray:
