@@ -1,7 +1,7 @@
-"""Lazy kernels (coopsim.compiled.linking): a kernel is compiled to LLVM IR only, cached as IR, and
+"""Lazy kernels (coopsim.compiled.toolchain.linking): a kernel is compiled to LLVM IR only, cached as IR, and
 becomes machine code inside the entries that call it; remembered call-type resolution
-(coopsim.compiled.resolution) gives numba's own answers; code loads from the cache without numba's
-compiler registries (coopsim.compiled.loading), and a later compile still has them. Each case runs
+(coopsim.compiled.toolchain.resolution) gives numba's own answers; code loads from the cache without numba's
+compiler registries (coopsim.compiled.toolchain.loading), and a later compile still has them. Each case runs
 in fresh processes over a kernel and two entries written to a temporary folder, with numba's cache
 there; results exact (the arithmetic is exact in binary floating point)."""
 
@@ -21,11 +21,13 @@ from numba.core import errors
 from numba.core.registry import cpu_target
 from numba.core.types import functions
 
-from coopsim.compiled import linking, numba_range, resolution
+from coopsim.compiled.toolchain import linking
+from coopsim.compiled.toolchain import numba_range
+from coopsim.compiled.toolchain import resolution
 
 MODULE = textwrap.dedent('''
     import numpy as np
-    from coopsim.compiled.jit import entry, kernel
+    from coopsim.compiled.toolchain.jit import entry, kernel
 
 
     @kernel
@@ -52,7 +54,7 @@ PROBE = textwrap.dedent('''
     import json, sys
     import numpy as np
     import lazymod
-    from coopsim.compiled import linking
+    from coopsim.compiled.toolchain import linking
 
     out = {}
     numba_np = lambda: sorted(m for m in ("numba.np.arraymath", "numba.np.linalg", "numba.np.npdatetime",

@@ -1,4 +1,4 @@
-"""coopsim's changes to numba (coopsim.compiled.linking, resolution, loading) apply to coopsim's
+"""coopsim's changes to numba (coopsim.compiled.toolchain.linking, resolution, loading) apply to coopsim's
 functions only: a user's own `@njit(cache=True)` function compiled, cached and loaded in a process
 that imported coopsim.compiled is handled as stock numba handles it. With COOPSIM_STOCK_NUMBA=1 none
 of the changes is installed and coopsim's compiled code gives the same numbers, to the last bit.
@@ -16,13 +16,14 @@ import textwrap
 
 import numpy as np
 
-from coopsim.compiled import api, resolution
+from coopsim.compiled import api
+from coopsim.compiled.toolchain import resolution
 from conftest import SCENARIOS
 
 PAPER = str(SCENARIOS / "paper_planar_2x3.yaml")
 
 COOPMOD = textwrap.dedent('''
-    from coopsim.compiled.jit import entry, kernel
+    from coopsim.compiled.toolchain.jit import entry, kernel
 
 
     @kernel
@@ -58,7 +59,9 @@ COMPILE = textwrap.dedent('''
     import json, sys
     import numpy as np
     from numba.core import config
-    from coopsim.compiled import api, linking, resolution
+    from coopsim.compiled import api
+    from coopsim.compiled.toolchain import linking
+    from coopsim.compiled.toolchain import resolution
     from coopsim.scenario import load_scenario
 
     model = load_scenario(sys.argv[2])
@@ -191,7 +194,9 @@ STOCK = textwrap.dedent('''
     import numpy as np
     from numba.core import caching, cpu
     from numba.core.types import functions
-    from coopsim.compiled import api, chain, ik, jit, linking
+    from coopsim.compiled import api, chain, ik
+    from coopsim.compiled.toolchain import jit
+    from coopsim.compiled.toolchain import linking
     from coopsim.scenario import load_scenario
 
     out = {"stock": jit.STOCK, "wrapped": [getattr(f, "_coopsim", False) for f in (
@@ -235,7 +240,7 @@ def test_setting_an_environment_is_numbas_unless_a_lazy_librarys_executable_is_m
 
     from numba.core import codegen
 
-    from coopsim.compiled import linking
+    from coopsim.compiled.toolchain import linking
 
     slot, asked = (ctypes.c_void_p * 1)(), []
 

@@ -1,14 +1,15 @@
 """Compiled native model (numba): the same algorithms as the plain-NumPy stages, over flat arrays.
 
-The plain-NumPy modules (`coopsim.dynamics.kinematics`, `gibbs_appell`, `grasp`, `closed_chain`, `manifold`,
-`integrate`) are the readable reference; this package runs the same equations compiled, with no
+The plain-NumPy stages (`coopsim.dynamics`: kinematics, gibbs_appell, grasp, closed_chain, manifold,
+integrate) are the readable reference; this package runs the same equations compiled, with no
 Python and no allocation per evaluation, and is what the commands use. Stages, in the order they run:
 
-    jit.py         the two compilation modes: internal kernels and entries called from Python
-    linking.py     kernels compiled to LLVM IR only, made machine code inside the entries that call them
-    resolution.py  numba's call-type resolution, remembered (each operation's signature found once)
-    loading.py     compiled code loaded from numba's cache without numba's compiler registries
-    numba_range.py the numba versions those three follow (they act on coopsim's functions only)
+    toolchain/     how numba compiles the package, fenced off from the stages:
+      jit.py         the two compilation modes: internal kernels and entries called from Python
+      linking.py     kernels compiled to LLVM IR only, made machine code inside the entries that call them
+      resolution.py  numba's call-type resolution, remembered (each operation's signature found once)
+      loading.py     compiled code loaded from numba's cache without numba's compiler registries
+      numba_range.py the numba versions those three follow (they act on coopsim's functions only)
     packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
     structs.py     both as numba StructRefs (passed by reference, fields read without reference
                    counting), built by cached constructors
@@ -45,8 +46,8 @@ def _cache_dir() -> str:
     if that is set, else in this folder's __pycache__."""
     here = _Path(__file__).resolve().parent
     digest = _hashlib.sha256()
-    for path in sorted(here.glob("*.py")):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    for path in sorted(here.rglob("*.py")):
+        digest.update(path.relative_to(here).as_posix().encode() + b"\0" + path.read_bytes())
     base = _numba_config.CACHE_DIR or str(here / "__pycache__")
     return str(_Path(base) / f"coopsim-{digest.hexdigest()[:16]}")
 

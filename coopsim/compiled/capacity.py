@@ -17,7 +17,7 @@ takes the NumPy path, which handles rank loss.
 
 import numpy as np
 
-from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.toolchain.jit import entry, kernel
 
 
 @kernel

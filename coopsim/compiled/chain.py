@@ -23,7 +23,7 @@ RANK_DEFICIENT (Λ𝐈⁻¹Λᵀ lost rank: minimum-norm grasp wrenches were use
 from __future__ import annotations
 
 import numpy as np
-from coopsim.compiled.jit import kernel
+from coopsim.compiled.toolchain.jit import kernel
 
 from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from coopsim.core.model import PRISMATIC

@@ -32,7 +32,7 @@ from numba import njit
 from numba.experimental import structref
 
 from coopsim.compiled.chain import OK, arm_terms, object_dynamics, object_pose
-from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import bisect, copy1, copy2, gauss_solve
 from coopsim.compiled.sample import object_acceleration, object_wrench
 from coopsim.compiled.spatial import axis_rotation, matmul3, matmul3_T, rot_log

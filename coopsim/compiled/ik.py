@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from coopsim.compiled.chain import arm_bias, arm_jacobian, arm_kinematics
-from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import lu_solve, singular_ratio
 from coopsim.compiled.manifold import max_abs
 from coopsim.compiled.spatial import matmul3_T, rot_log

@@ -33,7 +33,7 @@ import numpy as np
 from coopsim.compiled import tableaux
 from coopsim.compiled.chain import OK, RANK_DEFICIENT, chain_forward
 from coopsim.compiled.control import feedback
-from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import bisect, copy1
 from coopsim.compiled.manifold import project_state
 from coopsim.compiled.packing import STAB_PROJECTION

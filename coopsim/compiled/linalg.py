@@ -13,7 +13,7 @@ solve borrow their array arguments on entry (`structs.borrow`): no reference cou
 from __future__ import annotations
 
 import numpy as np
-from coopsim.compiled.jit import kernel
+from coopsim.compiled.toolchain.jit import kernel
 from coopsim.compiled.structs import borrow
 
 

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.compiled.chain import arm_terms, chain_forward, constraint_matrix, loop_residual, object_dynamics, object_pose
-from coopsim.compiled.jit import entry, kernel
+from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import copy1, copy2, copy3, jacobi_eigh
 from coopsim.compiled.manifold import max_abs
 from coopsim.compiled.spatial import rot_to_quat

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.compiled.jit import kernel
+from coopsim.compiled.toolchain.jit import kernel
 from coopsim.compiled.linalg import inverse_factor_norm2
 
 SCHUR_MIN_RATIO = 1e-10

@@ -4,7 +4,7 @@ R maps body to world coordinates, quaternions [w, x, y, z] with w ≥ 0)."""
 from __future__ import annotations
 
 import numpy as np
-from coopsim.compiled.jit import kernel
+from coopsim.compiled.toolchain.jit import kernel
 
 
 @kernel

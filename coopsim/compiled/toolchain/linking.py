@@ -41,8 +41,8 @@ import llvmlite.binding as ll
 from numba.core import codegen, compiler, compiler_machinery, cpu, typed_passes
 from numba.core.environment import lookup_environment
 
-from coopsim.compiled import resolution
-from coopsim.compiled.numba_range import supported_numba
+from coopsim.compiled.toolchain import resolution
+from coopsim.compiled.toolchain.numba_range import supported_numba
 
 KIND = "coopsim-ir"          # the cache's name for a lazy library's bitcode
 _ENV_PREFIX = "_ZN08NumbaEnv"  # numba's mangled name of a function's environment global

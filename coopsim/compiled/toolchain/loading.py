@@ -20,7 +20,7 @@ from __future__ import annotations
 from numba.core import caching
 from numba.core.runtime import rtsys
 
-from coopsim.compiled.numba_range import supported_numba
+from coopsim.compiled.toolchain.numba_range import supported_numba
 
 MARK = "_coopsim_compiled"     # the attribute `jit.kernel` and `jit.entry` set on the functions they compile
 

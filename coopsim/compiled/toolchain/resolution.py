@@ -30,7 +30,7 @@ import threading
 from numba.core import targetconfig
 from numba.core.types import functions
 
-from coopsim.compiled.numba_range import supported_numba
+from coopsim.compiled.toolchain.numba_range import supported_numba
 
 _MEMO: dict = {}
 _FLAGS: dict = {}     # id(flags) → (flags, a hashable summary of their values)

@@ -29,7 +29,9 @@ import os
 from numba import njit
 from numba.core import compiler, config
 
-from coopsim.compiled import linking, loading, resolution
+from coopsim.compiled.toolchain import linking
+from coopsim.compiled.toolchain import loading
+from coopsim.compiled.toolchain import resolution
 
 STOCK = os.environ.get("COOPSIM_STOCK_NUMBA", "") not in ("", "0")   # install none of the patches
 
