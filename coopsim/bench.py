@@ -230,7 +230,7 @@ class Reference:
 def reference(model: Model) -> Reference:
     """Native DOP853 at REFERENCE_RTOL / REFERENCE_ATOL, and again CHECK_FACTOR looser, over
     model.duration on the OUTPUT_DT grid."""
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL))
     check = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL * CHECK_FACTOR,
@@ -251,7 +251,7 @@ def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], objec
 
 def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> RunRow:
     """Time `simulate(model, settings=s)` and its time loop alone; error against ref (SimResult)."""
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     adaptive = s.method != "rk4"
     setting = f"rtol {s.rtol:.0e}, atol {s.atol:.0e}" if adaptive else f"step {s.step:g} s"
@@ -607,7 +607,7 @@ def scaling_fits(points: list[dict], key: str = "native_amortised_us") -> dict:
 
 
 _STARTUP_SCRIPT = ("import json, time; t0 = time.perf_counter(); from coopsim.scenario import load_scenario; "
-                   "from coopsim.simulate import simulate; m = load_scenario({path!r}); t1 = time.perf_counter(); "
+                   "from coopsim.forward.simulate import simulate; m = load_scenario({path!r}); t1 = time.perf_counter(); "
                    "{warm}simulate(m, duration=0.05); t2 = time.perf_counter(); simulate(m, duration=0.05); "
                    "t3 = time.perf_counter(); print(json.dumps({{'imports': t1 - t0, 'first': t2 - t1, 'again': t3 - t2}}))")
 _WARM_UP = "from coopsim.compiled.warmup import warm_up; warm_up(); "   # what the CLI does on a first run
@@ -702,7 +702,7 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     'commands': command_times or None,
     'settings': what was run, 'environment': versions and machine}."""
     from coopsim.scenario import load_scenario
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     peers = peers or load_peers()
     models = [load_scenario(p) for p in scenarios]

@@ -15,7 +15,7 @@ from coopsim.resolutions import METHODS, methods_help
 def _cmd_simulate(args) -> int:
     from coopsim.progress import ProgressBar
     from coopsim.scenario import load_scenario
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
     from coopsim.summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
@@ -29,7 +29,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _print_warnings(res) -> None:
-    """Each warning of a native run (`coopsim.diagnostics`) as one line on stderr."""
+    """Each warning of a native run (`coopsim.forward.diagnostics`) as one line on stderr."""
     for w in res.warnings:
         print(f"coopsim: warning: {w.message()}", file=sys.stderr)
 

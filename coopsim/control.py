@@ -19,7 +19,7 @@ clip it when `saturate` is set:
     prescribed motion.
 
 Two implementations of the same laws: `Controller.command` here (NumPy over the compiled inverse-dynamics
-terms: the 'stages' engine of `coopsim.simulate` calls it at every stage of the reference time loop),
+terms: the 'stages' engine of `coopsim.forward.simulate` calls it at every stage of the reference time loop),
 and `coopsim.compiled.control` (the whole evaluation compiled, called by the compiled time loop at
 every stage: the default engine; `Controller.packed` is its data). The 'bounded' distribution (a QP)
 and Python callables (`TorqueFeedback`) run on the 'stages' engine only (`Controller.compiled_reason`).
@@ -186,7 +186,7 @@ class Controller:
         no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
         import warnings
 
-        from coopsim.diagnostics import describe_state
+        from coopsim.forward.diagnostics import describe_state
         from coopsim.inverse import SampleFailureWarning, distribute, resolution_for
 
         failures: list = []

@@ -13,7 +13,7 @@ import numpy as np
 from coopsim.compare import Comparison, compare
 from coopsim.core.model import Model, TorqueTable, ValidationThresholds
 from coopsim.mujoco_run import TwinResult, run_twin
-from coopsim.simulate import SimResult, simulate
+from coopsim.forward.simulate import SimResult, simulate
 
 
 @dataclass(frozen=True, eq=False)

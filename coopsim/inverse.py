@@ -52,7 +52,7 @@ from coopsim.core.model import Model, TorqueFunction, TorqueTable
 from coopsim.core.errors import ConstraintRankWarning, CoopsimError
 from coopsim.qp import solve_qps
 from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
-from coopsim.simulate import describe_state
+from coopsim.forward.simulate import describe_state
 from coopsim.core.spatial import cross, rigid_acceleration
 from coopsim.stress import grasp_line_axes, line_frame
 from coopsim.trajectory import JointTrajectory, trajectory_at_times
@@ -697,7 +697,7 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
     time loop meets every stage on a knot of the table."""
     from coopsim.compiled.integrate import stage_times, tableau
-    from coopsim.simulate import output_times, simulate
+    from coopsim.forward.simulate import output_times, simulate
 
     tr = traj.t - traj.t[0]
     dt = float(tr[1])

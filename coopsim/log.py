@@ -763,7 +763,7 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
     joints per arm, joint names, joint types (revolute / prismatic)), native.integrator, mujoco, validation,
     and for a native result native.initial_projection (dq, dqd, residual before/after, iterations),
     native.integrator_stats and native.warnings (count; "1", "2", …: each warning as JSON,
-    `coopsim.diagnostics.RunWarning.as_dict`).
+    `coopsim.forward.diagnostics.RunWarning.as_dict`).
     Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
     {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
     extra = dict(extra or {})

@@ -228,7 +228,7 @@ def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
 def mjcf_spec(model: Model) -> mujoco.MjSpec:
     """The spec of a file in `models/`: the twin, its keyframe at the consistent initial state of
     `coopsim run` (`simulate.initial_state`) and the scene (light, floor, camera), saved as written."""
-    from coopsim.simulate import initial_state
+    from coopsim.forward.simulate import initial_state
 
     init = initial_state(model)
     spec = build_spec(model, initial=(init.q, init.qd), scene=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from coopsim.core.joints import COORDINATE, type_names, units_of
-from coopsim.simulate import SimResult
+from coopsim.forward.simulate import SimResult
 
 
 def kinetic_energy_summary(res: SimResult) -> dict:
@@ -23,7 +23,7 @@ def kinetic_energy_summary(res: SimResult) -> dict:
 def simulation_summary(res: SimResult) -> dict:
     """JSON-ready summary of a forward simulation (SI units; a prismatic joint's entries of the `_rad`
     joint vectors are in m; wall_time_s is the only non-deterministic entry); `warnings`: the run's
-    `coopsim.diagnostics.RunWarning`s."""
+    `coopsim.forward.diagnostics.RunWarning`s."""
     m, init = res.model, res.initial
     return {
         "scenario": m.name,

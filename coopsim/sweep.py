@@ -294,7 +294,7 @@ def study_summary(model, study: Study) -> dict:
     files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
     without its trade-off curve, `capacity_summary`."""
     if study.kind == "simulate":
-        from coopsim.simulate import simulate
+        from coopsim.forward.simulate import simulate
         from coopsim.summary import simulation_summary
 
         return simulation_summary(simulate(model, duration=study.duration))

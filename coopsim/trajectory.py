@@ -51,7 +51,7 @@ class JointTrajectory:
 
 
 def from_simulation(res) -> JointTrajectory:
-    """The trajectory of a forward run (`coopsim.simulate.SimResult`): its samples as they are."""
+    """The trajectory of a forward run (`coopsim.forward.simulate.SimResult`): its samples as they are."""
     return JointTrajectory(res.t.copy(), res.q.copy(), res.qd.copy(), res.qdd.copy(), "forward")
 
 
@@ -194,7 +194,7 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     chosen at the start is kept. Raises TrajectoryError naming the time and arm when a target is out
     of reach, an arm's Jacobian is singular, det(S J) changes sign between samples (a singularity is
     crossed), or a target leaves the plane of motion of a planar scene."""
-    from coopsim.simulate import output_times
+    from coopsim.forward.simulate import output_times
 
     S = model.rows
     redundant = _check_joint_counts(model, S)
@@ -238,7 +238,7 @@ def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
 
 
 def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
-    from coopsim.diagnostics import joint_limit_reason, joint_limit_violation
+    from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
 
     hit = joint_limit_violation(model, q)
     if hit is not None:

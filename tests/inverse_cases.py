@@ -10,7 +10,7 @@ import numpy as np
 
 from coopsim.inverse import inverse_problem
 from coopsim.scenario import load_scenario
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from coopsim.trajectory import from_simulation, object_motion_trajectory
 from conftest import SCENARIOS
 

@@ -20,7 +20,7 @@ from coopsim.compiled.structs import PACKED_FIELDS, LOOP_FIELDS, TABLEAU_FIELDS,
 from coopsim.compiled.packing import PackedModel, Workspace
 from coopsim.dynamics import integrate as ref_integrate
 from coopsim.core.model import TorqueTable, torque_at
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from coopsim.core.errors import SimulationError
 from conftest import SCENARIOS, consistent_states, rel_err
 from coopsim.scenario import load_scenario

@@ -19,7 +19,7 @@ from coopsim.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback
 from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.scenario import load_scenario, model_from_dict
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from conftest import SCENARIOS
 
 HOLD = SCENARIOS / "control" / "control_spatial_hold.yaml"

@@ -711,7 +711,7 @@ def valid_log() -> bytes:
 
         from coopsim.log import write_run_log
         from coopsim.scenario import load_scenario
-        from coopsim.simulate import simulate
+        from coopsim.forward.simulate import simulate
 
         model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
         with tempfile.TemporaryDirectory() as tmp:

@@ -24,7 +24,7 @@ from coopsim.harness import cross_validate
 from coopsim.log import read_mcap, write_run_log
 from coopsim.mjcf import build_spec, dof_address, qpos_address
 from coopsim.scenario import load_scenario, load_yaml, model_from_dict
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from coopsim.summary import simulation_summary
 from conftest import SCENARIOS
 

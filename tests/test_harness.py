@@ -109,7 +109,7 @@ def test_bundled_scenario_moves_and_agrees_with_its_mujoco_twin(path):
 
 def test_spatial_scenario_is_a_hard_3d_case(spatial):
     """At least 6 revolute joints per arm, non-parallel axes, gravity on, object turning in 3D."""
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     assert spatial.plane is None and min(a.n for a in spatial.arms) >= 6
     assert np.linalg.norm(spatial.gravity) > 9

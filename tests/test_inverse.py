@@ -253,7 +253,7 @@ def test_torque_function_drives_the_forward_simulation():
     `simulate` exactly like the equivalent table (the paper's constant torques, 0.3 s, bit for bit on
     the reference engine, which is where a TorqueFunction runs)."""
     from coopsim.core.model import TorqueFunction, torque_at
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     m = run(PAPER)[0]
     const = torque_at(m.torques, 0.0)

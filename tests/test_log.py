@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from coopsim import log as L
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.mujoco_run import run_twin
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import quat_to_rot
 
 from conftest import SCENARIOS

@@ -23,7 +23,7 @@ from coopsim.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_
 from coopsim.core.model import Model, TorqueFunction, torque_at
 from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario
-from coopsim.simulate import initial_state, output_times, simulate
+from coopsim.forward.simulate import initial_state, output_times, simulate
 from conftest import ROOT, SCENARIOS
 
 SCENARIO_FILES = sorted(SCENARIOS.glob("*.yaml"))

@@ -150,7 +150,7 @@ def test_reports_name_joints_with_the_helper():
     """The capacity entry's saturating motor (stacked joint 3 of the paper scene: arm 2's first joint,
     the README's 'arm 2 joint 1'), the comparison's worst joint and the plots' legends."""
     from coopsim.capacity import Capacity
-    from coopsim.simulate import simulate
+    from coopsim.forward.simulate import simulate
 
     m = model(PAPER)
     entry = _capacity_entry(m, Capacity(21.71, 0.0, True, 3, 10, 1.77, "upper"))

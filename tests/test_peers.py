@@ -14,7 +14,7 @@ from coopsim.dynamics.manifold import consistent_state
 from coopsim.core.model import torque_at
 from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario
-from coopsim.simulate import forward, simulate
+from coopsim.forward.simulate import forward, simulate
 from conftest import ROOT, SCENARIOS
 
 SCENARIO_FILES = sorted(SCENARIOS.glob("*.yaml"))

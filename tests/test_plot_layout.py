@@ -15,7 +15,7 @@ import pytest
 from coopsim.log import read_mcap, run_metadata, write_mcap, write_run_log
 from coopsim.mujoco_run import run_twin
 from coopsim.scenario import load_scenario
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "tests" / "data" / "planar_7r_pair.yaml"

@@ -11,7 +11,7 @@ import pytest
 from coopsim.log import read_mcap, write_run_log
 from coopsim.mujoco_run import run_twin
 from coopsim.plots import FILES, comparison_plots
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

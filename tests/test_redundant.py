@@ -12,7 +12,7 @@ import pytest
 
 from coopsim import inverse as inv
 from coopsim.dynamics.closed_chain import position_residual
-from coopsim.diagnostics import joint_limits
+from coopsim.forward.diagnostics import joint_limits
 from coopsim.dynamics.manifold import constraint_jacobian
 from coopsim.compiled import api
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate

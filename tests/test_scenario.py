@@ -8,7 +8,7 @@ import yaml
 from coopsim.core.model import torque_at
 from coopsim.scenario import load_scenario, model_from_dict
 from coopsim.core.errors import ConstraintError, ScenarioError
-from coopsim.simulate import initial_state
+from coopsim.forward.simulate import initial_state
 from conftest import SCENARIOS, mutated, paper_residual_by_hand
 
 PAPER = yaml.safe_load((SCENARIOS / "paper_planar_2x3.yaml").read_text())

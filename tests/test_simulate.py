@@ -8,7 +8,7 @@ from scipy.integrate import simpson
 
 from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.model import TorqueTable
-from coopsim.simulate import simulate
+from coopsim.forward.simulate import simulate
 from coopsim.core.errors import ConstraintRankWarning, SimulationError
 from conftest import MujocoReference
 

@@ -31,7 +31,7 @@ from coopsim.compiled import api
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.kinematics import arm_pose
 from coopsim.scenario import model_from_dict
-from coopsim.simulate import initial_state, simulate
+from coopsim.forward.simulate import initial_state, simulate
 from conftest import SCENARIOS, consistent_states, rel_err
 
 D = np.array([1e5, -7e4, 3e4])

@@ -2,7 +2,7 @@
 states (threads, the kernels release the GIL), the time loop with progress, sampling, inverse terms.
 
 Failures come back as codes from compiled code and are turned here into one-line reasons; the
-callers (`coopsim.simulate`) add the time and configuration.
+callers (`coopsim.forward.simulate`) add the time and configuration.
 """
 
 from __future__ import annotations

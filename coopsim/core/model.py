@@ -186,7 +186,7 @@ class IntegratorSettings:
     says so (max_initial_correction stops the run);
     singularity_limit: an arm counts as near a singularity where σ_min/σ_max of its end-effector
     Jacobian in the scene's rows (linear rows divided by the arm's reach) falls below this.
-    rtol/atol are also the accuracy a fixed rk4 step is checked against (`coopsim.diagnostics`)."""
+    rtol/atol are also the accuracy a fixed rk4 step is checked against (`coopsim.forward.diagnostics`)."""
 
     method: str = "dop853"
     rtol: float = 1e-11

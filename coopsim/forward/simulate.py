@@ -28,10 +28,10 @@ from functools import cached_property
 
 import numpy as np
 
-from coopsim import diagnostics
+from coopsim.forward import diagnostics
 from coopsim.core.errors import ConstraintError, ConstraintRankWarning, SimulationError
 from coopsim.dynamics.closed_chain import ChainAcceleration, ChainTerms, chain_terms, forward_dynamics, position_residual
-from coopsim.diagnostics import RunWarning, describe_state, run_warning
+from coopsim.forward.diagnostics import RunWarning, describe_state, run_warning
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
 from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
@@ -55,7 +55,7 @@ class SimResult(SampledMotion):
     'stages'); control_counts: with a controller in the compiled loop, (stage evaluations, evaluations
     in which the motor lines clipped a joint, clipped (evaluation, joint) pairs), else None.
 
-    Computed on first use (`coopsim.diagnostics`; about 4 µs a sample): manipulability (N, r) of each
+    Computed on first use (`coopsim.forward.diagnostics`; about 4 µs a sample): manipulability (N, r) of each
     arm, kinetic_energy (N,) J, warnings (every `RunWarning` of the run, events included)."""
 
     model: Model
@@ -222,7 +222,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
 
 def _check_conditioning(res: SimResult) -> None:
     """With integrator.on_ill_conditioning: error, stop at the first sample whose constraint matrix is
-    ill-conditioned (`coopsim.diagnostics`); a warning on the result otherwise."""
+    ill-conditioned (`coopsim.forward.diagnostics`); a warning on the result otherwise."""
     m = res.model
     i = diagnostics.first_ill_conditioned(m, res.cond) if m.integrator.on_ill_conditioning == "error" else None
     if i is not None:

@@ -5,7 +5,7 @@ A run can finish and still be wrong, or right but fragile; each check below turn
 print them, `summary.json` and the run log's metadata record them):
 
 - `rank_deficient`: Λ𝐈⁻¹Λᵀ lost rank while integrating (minimum-norm grasp wrenches; found by the
-  integrator, `coopsim.simulate`);
+  integrator, `coopsim.forward.simulate`);
 - `ill_conditioned`: its condition number above `integrator.condition_limit` at some sample (the chain
   is near a singular configuration: grasp and internal wrenches lose about log10(cond) digits, and a
   small torque can ask for a large internal force); `integrator.on_ill_conditioning: error` stops the

@@ -1,0 +1,5 @@
+"""Forward simulation: the scenario's torques through an engine, sampled, with run diagnostics.
+
+    simulate.py     the pipeline: consistent initial state, the time loop, every reported quantity
+    diagnostics.py  run warnings (ill-conditioned chain, arm singularities, large corrections, RK4 steps)
+"""
