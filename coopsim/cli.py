@@ -9,7 +9,7 @@ import warnings
 
 from coopsim import __version__
 from coopsim.core.errors import CoopsimError
-from coopsim.resolutions import METHODS, methods_help
+from coopsim.inverse.resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:

@@ -5,12 +5,12 @@ scenario's torque tables are added to it (they act as a disturbance), then the m
 clip it when `saturate` is set:
 
   * joint_pd:  τ = τ_comp(θ, θ̇) + Kp (θ_r − θ) + Kd (θ̇_r − θ̇), with τ_comp the closed-chain inverse
-    dynamics (`coopsim.inverse`) at (θ, 0, 0) ('gravity') or (θ, θ̇, 0) ('bias'), the object's share
-    distributed by a redundancy resolution (`coopsim.resolutions`); θ_r a set-point on the loop-closure
+    dynamics (`coopsim.inverse.solve`) at (θ, 0, 0) ('gravity') or (θ, θ̇, 0) ('bias'), the object's share
+    distributed by a redundancy resolution (`coopsim.inverse.resolutions`); θ_r a set-point on the loop-closure
     manifold or the joint trajectory of a prescribed object motion.
   * computed_torque: the object acceleration a = a_r + Kd (v_r − v) + Kp e (pose error e = [p_r − p;
     log(R_r Rᵀ)], world axes) is turned into the arms' joint accelerations by differential kinematics
-    (`coopsim.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
+    (`coopsim.inverse.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
     the resolution gives τ; a squeeze force f_s along each grasp line (towards the centre of mass) is
     added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion;
     and each arm's grasp error (`grasp_errors`) is fed back in joint space, τ_m += J_mᵀSᵀS (Kp e_m +
@@ -76,8 +76,8 @@ class Command:
 
 
 def saturate(motors, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.capacity.torque_limits`)."""
-    from coopsim.capacity import torque_limits
+    """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.inverse.capacity.torque_limits`)."""
+    from coopsim.inverse.capacity import torque_limits
 
     lo, hi = torque_limits(motors, qd)
     return np.minimum(np.maximum(tau, lo), hi)
@@ -167,9 +167,9 @@ class Controller:
 
     @cached_property
     def resolution(self):
-        """The distribution's resolution (`coopsim.inverse.resolution_for`); 'bounded' with the bounds of
+        """The distribution's resolution (`coopsim.inverse.solve.resolution_for`); 'bounded' with the bounds of
         inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
-        from coopsim.inverse import resolution_for
+        from coopsim.inverse.solve import resolution_for
 
         inv = self.plant.inverse
         bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
@@ -187,7 +187,7 @@ class Controller:
         import warnings
 
         from coopsim.forward.diagnostics import describe_state
-        from coopsim.inverse import SampleFailureWarning, distribute, resolution_for
+        from coopsim.inverse.solve import SampleFailureWarning, distribute, resolution_for
 
         failures: list = []
         with warnings.catch_warnings():
@@ -224,7 +224,7 @@ class Controller:
 
     @cached_property
     def trajectory(self):
-        from coopsim.trajectory import object_motion_trajectory
+        from coopsim.inverse.trajectory import object_motion_trajectory
 
         return object_motion_trajectory(self.model, self.model.inverse.object_motion)
 
@@ -232,7 +232,7 @@ class Controller:
         """(θ_r, θ̇_r) (n,) of joint_pd at time t."""
         if self.settings.reference == "setpoint":
             return self.setpoint, np.zeros_like(self.setpoint)
-        from coopsim.trajectory import trajectory_at
+        from coopsim.inverse.trajectory import trajectory_at
 
         q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
         return q, qd
@@ -241,8 +241,8 @@ class Controller:
         """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
         messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
         the null space of the grasp matrix."""
-        from coopsim.inverse import inverse_problem, torques_of
-        from coopsim.trajectory import JointTrajectory
+        from coopsim.inverse.solve import inverse_problem, torques_of
+        from coopsim.inverse.trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
@@ -289,7 +289,7 @@ class Controller:
         return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
 
     def _computed_torque(self, t, q, qd):
-        from coopsim.trajectory import object_motion_at
+        from coopsim.inverse.trajectory import object_motion_at
 
         s, m = self.settings, self.plant
         state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
@@ -407,7 +407,7 @@ class Controller:
 
 def _packed_motion(motion) -> dict:
     """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
-    and R_a φ of `coopsim.trajectory.object_motion_at`)."""
+    and R_a φ of `coopsim.inverse.trajectory.object_motion_at`)."""
     from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
     from coopsim.core.spatial import rot_log
 

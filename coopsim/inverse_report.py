@@ -2,7 +2,7 @@
 plain-data summaries for the text and JSON outputs, and the MCAP series (no I/O here).
 
     scenario → trajectory (forward run or object-motion IK) → InverseProblem
-      → resolutions (the registry `coopsim.resolutions.RESOLUTIONS`; plus the forward input torques)
+      → resolutions (the registry `coopsim.inverse.resolutions.RESOLUTIONS`; plus the forward input torques)
       → object stress (grasp-line components, box section loads) → [replay]
       → capacity (closed form per resolution, LP bound, optimised weights, [brute-force check])
 """
@@ -14,16 +14,16 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim import capacity as cap
-from coopsim.inverse import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
+from coopsim.inverse import capacity as cap
+from coopsim.inverse.solve import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
                       inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.log import Series, nonfinite_name
 from coopsim.core.model import Model
-from coopsim.resolutions import LINEAR_METHODS, METHODS
-from coopsim.stress import SectionLoads, decompose_internal, section_loads
-from coopsim.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
+from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
+from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
+from coopsim.inverse.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
 DEFINITIONS = ("paper", "nonsqueezing")
 Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.progress.ProgressBar`
@@ -283,7 +283,7 @@ class CapacityStudy:
 def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
                    optimise: bool = True, check: bool = False, methods=LINEAR_METHODS,
                    progress: Progress | None = None) -> CapacityStudy:
-    """DLCC of every linear resolution (`coopsim.resolutions.LINEAR_METHODS`) along the scenario's trajectory
+    """DLCC of every linear resolution (`coopsim.inverse.resolutions.LINEAR_METHODS`) along the scenario's trajectory
     (object scaled at constant geometry; with a payload position also as a point payload), the LP bound,
     the optimised weights; `progress` hears the stages forward (or ik), capacity, lp and weights."""
     traj, _ = trajectory_of(model, duration, progress)
@@ -418,21 +418,21 @@ def inverse_series(study: InverseStudy) -> list:
 
     t = study.traj.t
     lo, hi = study.limits
-    out = [Series("/inverse/trajectory", "coopsim.inverse.Trajectory", t,
+    out = [Series("/inverse/trajectory", "coopsim.inverse.solve.Trajectory", t,
                   {"q": study.traj.q, "qd": study.traj.qd, "qdd": study.traj.qdd, "tau_min": lo, "tau_max": hi})]
     for k, r in study.results.items():
-        out.append(Series(f"/inverse/{k}/torque", "coopsim.inverse.Torque", t,
+        out.append(Series(f"/inverse/{k}/torque", "coopsim.inverse.solve.Torque", t,
                           {"tau": r.tau, "cost": r.cost, "torque_norm": np.linalg.norm(r.tau, axis=1)}))
-        out.append(Series(f"/inverse/{k}/grasp_wrench", "coopsim.inverse.GraspWrench", t, {"wrench": r.grasp_wrench}))
+        out.append(Series(f"/inverse/{k}/grasp_wrench", "coopsim.inverse.solve.GraspWrench", t, {"wrench": r.grasp_wrench}))
         fields = {}
         for d in DEFINITIONS:
             fields[d] = getattr(r, f"internal_{d}")
             for part, v in study.components[k][d].items():
                 fields[f"{d}_{part}"] = v
-        out.append(Series(f"/inverse/{k}/internal", "coopsim.inverse.Internal", t, fields))
+        out.append(Series(f"/inverse/{k}/internal", "coopsim.inverse.solve.Internal", t, fields))
         if k in study.stress:
             s: SectionLoads = study.stress[k]
-            out.append(Series(f"/inverse/{k}/stress", "coopsim.inverse.Stress", t,
+            out.append(Series(f"/inverse/{k}/stress", "coopsim.inverse.solve.Stress", t,
                               {"peak_normal": s.peak_normal, "peak_shear": s.peak_shear,
                                "max_axial": np.max(np.abs(s.axial), axis=1), "max_bending": np.max(s.bending, axis=1)}))
     return out
@@ -445,15 +445,15 @@ def capacity_series(study: CapacityStudy) -> list:
 
     t = study.traj.t
     lo, hi = study.limits
-    out = [Series("/capacity/limits", "coopsim.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
+    out = [Series("/capacity/limits", "coopsim.inverse.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
     for (k, mode), c in study.caps.items():
-        out.append(Series(f"/capacity/{k}/{mode}", "coopsim.capacity.AtCapacity", t,
+        out.append(Series(f"/capacity/{k}/{mode}", "coopsim.inverse.capacity.AtCapacity", t,
                           {"tau": study.tau_at[k, mode], "per_sample_mass": c.per_sample}))
     for mode, c in study.lp.items():
-        out.append(Series(f"/capacity/lp/{mode}", "coopsim.capacity.LP", t, {"per_sample_mass": c.per_sample}))
+        out.append(Series(f"/capacity/lp/{mode}", "coopsim.inverse.capacity.LP", t, {"per_sample_mass": c.per_sample}))
     if study.optimised is not None:
         w, c, tau = study.optimised
-        out.append(Series("/capacity/optimised/scaled", "coopsim.capacity.AtCapacity", t,
+        out.append(Series("/capacity/optimised/scaled", "coopsim.inverse.capacity.AtCapacity", t,
                           {"tau": tau, "per_sample_mass": c.per_sample}))
     return out
 

@@ -5,7 +5,7 @@ fresh study and a stored log are drawn by the same code. Topics: /inverse/trajec
 /inverse/<method>/{torque,internal,stress} (`coopsim inverse`), /capacity/limits,
 /capacity/<method>/<mode>, /capacity/lp/<mode> and the capacity.<method>.<mode> metadata records
 (`coopsim capacity`). Joint labels come from the log's "model" metadata record (`coopsim.core.labels`); the
-resolutions' labels, colours and order from the registry `coopsim.resolutions.RESOLUTIONS`.
+resolutions' labels, colours and order from the registry `coopsim.inverse.resolutions.RESOLUTIONS`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from coopsim.core.labels import metadata_arms, metadata_joint_labels, metadata_j
 from coopsim.log import LogData
 from coopsim.plots import legend_beside, legend_width, panel_grid, run_title
 from coopsim.render import FigureWorkers, render_figures
-from coopsim.resolutions import RESOLUTIONS
+from coopsim.inverse.resolutions import RESOLUTIONS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -649,7 +649,7 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
     if sec is None:
         return None
     from coopsim.control import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
-    from coopsim.resolutions import METHODS
+    from coopsim.inverse.resolutions import METHODS
 
     law = sec.string("law", LAWS)
     if np.any(passive):

@@ -245,7 +245,7 @@ def _study(sec: _Section) -> Study:
                 sec.fail(key, f"expected true or false, got {v!r}")
             options[key] = v
     if kind == "inverse":
-        from coopsim.resolutions import METHODS
+        from coopsim.inverse.resolutions import METHODS
 
         methods = sec.raw("methods", list(METHODS))
         if not isinstance(methods, list) or not methods or any(m not in METHODS for m in methods):

@@ -8,10 +8,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from coopsim.inverse import inverse_problem
+from coopsim.inverse.solve import inverse_problem
 from coopsim.scenario import load_scenario
 from coopsim.forward.simulate import simulate
-from coopsim.trajectory import from_simulation, object_motion_trajectory
+from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory
 from conftest import SCENARIOS
 
 BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.yaml"))

@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim import capacity as cap
-from coopsim import inverse as inv
+from coopsim.inverse import capacity as cap
+from coopsim.inverse import solve as inv
 from coopsim.core.model import Motors
-from coopsim.qp import QPError
+from coopsim.inverse.qp import QPError
 from conftest import MujocoReference, mujoco_kkt_acceleration
 from inverse_cases import BUNDLED, PAYLOAD, problem, run
 

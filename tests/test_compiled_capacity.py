@@ -1,5 +1,5 @@
 """Compiled minimum-energy capacity objective (`coopsim.compiled.capacity`) against the NumPy path it
-replaces in `coopsim.capacity.optimise_weights`: `min_energy_solve` → `torques_of` → `mass_limits` →
+replaces in `coopsim.inverse.capacity.optimise_weights`: `min_energy_solve` → `torques_of` → `mass_limits` →
 `mass_interval`, at random weights on every bundled scenario that has motor lines."""
 
 import warnings
@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim import capacity as cap
-from coopsim import inverse as inv
+from coopsim.inverse import capacity as cap
+from coopsim.inverse import solve as inv
 from coopsim.compiled.capacity import min_energy_mass_interval
 from inverse_cases import BUNDLED, model, problem
 

@@ -182,7 +182,7 @@ def carry():
     """The carry scene with a perfect controller model and no disturbance, started on the prescribed
     motion (closed-chain IK of the first waypoint: zero initial error), and that IK trajectory of the
     first segment sampled every 0.05 s (the knots the run's samples fall on)."""
-    from coopsim.trajectory import object_motion_trajectory
+    from coopsim.inverse.trajectory import object_motion_trajectory
 
     model = load_scenario(CARRY)
     om = model.inverse.object_motion
@@ -199,7 +199,7 @@ def carry():
 def _object_errors(model, res):
     """(position m, orientation rad) (N,) of a run's object against the prescribed motion."""
     from coopsim.core.spatial import quat_to_rot, rot_log
-    from coopsim.trajectory import object_motion_at
+    from coopsim.inverse.trajectory import object_motion_at
 
     om = model.inverse.object_motion
     ref = [object_motion_at(om, t) for t in res.t]
@@ -211,10 +211,10 @@ def _object_errors(model, res):
 def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforward(carry):
     """Perfect model, zero initial error: the bar follows the prescribed motion to ≤ 1e-8 m and rad
     (measured 4.6e-16 m, 8.9e-16 rad), and the torques are the minimum-energy inverse-dynamics torques
-    of the closed-chain IK trajectory (`coopsim.inverse.stage_torques` at its knots) to ≤ 1e-8 N·m
+    of the closed-chain IK trajectory (`coopsim.inverse.solve.stage_torques` at its knots) to ≤ 1e-8 N·m
     (measured 7e-13 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 4.4e-16 m)
     and the internal force changes by exactly the command along each grasp line (≤ 1e-6 N)."""
-    from coopsim import inverse as inv
+    from coopsim.inverse import solve as inv
     from coopsim.core.spatial import quat_to_rot
 
     model, perfect, traj = carry
@@ -259,7 +259,7 @@ def test_joint_pd_reference_follows_the_object_motion(carry):
     prescribed one to 1e-12 m, at a sample of the IK trajectory and between samples (its quintic
     Hermite interpolant; measured 3e-16 to 4e-15 m), and its rates start at zero (rest at waypoint 1)."""
     from coopsim.core.model import ControlSettings
-    from coopsim.trajectory import object_motion_at, object_pose_of
+    from coopsim.inverse.trajectory import object_motion_at, object_pose_of
 
     model, perfect, traj = carry
     first = replace(model.inverse.object_motion, times=traj.t[[0, -1]], output_dt=0.05)
@@ -279,9 +279,9 @@ def test_exported_torque_csv_read_back_by_a_scenario_reproduces_the_carry(carry,
     (`coopsim.torque_csv`, what `coopsim inverse --torques-csv` writes) every 5 ms and read back by the
     scenario's `torque: {csv: …}`, drive the forward model along the prescribed motion to ≤ 1e-6 rad over
     2 s (measured 4.3e-7 rad; 4.4e-5 rad at 50 ms: the error is the piecewise-linear table's, O(dt²))."""
-    from coopsim import inverse as inv
+    from coopsim.inverse import solve as inv
     from coopsim.torque_csv import write_torque_csvs
-    from coopsim.trajectory import trajectory_at_times
+    from coopsim.inverse.trajectory import trajectory_at_times
 
     model, _, traj = carry
     t = np.linspace(0.0, 2.0, 401)

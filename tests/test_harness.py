@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.compare import orientation_error
 from coopsim.harness import cross_validate
 from coopsim.core.model import TorqueTable
 from coopsim.scenario import load_scenario
-from coopsim.trajectory import object_motion_trajectory, trajectory_at_times
+from coopsim.inverse.trajectory import object_motion_trajectory, trajectory_at_times
 from conftest import SCENARIOS
 
 SCENARIO_FILES = sorted(SCENARIOS.glob("*.yaml"))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.spatial import cross
 from inverse_cases import problem, run

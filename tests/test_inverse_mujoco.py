@@ -25,9 +25,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.trajectory import JointTrajectory
+from coopsim.inverse.trajectory import JointTrajectory
 from inverse_cases import BUNDLED, run
 
 SAMPLES = 6

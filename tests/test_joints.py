@@ -257,7 +257,7 @@ def test_object_motion_ik_moves_the_slides():
     """Closed-chain inverse kinematics of a prescribed carry (0.3 s, the bar 6 cm along and 3 cm up,
     turned 0.1 rad): every sample puts the object where the motion says (the kinematics are MuJoCo's,
     test above), and the rail and the lift both move."""
-    from coopsim.trajectory import object_motion_at, object_motion_trajectory, object_pose_of
+    from coopsim.inverse.trajectory import object_motion_at, object_motion_trajectory, object_pose_of
 
     carry = {"trajectory": "object_motion", "object_motion": {"output_dt": 0.02, "waypoints": [
         {"time": 0.0, "position": [0.0, 0.0, 0.5]}, {"time": 0.3, "position": [0.06, 0.0, 0.53], "rpy": [0, 0.1, 0]}]}}

@@ -10,16 +10,17 @@ import json
 import numpy as np
 import pytest
 
-from coopsim import capacity as cap
-from coopsim import inverse as inv
-from coopsim import scenario, trajectory
+from coopsim.inverse import capacity as cap
+from coopsim.inverse import solve as inv
+from coopsim import scenario
+from coopsim.inverse import trajectory
 from coopsim.dynamics import kinematics
 from coopsim.cli import build_parser
 from coopsim.compare import compare
 from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study
 from coopsim.core.labels import joint_labels, metadata_joint_labels
 from coopsim.log import LogData, run_metadata
-from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method
+from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method
 from coopsim.core.spatial import axis_angle_to_rot, box_inertia, rigid_acceleration
 from inverse_cases import model, problem
 
@@ -149,7 +150,7 @@ def test_joint_labels_are_one_based_and_name_custom_arms():
 def test_reports_name_joints_with_the_helper():
     """The capacity entry's saturating motor (stacked joint 3 of the paper scene: arm 2's first joint,
     the README's 'arm 2 joint 1'), the comparison's worst joint and the plots' legends."""
-    from coopsim.capacity import Capacity
+    from coopsim.inverse.capacity import Capacity
     from coopsim.forward.simulate import simulate
 
     m = model(PAPER)
@@ -199,7 +200,7 @@ def test_box_inertia_by_integration_and_its_users():
     K = dm * (np.sum(X * X) * np.eye(3) - X.T @ X)
     assert np.max(np.abs(box_inertia(mass, size) - K)) <= 1e-3 * np.max(K)
     assert box_inertia(12.0, [1.0, 2.0, 3.0]) == pytest.approx(np.diag([13.0, 10.0, 5.0]), abs=1e-15)
-    import coopsim.stress as stress
+    import coopsim.inverse.stress as stress
     assert stress.box_inertia is box_inertia and scenario.box_inertia is box_inertia
     assert not hasattr(stress, "piece_inertia") and not hasattr(scenario, "_box_inertia")
 

@@ -12,9 +12,9 @@ import pytest
 import yaml
 from scipy.optimize import minimize, nnls
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.inverse_report import format_inverse_summary, inverse_study, inverse_summary
-from coopsim.qp import QPError, solve_qp, solve_qps
+from coopsim.inverse.qp import QPError, solve_qp, solve_qps
 from conftest import SCENARIOS, run_cli
 from inverse_cases import problem, run
 

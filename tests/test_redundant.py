@@ -1,4 +1,4 @@
-"""Redundant arms in prescribed object motion (issue #11 scope 4, `coopsim.trajectory.redundant_motion`):
+"""Redundant arms in prescribed object motion (issue #11 scope 4, `coopsim.inverse.trajectory.redundant_motion`):
 least joint-velocity norm plus a null-space pull toward a rest posture, exact on the grasps, consistent
 rates and accelerations (inverse dynamics replays them), and joint limits checked along trajectories.
 
@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.dynamics.closed_chain import position_residual
 from coopsim.forward.diagnostics import joint_limits
 from coopsim.dynamics.manifold import constraint_jacobian
@@ -19,7 +19,7 @@ from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacob
 from coopsim.core.model import ObjectMotion
 from coopsim.robots import robots_folder
 from coopsim.core.spatial import rot_log
-from coopsim.trajectory import (JointTrajectory, TrajectoryError, grasp_targets, object_motion_at,
+from coopsim.inverse.trajectory import (JointTrajectory, TrajectoryError, grasp_targets, object_motion_at,
                                 object_motion_trajectory, object_pose_of)
 from inverse_cases import model, run
 
@@ -97,7 +97,7 @@ def _capacities_as_measured(m, traj):
     arm 2 joint 6 on τ_max at t = 2.52 s), 'min_energy' (the scenario's weights) 32.62 kg (arm 1 joint 4 on
     τ_min, t = 0.44 s) — and the LP bound over every distribution, 53.86 kg, lies above them. Regression
     pins: numbers produced by coopsim itself (README table)."""
-    from coopsim import capacity as cap
+    from coopsim.inverse import capacity as cap
 
     P = inv.inverse_problem(m, traj)
     got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}

@@ -4,9 +4,9 @@ part's Newton–Euler equations), peak-stress formulas, and what the resolutions
 import numpy as np
 import pytest
 
-from coopsim import inverse as inv
+from coopsim.inverse import solve as inv
 from coopsim.core.spatial import box_inertia, cross
-from coopsim.stress import decompose_internal, grasp_line_axes, line_frame, section_loads
+from coopsim.inverse.stress import decompose_internal, grasp_line_axes, line_frame, section_loads
 from inverse_cases import problem, run
 
 PAPER = "paper_planar_2x3"

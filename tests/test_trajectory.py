@@ -13,7 +13,7 @@ from coopsim.scenario import model_from_dict
 from coopsim.core.errors import ScenarioError
 from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import rot_log, rpy_to_rot
-from coopsim.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
+from coopsim.inverse.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
                                 object_pose_of, time_law, trajectory_at)
 from conftest import SCENARIOS, mutated
 from inverse_cases import model, run

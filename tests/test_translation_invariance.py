@@ -125,7 +125,7 @@ def test_a_far_scene_projects_and_integrates_as_at_home(name):
 
 def _trajectory(model):
     """The scenario's trajectory to invert: the IK of its object motion, else a 0.1 s forward run."""
-    from coopsim.trajectory import from_simulation, object_motion_trajectory
+    from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory
 
     if model.inverse.trajectory == "object_motion":
         return object_motion_trajectory(model, model.inverse.object_motion)
@@ -136,10 +136,10 @@ def _inverse_numbers(model, traj, every: int):
     """Every number the inverse side reports that must not move with the scene: per resolution τ,
     grasp wrenches, both internal wrenches and their grasp-line components, the grasp-line frames; the
     closed-form capacities (scaled and payload) of the linear resolutions and the LP bound."""
-    from coopsim import capacity as cap
-    from coopsim import inverse as inv
-    from coopsim.stress import decompose_internal
-    from coopsim.trajectory import JointTrajectory
+    from coopsim.inverse import capacity as cap
+    from coopsim.inverse import solve as inv
+    from coopsim.inverse.stress import decompose_internal
+    from coopsim.inverse.trajectory import JointTrajectory
 
     sub = JointTrajectory(traj.t[::every], traj.q[::every], traj.qd[::every], traj.qdd[::every], traj.source)
     P = inv.inverse_problem(model, sub, np.array([0.1, 0.0, 0.0]))
@@ -180,7 +180,7 @@ def test_object_motion_ik_does_not_move_with_the_scene():
     relative to the arm base (compiled `ik.pose_error`, `trajectory.pose_error`), the targets from the
     waypoints relative to the first one. Before (p_EE − p in world positions) they moved: θ 1.2e-11,
     θ̇ 3.5e-12, θ̈ 2.8e-12 (rel_err, measured with the previous code on this test)."""
-    from coopsim.trajectory import object_motion_trajectory, pose_error
+    from coopsim.inverse.trajectory import object_motion_trajectory, pose_error
 
     home, far = home_and_far("paper_planar_2x3_carry")
     a, b = (object_motion_trajectory(m, m.inverse.object_motion) for m in (far, home))

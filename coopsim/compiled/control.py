@@ -5,18 +5,18 @@ command is added to the tabulated torques (a disturbance) and the sum clipped to
 eq. 36 when `saturate` is set, exactly as `coopsim.control.Controller.command` does in Python:
 
   * joint PD: u = Kp (θ_r − θ) + Kd (θ̇_r − θ̇) + τ_comp, θ_r a set-point or the quintic Hermite
-    interpolant of a joint trajectory (`coopsim.trajectory.trajectory_at_times`), τ_comp the
+    interpolant of a joint trajectory (`coopsim.inverse.trajectory.trajectory_at_times`), τ_comp the
     closed-chain inverse dynamics at (θ, 0, 0) or (θ, θ̇, 0) (`inverse_torques`);
   * computed torque: the object pose error e = [p_r − p; log(R_r Rᵀ)] and twist error against the
-    prescribed object motion (`object_reference`, `coopsim.trajectory.object_motion_at`), the object
+    prescribed object motion (`object_reference`, `coopsim.inverse.trajectory.object_motion_at`), the object
     acceleration a = a_r + Kd ė + Kp e, each arm's θ̈ from S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m), and the
     inverse dynamics of (θ, θ̇, θ̈) with a squeeze force in the null space of the grasp matrix;
     plus, per arm, joint-space feedback on its grasp error (`grasp_feedback`).
 
-Inverse dynamics (`coopsim.inverse`): τ = τ_arms + Jᵀ f with A f = y, distributed by the paper's W⁺
+Inverse dynamics (`coopsim.inverse.solve`): τ = τ_arms + Jᵀ f with A f = y, distributed by the paper's W⁺
 (f_m = S W(−s_m) Sᵀ y / r), the non-squeezing inverse (f = M*Aᵀ(A M*Aᵀ)⁻¹ y) or weighted minimum
 energy (the KKT system [JᵀQJ Aᵀ; A 0][f; λ] = [−JᵀQτ_arms; y] by Gaussian elimination with partial
-pivoting: the same unique minimiser as the null-space form of `coopsim.inverse.min_energy_solve`, for
+pivoting: the same unique minimiser as the null-space form of `coopsim.inverse.solve.min_energy_solve`, for
 actuated arms whose equations keep their rank). The QP of 'bounded' is not compiled.
 
 The controller evaluates its own model (`Pc`, `Wc`: the scene with the controller's object mass); every
@@ -285,7 +285,7 @@ def segment(ts, t):
 @kernel
 def hermite(p0, v0, a0, p1, v1, a1, u, h):
     """(θ, θ̇) at u of the quintic Hermite polynomial through (θ, θ̇, θ̈) = (p0, v0, a0) at u = 0 and
-    (p1, v1, a1) at u = 1 over h s (`coopsim.trajectory.hermite_quintic`)."""
+    (p1, v1, a1) at u = 1 over h s (`coopsim.inverse.trajectory.hermite_quintic`)."""
     v0, a0, v1, a1 = h * v0, h * h * a0, h * v1, h * h * a1
     d = p1 - p0
     c2 = 0.5 * a0
@@ -321,7 +321,7 @@ def joint_reference(C, t):
 
 @kernel
 def time_law(kind, u):
-    """(s, ds/du, d²s/du²) of the normalised time law (`coopsim.trajectory.time_law`)."""
+    """(s, ds/du, d²s/du²) of the normalised time law (`coopsim.inverse.trajectory.time_law`)."""
     if kind == LAW_QUINTIC:
         return (10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5, 30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4,
                 60 * u - 180 * u ** 2 + 120 * u ** 3)
@@ -330,7 +330,7 @@ def time_law(kind, u):
 
 @kernel
 def object_reference(C, t, R):
-    """The prescribed object state at om_t[0] + t (`coopsim.trajectory.object_motion_at`): C.p_r (3,),
+    """The prescribed object state at om_t[0] + t (`coopsim.inverse.trajectory.object_motion_at`): C.p_r (3,),
     R (3, 3), C.v_r and C.a_r (6,) [linear; angular]."""
     ts = C.om_t
     i, tc = segment(ts, ts[0] + t)

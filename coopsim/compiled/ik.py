@@ -1,4 +1,4 @@
-"""Compiled inverse kinematics of one arm (as `coopsim.trajectory.arm_ik` and `arm_rates`): Newton
+"""Compiled inverse kinematics of one arm (as `coopsim.inverse.trajectory.arm_ik` and `arm_rates`): Newton
 steps Δθ = −(S J)⁻¹ S e(θ) on the end-effector pose error e = [p_EE(θ) − p; log(R_EE(θ) Rᵀ)] in the rows
 S (k × 6, k = n_m), then the differential kinematics S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇).
 The target position p is given relative to the arm's base point and compared with the end-effector's

@@ -133,7 +133,7 @@ class ControlSettings:
     τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m) with grasp_kp (2,) [N/m, N·m/rad] and grasp_kd (2,) [N·s/m,
     N·m·s/rad] (zero: none; e_m is zero on the native model up to its loop-closure tolerance).
     mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =
-    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.capacity.torque_limits`).
+    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.inverse.capacity.torque_limits`).
     fallback (distribution 'bounded' only, its bounds inverse.internal_force_bound and
     internal_moment_bound, none: unbounded): where its QP has no solution, the resolution used instead
     ('nonsqueezing', 'paper', 'min_energy': a `distribution_fallback` RunWarning counts them) or
@@ -256,7 +256,7 @@ class ObjectMotion:
     initial_guess (n_total,) rad: joint angles that pick the inverse-kinematics branch at the first
     waypoint (None: the scenario's initial angles). Arms with more joints than constraint rows
     (redundant) move by least joint-velocity norm plus a null-space pull toward rest_posture (n_total,)
-    rad (None: the scenario's initial angles) with gain rest_gain 1/s (`coopsim.trajectory.redundant_rates`)."""
+    rad (None: the scenario's initial angles) with gain rest_gain 1/s (`coopsim.inverse.trajectory.redundant_rates`)."""
 
     times: np.ndarray
     positions: np.ndarray

@@ -25,9 +25,9 @@ There are k(r − 1) more unknowns than equations: each choice of f is a redunda
     Jacobian is not square or singular (the minimum-norm solution where the equations lose rank by the
     forward model's rule, the scenario's rank_tol; an InverseRankWarning says where).
   * 'bounded' — minimum energy with every component of the internal wrench (grasp-line frame,
-    non-squeezing definition by default) within ± a bound: a QP (`coopsim.qp`).
+    non-squeezing definition by default) within ± a bound: a QP (`coopsim.inverse.qp`).
 
-The resolutions are registered in `coopsim.resolutions.RESOLUTIONS` (one function each, the kernels
+The resolutions are registered in `coopsim.inverse.resolutions.RESOLUTIONS` (one function each, the kernels
 here); every reader (studies, capacity, plots, CLI) takes them from there.
 
 Two internal-wrench definitions are reported for every resolution, both at C, per arm (rows sum to 0):
@@ -50,12 +50,12 @@ import numpy as np
 from coopsim.dynamics.grasp import grasp_matrix
 from coopsim.core.model import Model, TorqueFunction, TorqueTable
 from coopsim.core.errors import ConstraintRankWarning, CoopsimError
-from coopsim.qp import solve_qps
-from coopsim.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
+from coopsim.inverse.qp import solve_qps
+from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method  # noqa: F401 (re-exported)
 from coopsim.forward.simulate import describe_state
 from coopsim.core.spatial import cross, rigid_acceleration
-from coopsim.stress import grasp_line_axes, line_frame
-from coopsim.trajectory import JointTrajectory, trajectory_at_times
+from coopsim.inverse.stress import grasp_line_axes, line_frame
+from coopsim.inverse.trajectory import JointTrajectory, trajectory_at_times
 
 
 class InverseError(CoopsimError):
@@ -499,7 +499,7 @@ def internal_wrench(prob: InverseProblem, f: np.ndarray, definition: str, Mstar:
 def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Resolution, Mstar: np.ndarray,
                                     failures: list | None = None) -> np.ndarray:
     """Minimum energy with a bounded internal wrench (a QP per sample, all solved together by
-    `coopsim.qp.solve_qps`: HiGHS, polished to the exact minimiser): min ½τᵀQτ s.t. A f = y, τ_j = 0
+    `coopsim.inverse.qp.solve_qps`: HiGHS, polished to the exact minimiser): min ½τᵀQτ s.t. A f = y, τ_j = 0
     (passive), and for every arm m every component of its internal wrench at C (definition
     res.bound_definition) in its grasp-line frame (axial, 2 shear | torsion, 2 bending) within
     ± res.force_bound (N) | ± res.moment_bound (N·m). A sample whose QP has no solution (infeasible:
@@ -579,7 +579,7 @@ def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolu
 
 def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
     """Rows (N, r, 3, 3) of every arm's grasp-line frame along the problem's trajectory
-    (`coopsim.stress.line_frame` of `coopsim.stress.grasp_line_axes` of the grasp offsets from C)."""
+    (`coopsim.inverse.stress.line_frame` of `coopsim.inverse.stress.grasp_line_axes` of the grasp offsets from C)."""
     return line_frame(grasp_line_axes(prob.grasp_offset), prob.normal)
 
 
@@ -590,7 +590,7 @@ def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
 def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                    force_bound: float = np.inf, moment_bound: float = np.inf,
                    bound_definition: str = "nonsqueezing") -> Resolution:
-    """The resolution `method` (a name in `coopsim.resolutions.RESOLUTIONS`) with the scenario's weights,
+    """The resolution `method` (a name in `coopsim.inverse.resolutions.RESOLUTIONS`) with the scenario's weights,
     passive flags and virtual masses."""
     resolution_method(method)
     obj = model.object

@@ -2,7 +2,7 @@
 
 Two views, both at every sample:
   * the internal wrench of one arm (at the centre of mass C, world axes; either definition, see
-    `coopsim.inverse`) resolved in that arm's grasp-line frame: axial force (squeeze < 0 < stretch),
+    `coopsim.inverse.solve`) resolved in that arm's grasp-line frame: axial force (squeeze < 0 < stretch),
     shear force, torsion (moment about the grasp line) and bending moment;
   * for a box object, the section loads along its grasp axis — the wrench one part of the object
     exerts on the other across a plane cut, from the Newton–Euler equations of the part (exact for a

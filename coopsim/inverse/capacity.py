@@ -4,7 +4,7 @@ Along a fixed trajectory the net object wrench is affine in the carried mass μ:
   * 'scaled': the object scaled at constant geometry (density × μ/m_o): Y = μ Y/m_o (M_o, b_o ∝ m_o);
   * 'payload': a point payload of mass μ at a fixed point of the object: Y = Y_o + μ Y_P.
 Every resolution whose distribution is linear in the net wrench (those the registry
-`coopsim.resolutions.RESOLUTIONS` marks linear: 'paper', 'nonsqueezing', 'min_energy' — with fixed virtual
+`coopsim.inverse.resolutions.RESOLUTIONS` marks linear: 'paper', 'nonsqueezing', 'min_energy' — with fixed virtual
 bodies and weights) therefore gives torques τ(μ) = a + μ b, and the
 motor lines of eq. 36,
     τ_min(θ̇) = −τ_s − (τ_s/ω_s) θ̇  <=  τ  <=  τ_max(θ̇) = τ_s − (τ_s/ω_s) θ̇,
@@ -27,12 +27,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from coopsim.inverse import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
+from coopsim.inverse.solve import (InverseProblem, MinEnergySetup, Resolution, distribute, energy, grasp_line_frames,
                       internal_bound_components, internal_operator, min_energy_setup, min_energy_solve, nan_peak,
                       resolve, torques_of)
 from coopsim.core.model import Model, Motors
-from coopsim.qp import LPBatch, QPError, solve_lps
-from coopsim.resolutions import LINEAR_METHODS, resolution_method
+from coopsim.inverse.qp import LPBatch, QPError, solve_lps
+from coopsim.inverse.resolutions import LINEAR_METHODS, resolution_method
 
 MODES = ("scaled", "payload")
 
@@ -125,7 +125,7 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                     passive_tol: float = 1e-9) -> Capacity:
     """DLCC of resolution `res` (closed form), for the resolutions the registry marks linear in the net
-    object wrench (`coopsim.resolutions.LINEAR_METHODS`); any other ('bounded') is refused (ValueError, with
+    object wrench (`coopsim.inverse.resolutions.LINEAR_METHODS`); any other ('bounded') is refused (ValueError, with
     the registry's reason): its torques are a nonlinear function of the carried mass, which the two-point
     affine fit would silently get wrong. Passive joints must carry no torque: 'min_energy' enforces it;
     for the others a passive torque above passive_tol N·m makes it infeasible."""
@@ -157,7 +157,7 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
     within ±bound; the capacity is the smallest per-sample maximum. The per-sample feasible sets are
     intervals, so their intersection is [max lower, min upper]: the lower ends are 0 when
     `zero_feasible` (a resolution is known to be feasible at μ = 0), else found by a second LP. All
-    samples' LPs are solved together (`coopsim.qp.solve_lps`). The motor reported is the one whose
+    samples' LPs are solved together (`coopsim.inverse.qp.solve_lps`). The motor reported is the one whose
     line has the largest dual value at the binding sample (its LP solved alone)."""
     A_ub, b_ub, A_eq, b_eq = _lp_rows(prob, motors, passive, mode, internal_bound, Mstar, definition)
     N, m = len(prob.t), prob.r * prob.k
@@ -347,7 +347,7 @@ def brute_force_check(model: Model, traj, res: Resolution, mode: str, capacity: 
     carrying a payload of) capacity·(1 ∓ rel), rerun the inverse dynamics from scratch with the same
     resolution, and measure the largest excess of a torque over its motor line (N·m; < 0: within).
     Returns {below_excess, above_excess, above_joint, above_time, ok} (ok: below < 0 < above)."""
-    from coopsim.inverse import inverse_problem
+    from coopsim.inverse.solve import inverse_problem
 
     lo, hi = torque_limits(model.motors, traj.qd)
     out = {}

@@ -1,8 +1,8 @@
 """The redundancy resolutions of the inverse dynamics: one registry that every reader uses.
 
 Each resolution is one entry of RESOLUTIONS: its pure function (the net object wrench → grasp wrenches,
-through the kernels of `coopsim.inverse`), its label and colour (plots), whether its distribution is
-linear in the net wrench (then `coopsim.capacity.method_capacity` has a closed form; otherwise it is
+through the kernels of `coopsim.inverse.solve`), its label and colour (plots), whether its distribution is
+linear in the net wrench (then `coopsim.inverse.capacity.method_capacity` has a closed form; otherwise it is
 refused with the entry's reason) and its line of CLI help. The inverse study runs METHODS, the capacity
 study LINEAR_METHODS, `coopsim inverse --method` offers METHODS, and the plots take labels, colours and
 order from here. Adding a resolution is adding an entry.
@@ -17,25 +17,25 @@ from typing import Callable, NamedTuple
 
 
 def _paper(prob, y, res):
-    from coopsim.inverse import paper_distribution
+    from coopsim.inverse.solve import paper_distribution
 
     return paper_distribution(prob, y), ()
 
 
 def _nonsqueezing(prob, y, res):
-    from coopsim.inverse import nonsqueezing_distribution, nonsqueezing_metric
+    from coopsim.inverse.solve import nonsqueezing_distribution, nonsqueezing_metric
 
     return nonsqueezing_distribution(prob, y, nonsqueezing_metric(prob, res.masses, res.inertias)), ()
 
 
 def _min_energy(prob, y, res):
-    from coopsim.inverse import min_energy_distribution
+    from coopsim.inverse.solve import min_energy_distribution
 
     return min_energy_distribution(prob, y, res.weights, res.passive), ()
 
 
 def _bounded(prob, y, res):
-    from coopsim.inverse import bounded_min_energy_distribution, nonsqueezing_metric
+    from coopsim.inverse.solve import bounded_min_energy_distribution, nonsqueezing_metric
 
     failures: list = []
     f = bounded_min_energy_distribution(prob, y, res, nonsqueezing_metric(prob, res.masses, res.inertias), failures)
@@ -44,8 +44,8 @@ def _bounded(prob, y, res):
 
 class ResolutionMethod(NamedTuple):
     """One redundancy resolution: name; distribute(prob, y, res) → (f, failures) — its pure function:
-    grasp wrenches f (N, rk) for the net object wrenches y (N, k) of an `coopsim.inverse.InverseProblem`
-    with the settings of a `coopsim.inverse.Resolution`, and the samples it could not solve
+    grasp wrenches f (N, rk) for the net object wrenches y (N, k) of an `coopsim.inverse.solve.InverseProblem`
+    with the settings of a `coopsim.inverse.solve.Resolution`, and the samples it could not solve
     (SampleFailure tuple, nan in f); label (plot legends); color (matplotlib); linear: the distribution is
     linear in the net object wrench (fixed weights and virtual bodies), so the capacity has a closed form;
     nonlinear_why: why it has none (the capacity's refusal); help: its words in `coopsim inverse --help`."""
