@@ -19,7 +19,7 @@ from coopsim.forward.simulate import SimResult, simulate
 @dataclass(frozen=True, eq=False)
 class CrossValidation:
     """Both runs and their comparison; control: the controller along the native and the twin run
-    (`coopsim.control.Command` along the run, native first), None without a controller; replay: with a
+    (`coopsim.control.controller.Command` along the run, native first), None without a controller; replay: with a
     controller, the twin driven open-loop by the native closed loop's torques (piecewise linear between
     the native samples) compared with the native run — information, no thresholds (its error is the
     tabulation's, and an unstable open loop, such as a pose held against gravity, drifts)."""
@@ -56,7 +56,7 @@ def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:
 
 def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> tuple | None:
     """The controllers of both runs evaluated at their samples (None without a controller)."""
-    from coopsim.control import closed_loop, controller_of, record
+    from coopsim.control.controller import closed_loop, controller_of, record
 
     ctrl = controller_of(native.model)
     if ctrl is None:

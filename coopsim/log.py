@@ -634,7 +634,7 @@ def twin_series(tw, prefix: str = "/mujoco") -> list[Series]:
 
 
 def control_series(rec, t, prefix: str, law: str) -> Series:
-    """{prefix}/control of a controller along a run (`coopsim.control.Command` along the run): joint_pd
+    """{prefix}/control of a controller along a run (`coopsim.control.controller.Command` along the run): joint_pd
     (coopsim.JointControl): reference_angle, reference_rate (N, n) rad, rad/s, angle_error (N, n) rad;
     computed_torque (coopsim.ObjectControl): pose_error (N, 6) [m; rad], twist_error (N, 6) [m/s; rad/s]
     world axes; both: command (N, n) N·m before saturation, torque (N, n) N·m applied, saturated (N, n)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from coopsim.control import closed_loop
+from coopsim.control.controller import closed_loop
 from coopsim.core.model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
 from coopsim.core.spatial import axis_angle_to_rot, rot_to_quat
 

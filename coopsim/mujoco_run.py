@@ -43,7 +43,7 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         yield
         return
 
-    from coopsim.control import controller_of
+    from coopsim.control.controller import controller_of
 
     ctrl = controller_of(model)
     if ctrl is not None:                         # compiled where it can be (`Controller.fastest`)
@@ -73,8 +73,8 @@ def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
 def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
     model.mujoco.timestep); `progress(fraction)` is called after each sample. A `control:` section runs
-    its controller in the loop (`coopsim.control.closed_loop`), fed the twin's state at every RK4 stage."""
-    from coopsim.control import closed_loop
+    its controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4 stage."""
+    from coopsim.control.controller import closed_loop
 
     model = closed_loop(model)
     m = build_spec(model).compile()

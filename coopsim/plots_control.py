@@ -1,4 +1,4 @@
-"""Plots of a closed-loop run log (`coopsim.control`): tracking error of both models and the native
+"""Plots of a closed-loop run log (`coopsim.control.controller`): tracking error of both models and the native
 internal force, from the /native/control, /mujoco/control and /native/internal_wrench topics
 (`coopsim.log.control_series`). Drawn by `coopsim.plots.comparison_plots` when the log has a
 controller."""

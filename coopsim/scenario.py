@@ -648,7 +648,7 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
     """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
     if sec is None:
         return None
-    from coopsim.control import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
+    from coopsim.control.controller import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
     from coopsim.inverse.resolutions import METHODS
 
     law = sec.string("law", LAWS)

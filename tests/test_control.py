@@ -1,4 +1,4 @@
-"""Controllers in the loop (`coopsim.control`, scenario `control:`): the numbers of issue #12.
+"""Controllers in the loop (`coopsim.control.controller`, scenario `control:`): the numbers of issue #12.
 
 Independent references: the set-point itself (an input), the eq. 36 motor lines written out here, the
 plain-NumPy reference engine (for the 'stages' engine), MuJoCo's own integration of the same controller
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.control import Controller, record
+from coopsim.control.controller import Controller, record
 from coopsim.compare import compare
 from coopsim.harness import control_series, cross_validate
 from coopsim.log import log_data
@@ -118,7 +118,7 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
 
 def test_computed_torque_on_redundant_arms_is_refused_by_name():
     """Differential kinematics per arm needs square arms: a 4-joint arm in a 3-row planar scene is named."""
-    from coopsim.control import ControlError
+    from coopsim.control.controller import ControlError
     from coopsim.core.model import ControlSettings
 
     m = load_scenario(SCENARIOS / "hard" / "planar_4arm_mixed.yaml")

@@ -1,7 +1,7 @@
 """Controllers inside the compiled time loop (`coopsim.compiled.control`), joint-space feedback on each
 arm's grasp error, and the 'bounded' distribution's fallback (issue #12, what the first stop left open).
 
-Independent references: the Python controller (`coopsim.control.Controller.command`, NumPy over the
+Independent references: the Python controller (`coopsim.control.controller.Controller.command`, NumPy over the
 compiled inverse-dynamics terms) in the reference time loop — the 'stages' engine: the same algorithm,
 so the two agree to round-off; finite differences of the grasp error; MuJoCo's own integration of the
 twin with soft welds."""
@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim.control import Controller, ControlError
+from coopsim.control.controller import Controller, ControlError
 from coopsim.core.model import ControlSettings, TorqueTable
 from coopsim.scenario import load_scenario
 from coopsim.forward.simulate import simulate
@@ -106,7 +106,7 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
 # ------------------------------------------------------------------------------------------------
 
 def test_the_grasp_error_is_the_loop_closure_residual_and_its_rate_its_derivative(carry):
-    """e_m (`coopsim.control.grasp_errors`) in the scene's rows is minus the plain-NumPy loop-closure
+    """e_m (`coopsim.control.controller.grasp_errors`) in the scene's rows is minus the plain-NumPy loop-closure
     residual Φ_m (`coopsim.dynamics.closed_chain.position_residual`) at a state off the manifold (≤ 1e-12; the
     carrier's is zero), and ė_m = [v_C + ω × R_o g_m; ω] − J_m θ̇_m is the derivative of e_m along θ̇ by
     central differences (h = 1e-6) at a consistent state (≤ 1e-8 m/s, rad/s, with rates of 1 rad/s;

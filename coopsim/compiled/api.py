@@ -254,7 +254,7 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
     at t_out (strictly increasing). Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it).
     `progress(fraction)` is called between chunks of about chunk_seconds of work; the chunking does
     not change the result. controller: None, or (Pc, Wc, C) StructRefs of a compiled controller in the
-    loop (`coopsim.control.Controller.compiled_loop`), whose command is added to the model's tables;
+    loop (`coopsim.control.controller.Controller.compiled_loop`), whose command is added to the model's tables;
     land: adaptive steps end on every output time (`integrate.run`)."""
     P, W, Ps, Ws = compiled(model)
     ctl = controller

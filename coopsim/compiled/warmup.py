@@ -125,7 +125,7 @@ def compile_evaluations(model) -> None:
 
 def compile_control(model) -> None:
     """The controller entries and the time loop with a controller in it."""
-    from coopsim.control import Controller
+    from coopsim.control.controller import Controller
     from coopsim.core.model import ControlSettings
     from coopsim.compiled import api
 

@@ -12,7 +12,7 @@
 Two engines run this pipeline: 'compiled' (`coopsim.compiled`, the default: the whole time loop in
 compiled code) and 'reference' (the plain-NumPy stage modules and `coopsim.dynamics.integrate`, which lands on
 every output time; used for torques given as a Python function, and as the readable reference the
-compiled engine is tested against). A controller in the loop (`coopsim.control`, torques that read the
+compiled engine is tested against). A controller in the loop (`coopsim.control.controller`, torques that read the
 state) runs in the compiled time loop (`coopsim.compiled.control`, evaluated at every stage; the
 adaptive steps then end on every output time, as the reference loop's do), except a 'bounded'
 distribution or a Python callable: those run on a third engine, 'stages' — the reference time loop over
@@ -198,7 +198,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    from coopsim.control import closed_loop, controller_of
+    from coopsim.control.controller import closed_loop, controller_of
 
     model = closed_loop(model)
     ctrl = controller_of(model)
@@ -235,7 +235,7 @@ def _check_conditioning(res: SimResult) -> None:
 def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progress, start: float,
                        fixed_step: float | None = None, controller=None) -> SimResult:
     """The compiled engine: one compiled time loop (`coopsim.compiled.api.integrate_chain`), then the
-    compiled sampling of every reported quantity. With a `coopsim.control.Controller` (model being its
+    compiled sampling of every reported quantity. With a `coopsim.control.controller.Controller` (model being its
     closed loop) the loop evaluates it at every stage over its scenario's torque tables, lands on every
     output time, and the samples' torques are the controller's there."""
     from coopsim.compiled import api
@@ -356,7 +356,7 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
 def _fallback_events(model: Model) -> list[RunWarning]:
     """A `distribution_fallback` RunWarning when the run's controller fell back from 'bounded' (at its
     first evaluation that did, with their count), else none."""
-    from coopsim.control import controller_of
+    from coopsim.control.controller import controller_of
 
     ctrl = controller_of(model)
     if ctrl is None or not ctrl.fallbacks:
