@@ -67,7 +67,7 @@ except Exception as _exc:   # MUJOCO_GL names a backend whose library is missing
                             f"({_one_line(_exc)}); install that backend (EGL: Debian/Ubuntu libegl1 and "
                             f"libgl1-mesa-dri; OSMesa: libosmesa6) or unset MUJOCO_GL") from None
 
-from coopsim.atomic import atomic_path
+from coopsim.io.atomic import atomic_path
 from coopsim.mjcf import build_spec, qpos_address
 
 SUFFIXES = (".gif", ".mp4")
@@ -126,7 +126,7 @@ def _log_scenario_path(log_path: Path, file: str) -> Path | None:
 
 
 def _read_log(log_path: Path):
-    from coopsim.log import read_mcap
+    from coopsim.io.log import read_mcap
 
     try:
         return read_mcap(log_path)
@@ -139,8 +139,8 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
     the joint angles but not the model's geometry: that comes from the scenario file named in its
     metadata (found relative to the current folder or a folder above the log, and checked against the
     recorded sha256), or from `scenario` when given. `log`: the file already read (`LogData`)."""
-    from coopsim.log import file_sha256
-    from coopsim.scenario import load_scenario
+    from coopsim.io.log import file_sha256
+    from coopsim.io.scenario import load_scenario
 
     log_path = Path(log_path)
     if log is None:
@@ -202,7 +202,7 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
     """(path, LogData) of the scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when
     it was written from this very file (same sha256), holds both models and covers `duration` (default:
     the scenario's); else None."""
-    from coopsim.log import file_sha256
+    from coopsim.io.log import file_sha256
 
     log_path = default_log_path(model)
     if not log_path.is_file():
@@ -221,9 +221,9 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
 def scenario_motion(path: str | Path, duration: float | None = None, progress=None,
                     before_run: Callable[[], None] | None = None, overrides=()) -> Motion:
     """The scenario's :func:`reusable_log` when there is one (never with `overrides`, the `--set`
-    pairs of `coopsim.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
+    pairs of `coopsim.io.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
     models (`before_run()` is called first, e.g. to announce it)."""
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     model = load_scenario(path, overrides=overrides)
     found = None if overrides else reusable_log(path, model, duration)
@@ -679,7 +679,7 @@ def view(source: str | Path, label: str | None = None, overrides=()) -> None:
     import tempfile
 
     from coopsim.mjcf import launch_viewer, mjcf_text
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     source = Path(source)
     if not source.is_file():

@@ -546,7 +546,7 @@ def _synthetic_arm(m: int, r: int, n: int) -> dict:
 
 def synthetic_model(r: int, n: int) -> Model:
     """The frozen Model of `synthetic_scene(r, n)`."""
-    from coopsim.scenario import model_from_dict
+    from coopsim.io.scenario import model_from_dict
 
     return model_from_dict(synthetic_scene(r, n), where=f"synthetic_{r}x{n}")
 
@@ -606,7 +606,7 @@ def scaling_fits(points: list[dict], key: str = "native_amortised_us") -> dict:
 # start-up
 
 
-_STARTUP_SCRIPT = ("import json, time; t0 = time.perf_counter(); from coopsim.scenario import load_scenario; "
+_STARTUP_SCRIPT = ("import json, time; t0 = time.perf_counter(); from coopsim.io.scenario import load_scenario; "
                    "from coopsim.forward.simulate import simulate; m = load_scenario({path!r}); t1 = time.perf_counter(); "
                    "{warm}simulate(m, duration=0.05); t2 = time.perf_counter(); simulate(m, duration=0.05); "
                    "t3 = time.perf_counter(); print(json.dumps({{'imports': t1 - t0, 'first': t2 - t1, 'again': t3 - t2}}))")
@@ -701,7 +701,7 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     Returns {'scenarios': [bench_scenario dicts], 'scaling': scaling_study, 'startup': dict or None,
     'commands': command_times or None,
     'settings': what was run, 'environment': versions and machine}."""
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
     from coopsim.forward.simulate import simulate
 
     peers = peers or load_peers()

@@ -55,8 +55,8 @@ def scaling_csv_text(report: dict) -> str:
 
 def json_safe(obj):
     """A copy strict JSON can carry: non-finite floats become "NaN", "Infinity", "-Infinity" (as in
-    coopsim.log), numpy scalars plain Python ones."""
-    from coopsim.log import nonfinite_name
+    coopsim.io.log), numpy scalars plain Python ones."""
+    from coopsim.io.log import nonfinite_name
 
     if isinstance(obj, dict):
         return {str(k): json_safe(v) for k, v in obj.items()}
@@ -270,7 +270,7 @@ def markdown_report(report: dict) -> str:
 def write_outputs(report: dict, out: str | Path) -> list[Path]:
     """Write bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and
     scaling.png into `out`, each atomically; returns the paths."""
-    from coopsim.atomic import write_text_atomic
+    from coopsim.io.atomic import write_text_atomic
     from coopsim.plots_bench import scaling_figure, work_precision_figure
 
     out = Path(out)

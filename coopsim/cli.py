@@ -14,7 +14,7 @@ from coopsim.inverse.resolutions import METHODS, methods_help
 
 def _cmd_simulate(args) -> int:
     from coopsim.progress import ProgressBar
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
     from coopsim.forward.simulate import simulate
     from coopsim.summary import format_simulation_summary, simulation_summary
 
@@ -41,8 +41,8 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold). Returns (log path, plot paths)."""
-    from coopsim.atomic import previous_set, staged_folder, write_text_atomic
-    from coopsim.log import log_data, write_mcap
+    from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
+    from coopsim.io.log import log_data, write_mcap
     from coopsim.render import render_while
 
     def work():
@@ -60,10 +60,10 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
 def _cmd_mjcf(args) -> int:
     from pathlib import Path
 
-    from coopsim.atomic import write_text_atomic
+    from coopsim.io.atomic import write_text_atomic
     from coopsim.mjcf import mjcf_text
     from coopsim.progress import ProgressBar
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     _announce_compile()                     # the keyframes come from the native model's initial state
     overrides = _overrides(args)
@@ -84,11 +84,11 @@ def _cmd_run(args) -> int:
 
     from coopsim.compare import format_comparison
     from coopsim.harness import control_series, cross_validate
-    from coopsim.log import file_sha256, run_log
+    from coopsim.io.log import file_sha256, run_log
     from coopsim.plots import comparison_plots
     from coopsim.progress import ProgressBar
     from coopsim.render import FigureWorkers
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
     from coopsim.summary import run_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
@@ -124,7 +124,7 @@ def _cmd_run(args) -> int:
 def _cmd_plot(args) -> int:
     from pathlib import Path
 
-    from coopsim.log import read_run_log
+    from coopsim.io.log import read_run_log
     from coopsim.plots import comparison_plots
     from coopsim.progress import ProgressBar
 
@@ -147,7 +147,7 @@ def _cmd_validate(args) -> int:
     from coopsim.compare import format_comparison
     from coopsim.harness import cross_validate
     from coopsim.progress import ProgressBar
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     results, overrides = [], _overrides(args)
     for scenario in _scenario_paths(args.scenarios, hard=True):
@@ -172,11 +172,11 @@ def _cmd_inverse(args) -> int:
     from pathlib import Path
 
     from coopsim.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
-    from coopsim.log import file_sha256, run_metadata
+    from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots_inverse import inverse_plots
     from coopsim.progress import ProgressBar
     from coopsim.render import FigureWorkers
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     methods = METHODS if args.method == "all" else (args.method,)
@@ -203,7 +203,7 @@ def _cmd_inverse(args) -> int:
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     if args.torques_csv is not None:
-        from coopsim.torque_csv import write_torque_csvs
+        from coopsim.io.torque_csv import write_torque_csvs
 
         res = study.results[args.method]
         paths = write_torque_csvs(args.torques_csv, model, res.t - res.t[0], res.tau)
@@ -226,11 +226,11 @@ def _cmd_capacity(args) -> int:
 
     from coopsim.inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
-    from coopsim.log import file_sha256, run_metadata
+    from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots_inverse import capacity_plots
     from coopsim.progress import ProgressBar
     from coopsim.render import FigureWorkers
-    from coopsim.scenario import load_scenario, require_motor_limits
+    from coopsim.io.scenario import load_scenario, require_motor_limits
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
@@ -370,8 +370,8 @@ def _cmd_view(args) -> int:
 
 
 def _overrides(args) -> list:
-    """The command's `--set PATH=VALUE` options as (PATH, value) pairs (`coopsim.overrides`), in order."""
-    from coopsim.overrides import parse_assignment
+    """The command's `--set PATH=VALUE` options as (PATH, value) pairs (`coopsim.io.overrides`), in order."""
+    from coopsim.io.overrides import parse_assignment
 
     return [parse_assignment(text) for text in args.set or ()]
 
@@ -388,7 +388,7 @@ def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
     meaningful MuJoCo twin)."""
     from pathlib import Path
 
-    from coopsim.scenario import load_yaml
+    from coopsim.io.scenario import load_yaml
 
     if given:
         return given

@@ -66,9 +66,9 @@ def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> 
 
 
 def control_series(cv: CrossValidation) -> list:
-    """The log channels of the controllers (`coopsim.log.control_series`): /native/control and
+    """The log channels of the controllers (`coopsim.io.log.control_series`): /native/control and
     /mujoco/control; none without a controller."""
-    from coopsim.log import control_series as series
+    from coopsim.io.log import control_series as series
 
     if cv.control is None:
         return []

@@ -19,7 +19,7 @@ from coopsim.inverse.solve import (InverseResult, default_bounds, distribution_o
                       inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
-from coopsim.log import Series, nonfinite_name
+from coopsim.io.log import Series, nonfinite_name
 from coopsim.core.model import Model
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
@@ -396,7 +396,7 @@ def format_capacity_summary(s: dict) -> str:
 
 def json_safe(obj):
     """A copy of a summary that strict JSON can carry: non-finite floats become the strings "Infinity",
-    "-Infinity" and "NaN" (the spellings coopsim.log uses), e.g. the capacity of unlimited motors."""
+    "-Infinity" and "NaN" (the spellings coopsim.io.log uses), e.g. the capacity of unlimited motors."""
     if isinstance(obj, dict):
         return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

@@ -1,6 +1,6 @@
 """Plots of a closed-loop run log (`coopsim.control.controller`): tracking error of both models and the native
 internal force, from the /native/control, /mujoco/control and /native/internal_wrench topics
-(`coopsim.log.control_series`). Drawn by `coopsim.plots.comparison_plots` when the log has a
+(`coopsim.io.log.control_series`). Drawn by `coopsim.plots.comparison_plots` when the log has a
 controller."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from coopsim.log import LogData
+from coopsim.io.log import LogData
 from coopsim.plots import NATIVE, TWIN, _arm_groups, _finish_log_axis, _log_plot, run_title
 
 if TYPE_CHECKING:

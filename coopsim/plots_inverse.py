@@ -1,6 +1,6 @@
 """Plots of inverse-dynamics and capacity logs, in the spirit of the paper's Figs. 6–8 (PNG, Agg).
 
-Every function takes a :class:`coopsim.log.LogData` read back from the MCAP file the CLI wrote, so a
+Every function takes a :class:`coopsim.io.log.LogData` read back from the MCAP file the CLI wrote, so a
 fresh study and a stored log are drawn by the same code. Topics: /inverse/trajectory,
 /inverse/<method>/{torque,internal,stress} (`coopsim inverse`), /capacity/limits,
 /capacity/<method>/<mode>, /capacity/lp/<mode> and the capacity.<method>.<mode> metadata records
@@ -19,7 +19,7 @@ import numpy as np
 
 from coopsim.core.joints import EFFORT, units_of
 from coopsim.core.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
-from coopsim.log import LogData
+from coopsim.io.log import LogData
 from coopsim.plots import legend_beside, legend_width, panel_grid, run_title
 from coopsim.render import FigureWorkers, render_figures
 from coopsim.inverse.resolutions import RESOLUTIONS

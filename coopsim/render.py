@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, TypeVar
 
-from coopsim.atomic import atomic_path
+from coopsim.io.atomic import atomic_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

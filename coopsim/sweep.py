@@ -1,6 +1,6 @@
 """Parameter sweeps: the sweep file → a validated `Sweep` (points), and one point's evaluation (pure).
 
-A sweep varies fields of one base scenario (`coopsim.overrides` paths) over a grid or a quasi-random
+A sweep varies fields of one base scenario (`coopsim.io.overrides` paths) over a grid or a quasi-random
 design and runs one study per point — the library calls of the single-run command, so a row holds the
 numbers that command prints for the overridden scenario (`coopsim simulate --json`, `coopsim validate
 --json`, `coopsim inverse --no-curve --json`, `coopsim capacity --json`, with `--set` per axis):
@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 
 from coopsim.core.errors import CoopsimError, ScenarioError
-from coopsim.overrides import apply_overrides, parse_path
-from coopsim.scenario import _Section, load_yaml, model_from_dict
+from coopsim.io.overrides import apply_overrides, parse_path
+from coopsim.io.scenario import _Section, load_yaml, model_from_dict
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
 DESIGNS = ("grid", "sobol", "halton")
@@ -84,7 +84,7 @@ class Study:
 
 @dataclass(frozen=True)
 class Axis:
-    """One varied field: name (its column), path (`coopsim.overrides`), values (grid) or bounds (low,
+    """One varied field: name (its column), path (`coopsim.io.overrides`), values (grid) or bounds (low,
     high) of a quasi-random design."""
 
     name: str
@@ -272,7 +272,7 @@ def _patterns(sec: _Section, key: str, default) -> list[str]:
 def _check_base(sweep: Sweep, root: _Section) -> None:
     """The base scenario with the fixed overrides and each axis's first value must make a model (each
     point's own values are checked when it runs: a bad one is that row's error)."""
-    from coopsim.scenario import require_motor_limits
+    from coopsim.io.scenario import require_motor_limits
 
     try:
         apply_overrides(sweep.base, sweep.fixed, where=f"{sweep.scenario}: set:")
@@ -309,7 +309,7 @@ def study_summary(model, study: Study) -> dict:
                         bounds=(study.option("bound_force"), study.option("bound_moment")))
         return inverse_summary(add_checks(s, study.option("replay"), curve=False))
     from coopsim.inverse_report import capacity_study, capacity_summary
-    from coopsim.scenario import require_motor_limits
+    from coopsim.io.scenario import require_motor_limits
 
     require_motor_limits(model, model.name)
     return capacity_summary(capacity_study(model, duration=study.duration, with_lp=study.option("lp"),

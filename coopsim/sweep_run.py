@@ -10,7 +10,7 @@ point ({"row": ...}, floats exact), appended, flushed and fsynced as each point 
 the rows of a checkpoint of the same sweep (same digest; a line cut short by a kill is dropped) and runs
 only the others.
 
-Outputs (`write_outputs`, one set: `coopsim.atomic.staged_folder`, files of earlier sets listed in
+Outputs (`write_outputs`, one set: `coopsim.io.atomic.staged_folder`, files of earlier sets listed in
 sweep.json replaced, the checkpoint and anything else kept): results.parquet and results.csv (one row
 per point), sweep.json (the summary), sweep.mcap (one JSON message per point on /sweep/point, log time =
 the point index in seconds, for Foxglove's Plot panel), and the figures of `coopsim.plots_sweep`.
@@ -90,7 +90,7 @@ class Checkpoint:
     def __init__(self, path: Path, sweep: Sweep, resume: bool):
         path.parent.mkdir(parents=True, exist_ok=True)
         if not resume or not path.is_file():
-            from coopsim.atomic import write_text_atomic
+            from coopsim.io.atomic import write_text_atomic
 
             write_text_atomic(path, json.dumps({"sweep": sweep.digest, "points": len(sweep.points),
                                                 "name": sweep.name}) + "\n")
@@ -317,7 +317,7 @@ def summary(sweep: Sweep, run: SweepRun, files: list[str]) -> dict:
 
 
 def _json_value(v: Any) -> Any:
-    from coopsim.log import nonfinite_name
+    from coopsim.io.log import nonfinite_name
 
     return nonfinite_name(v) if isinstance(v, float) and not math.isfinite(v) else v
 
@@ -333,7 +333,7 @@ def field_name(column: str) -> str:
 def point_log(sweep: Sweep, rows: list[dict]):
     """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
     (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
-    from coopsim.log import JsonTopic, stamp, time_ns
+    from coopsim.io.log import JsonTopic, stamp, time_ns
 
     names = columns_of(rows)
     fields = {c: field_name(c) for c in names}
@@ -353,9 +353,9 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
     """Write the sweep's outputs into folder `out` as one set (module docstring); returns their paths."""
     import pyarrow.parquet as pq
 
-    from coopsim.atomic import previous_set, staged_folder
+    from coopsim.io.atomic import previous_set, staged_folder
     from coopsim.inverse_report import json_safe
-    from coopsim.log import write_mcap
+    from coopsim.io.log import write_mcap
     from coopsim.plots_sweep import sweep_figures
 
     out = Path(out)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

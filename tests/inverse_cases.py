@@ -9,7 +9,7 @@ from functools import lru_cache
 import numpy as np
 
 from coopsim.inverse.solve import inverse_problem
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory
 from conftest import SCENARIOS

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.log import read_mcap
+from coopsim.io.log import read_mcap
 from conftest import run_cli
 
 

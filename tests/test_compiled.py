@@ -23,7 +23,7 @@ from coopsim.core.model import TorqueTable, torque_at
 from coopsim.forward.simulate import simulate
 from coopsim.core.errors import SimulationError
 from conftest import SCENARIOS, consistent_states, rel_err
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 
 TOL = 1e-12
 ALL = sorted(p.stem for p in SCENARIOS.glob("*.yaml"))

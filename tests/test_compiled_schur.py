@@ -19,7 +19,7 @@ from coopsim.compiled import api
 from coopsim.compiled.schur import constraint_trace, schur_factor, schur_solve
 from conftest import SCENARIOS, consistent_states
 from test_compiled import assert_compiled_terms_match_the_reference
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 
 # normwise relative error against LAPACK after one refinement step, per unit of cond(A)
 TOL = 1e-13

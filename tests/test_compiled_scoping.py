@@ -62,7 +62,7 @@ COMPILE = textwrap.dedent('''
     from coopsim.compiled import api
     from coopsim.compiled.toolchain import linking
     from coopsim.compiled.toolchain import resolution
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     model = load_scenario(sys.argv[2])
     api.forward(model, model.q0, model.qd0, np.zeros(model.n_total))   # coopsim's code, from the cache
@@ -101,7 +101,7 @@ LOAD = textwrap.dedent('''
     out = {}
     if sys.argv[2] != "-":
         from coopsim.compiled import api
-        from coopsim.scenario import load_scenario
+        from coopsim.io.scenario import load_scenario
 
         model = load_scenario(sys.argv[2])
         api.forward(model, model.q0, model.qd0, np.zeros(model.n_total))
@@ -197,7 +197,7 @@ STOCK = textwrap.dedent('''
     from coopsim.compiled import api, chain, ik
     from coopsim.compiled.toolchain import jit
     from coopsim.compiled.toolchain import linking
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     out = {"stock": jit.STOCK, "wrapped": [getattr(f, "_coopsim", False) for f in (
         cpu.CPUContext.get_executable, functions.BaseFunction.get_call_type, caching.Cache.load_overload)]}

@@ -13,12 +13,12 @@ import yaml
 from coopsim.control.controller import Controller, record
 from coopsim.compare import compare
 from coopsim.harness import control_series, cross_validate
-from coopsim.log import log_data
+from coopsim.io.log import log_data
 from coopsim.summary import control_summary
 from coopsim.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback
 from coopsim.core.errors import CoopsimError, ScenarioError
-from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.forward.simulate import simulate
 from conftest import SCENARIOS
 
@@ -149,7 +149,7 @@ def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
         np.testing.assert_allclose(ch["torque"], res.tau, rtol=1e-12, atol=1e-12)
         assert not ch["saturated"].any()
     # The tracking-error figure's curves are exactly those errors (per arm, the largest joint's).
-    from coopsim.log import run_metadata
+    from coopsim.io.log import run_metadata
     from coopsim.plots import _arm_groups
     from coopsim.plots_control import _errors, control_jobs
 
@@ -276,11 +276,11 @@ def test_joint_pd_reference_follows_the_object_motion(carry):
 
 def test_exported_torque_csv_read_back_by_a_scenario_reproduces_the_carry(carry, tmp_path):
     """The minimum-energy inverse-dynamics torques of the carry, written as one CSV per arm
-    (`coopsim.torque_csv`, what `coopsim inverse --torques-csv` writes) every 5 ms and read back by the
+    (`coopsim.io.torque_csv`, what `coopsim inverse --torques-csv` writes) every 5 ms and read back by the
     scenario's `torque: {csv: …}`, drive the forward model along the prescribed motion to ≤ 1e-6 rad over
     2 s (measured 4.3e-7 rad; 4.4e-5 rad at 50 ms: the error is the piecewise-linear table's, O(dt²))."""
     from coopsim.inverse import solve as inv
-    from coopsim.torque_csv import write_torque_csvs
+    from coopsim.io.torque_csv import write_torque_csvs
     from coopsim.inverse.trajectory import trajectory_at_times
 
     model, _, traj = carry

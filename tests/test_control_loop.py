@@ -13,7 +13,7 @@ import pytest
 
 from coopsim.control.controller import Controller, ControlError
 from coopsim.core.model import ControlSettings, TorqueTable
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 from conftest import SCENARIOS
 
@@ -231,7 +231,7 @@ def test_a_bounded_distribution_without_solution_falls_back_and_says_so(hold, fa
 def test_a_bounded_distribution_without_solution_stops_the_run_when_told(hold, failing_qp):
     """control.fallback: error — the run stops at the first evaluation without a solution, with one line
     naming the field, the time, the configuration and the reason; fallback is validated by name."""
-    from coopsim.scenario import model_from_dict
+    from coopsim.io.scenario import model_from_dict
     from coopsim.core.errors import ScenarioError
     import yaml
 

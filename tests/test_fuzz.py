@@ -709,8 +709,8 @@ def valid_log() -> bytes:
     if "run" not in _LOG_CACHE:
         import tempfile
 
-        from coopsim.log import write_run_log
-        from coopsim.scenario import load_scenario
+        from coopsim.io.log import write_run_log
+        from coopsim.io.scenario import load_scenario
         from coopsim.forward.simulate import simulate
 
         model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")
@@ -723,7 +723,7 @@ def valid_log() -> bytes:
 def _other_log(missing_field: bool) -> bytes:
     import tempfile
 
-    from coopsim.log import Series, write_mcap
+    from coopsim.io.log import Series, write_mcap
 
     t = np.array([0.0, 0.1])
     if missing_field:
@@ -991,7 +991,7 @@ def test_non_utf8_scenario_names_the_file_and_line(tmp_path, capfd):
     assert "not UTF-8 text: byte 0xff on line 1" in error_line(tmp_path, capfd, "mjcf", scenario(tmp_path, utf16, "u.yaml"))
     # a UTF-8 byte-order mark is fine
     bom = scenario(tmp_path, b"\xef\xbb\xbf" + BASES["paper_planar_2x3"].encode(), "bom.yaml")
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     assert load_scenario(bom).name == "paper_planar_2x3"
 
@@ -1090,7 +1090,7 @@ def test_every_damaged_byte_of_a_log_is_detected(tmp_path):
     from mcap.records import DataEnd
     from mcap.stream_reader import StreamReader
 
-    from coopsim.log import UnreadableLogError, read_run_log
+    from coopsim.io.log import UnreadableLogError, read_run_log
 
     good = valid_log()
     path = tmp_path / "x.mcap"
@@ -1113,7 +1113,7 @@ def test_logs_without_a_data_crc_still_read(tmp_path, monkeypatch):
     """Logs written before the data-section CRC (a zero CRC: not checked) read as before."""
     import functools
 
-    import coopsim.log as L
+    import coopsim.io.log as L
 
     series = [L.Series("/a", "coopsim.A", np.array([0.0, 1.0]), {"x": np.array([[1.0, 2.0], [3.0, np.nan]])})]
     new = L.read_mcap(L.write_mcap(tmp_path / "new.mcap", series, {"m": {"k": "v"}}))
@@ -1148,7 +1148,7 @@ def test_duplicate_keys_are_refused_naming_both_lines(tmp_path, capfd):
 def test_aliases_and_merge_keys_still_work(tmp_path):
     """Anchors, aliases and merge keys are fine within the limits: a link reused by alias loads as the
     plain file does."""
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     text = BASES["paper_planar_2x3"].replace(
         "      - {joint: {axis: [0, 0, 1]}, box: {length: 0.6, cross_section: [0.04, 0.04], density: 7850}}\n", "", 4)
@@ -1261,7 +1261,7 @@ def test_names_must_be_safe_file_stems(tmp_path, capfd, name):
 
 
 def test_default_name_is_the_file_stem_made_safe(tmp_path):
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     for stem, name in (("my scenario", "my_scenario"), (".hidden", "hidden"), ("ok-1.2", "ok-1.2")):
         assert load_scenario(scenario(tmp_path, dump(delete(PAPER, ("name",))), f"{stem}.yaml")).name == name

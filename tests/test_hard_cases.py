@@ -21,9 +21,9 @@ import pytest
 from coopsim import cli
 from coopsim.core.errors import ConstraintError, ScenarioError, SimulationError
 from coopsim.harness import cross_validate
-from coopsim.log import read_mcap, write_run_log
+from coopsim.io.log import read_mcap, write_run_log
 from coopsim.mjcf import build_spec, dof_address, qpos_address
-from coopsim.scenario import load_scenario, load_yaml, model_from_dict
+from coopsim.io.scenario import load_scenario, load_yaml, model_from_dict
 from coopsim.forward.simulate import simulate
 from coopsim.summary import simulation_summary
 from conftest import SCENARIOS
@@ -306,7 +306,7 @@ def test_inverse_writes_its_set_beside_a_run(tmp_path, monkeypatch, capsys):
 _KILLED_WRITER = """
 import sys, time
 from pathlib import Path
-from coopsim.atomic import staged_folder
+from coopsim.io.atomic import staged_folder
 with staged_folder(Path(sys.argv[1])) as stage:      # as `coopsim run` writes its outputs
     (stage / "half.mcap").write_bytes(b"x" * 1000)
     print("writing", flush=True)
@@ -315,7 +315,7 @@ with staged_folder(Path(sys.argv[1])) as stage:      # as `coopsim run` writes i
 
 
 def test_a_killed_run_leaves_nothing_and_the_next_run_cleans_up(tmp_path, monkeypatch, capsys):
-    """A process SIGKILLed while it writes a run's outputs (coopsim.atomic.staged_folder, as `coopsim run`
+    """A process SIGKILLed while it writes a run's outputs (coopsim.io.atomic.staged_folder, as `coopsim run`
     does; the real command under SIGINT: test_cli_text) leaves no `out`, only a hidden temporary,
     which the next `coopsim run` removes."""
     out = tmp_path / "out"

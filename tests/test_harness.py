@@ -12,7 +12,7 @@ from coopsim.inverse import solve as inv
 from coopsim.compare import orientation_error
 from coopsim.harness import cross_validate
 from coopsim.core.model import TorqueTable
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.inverse.trajectory import object_motion_trajectory, trajectory_at_times
 from conftest import SCENARIOS
 

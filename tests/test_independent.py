@@ -30,7 +30,7 @@ from coopsim.dynamics.closed_chain import chain_terms
 from coopsim.compiled import api
 from coopsim.dynamics.kinematics import arm_pose
 from coopsim.core.model import torque_at
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import forward, simulate
 from conftest import SCENARIOS
 from independent.pinocchio_scene import README, Conventions, PinocchioScene

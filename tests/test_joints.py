@@ -27,7 +27,7 @@ from coopsim.inverse_report import capacity_study, inverse_study
 from coopsim.core.joints import joint_units
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
 from coopsim.core.model import PRISMATIC, REVOLUTE
-from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.core.errors import ScenarioError
 from conftest import (SCENARIOS, MujocoReference, consistent_states, mujoco_kkt_acceleration, mutated,
                       rel_err)
@@ -241,7 +241,7 @@ def test_units_follow_the_joint_types(gantry):
     from coopsim.compare import _metric
     from coopsim.core.joints import COORDINATE, EFFORT, RATE, units_of
     from coopsim.core.labels import metadata_joint_types
-    from coopsim.log import run_metadata
+    from coopsim.io.log import run_metadata
 
     meta = run_metadata(gantry)
     types = ["prismatic", "revolute", "revolute"] * 2

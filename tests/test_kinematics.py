@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from coopsim.dynamics.kinematics import arm_frames, arm_pose, ee_bias_acceleration, ee_jacobian
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from conftest import SCENARIOS, MujocoReference, random_states, rel_err
 
 TOL_POSE = 1e-12  # m, dimensionless rotation entries

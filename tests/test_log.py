@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from coopsim import log as L
+from coopsim.io import log as L
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.mujoco_run import run_twin
 from coopsim.forward.simulate import simulate

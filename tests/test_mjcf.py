@@ -22,7 +22,7 @@ from coopsim.compare import orientation_error
 from coopsim.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_text, qpos_address
 from coopsim.core.model import Model, TorqueFunction, torque_at
 from coopsim.mujoco_run import run_twin
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import initial_state, output_times, simulate
 from conftest import ROOT, SCENARIOS
 

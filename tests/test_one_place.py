@@ -12,14 +12,14 @@ import pytest
 
 from coopsim.inverse import capacity as cap
 from coopsim.inverse import solve as inv
-from coopsim import scenario
+from coopsim.io import scenario
 from coopsim.inverse import trajectory
 from coopsim.dynamics import kinematics
 from coopsim.cli import build_parser
 from coopsim.compare import compare
 from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study
 from coopsim.core.labels import joint_labels, metadata_joint_labels
-from coopsim.log import LogData, run_metadata
+from coopsim.io.log import LogData, run_metadata
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method
 from coopsim.core.spatial import axis_angle_to_rot, box_inertia, rigid_acceleration
 from inverse_cases import model, problem

@@ -1,4 +1,4 @@
-"""`--set PATH=VALUE` (coopsim/overrides.py): the overridden scenario is the edited file, bad paths and
+"""`--set PATH=VALUE` (coopsim/io/overrides.py): the overridden scenario is the edited file, bad paths and
 values are one-line errors naming the path (exit 2)."""
 
 import json
@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from conftest import SCENARIOS, mutated, run_cli
-from coopsim.overrides import OverrideError, apply_overrides, format_path, parse_assignment, parse_path
-from coopsim.scenario import load_scenario, load_yaml
+from coopsim.io.overrides import OverrideError, apply_overrides, format_path, parse_assignment, parse_path
+from coopsim.io.scenario import load_scenario, load_yaml
 
 CARRY = SCENARIOS / "paper_planar_2x3_carry.yaml"
 

@@ -13,7 +13,7 @@ import pytest
 from coopsim.dynamics.manifold import consistent_state
 from coopsim.core.model import torque_at
 from coopsim.mujoco_run import run_twin
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import forward, simulate
 from conftest import ROOT, SCENARIOS
 

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coopsim.log import read_mcap, run_metadata, write_mcap, write_run_log
+from coopsim.io.log import read_mcap, run_metadata, write_mcap, write_run_log
 from coopsim.mujoco_run import run_twin
-from coopsim.scenario import load_scenario
+from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]

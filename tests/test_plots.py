@@ -8,7 +8,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from coopsim.log import read_mcap, write_run_log
+from coopsim.io.log import read_mcap, write_run_log
 from coopsim.mujoco_run import run_twin
 from coopsim.plots import FILES, comparison_plots
 from coopsim.forward.simulate import simulate
@@ -89,9 +89,9 @@ def test_every_figure_names_its_scenario_and_settings(logs):
 def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
     from coopsim.inverse_report import inverse_series, solve_study
-    from coopsim.log import log_data, run_metadata
+    from coopsim.io.log import log_data, run_metadata
     from coopsim.plots_inverse import MOTOR_LINES, inverse_torques_figure
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
     from conftest import SCENARIOS
 
     model = load_scenario(SCENARIOS / "paper_planar_2x3.yaml")

@@ -126,7 +126,7 @@ def test_plot_reports_its_stages_on_a_terminal(tmp_path, monkeypatch, capsys):
 
     log = tmp_path / "run.mcap"
     log.write_bytes(b"stand-in")
-    monkeypatch.setattr("coopsim.log.read_run_log", lambda path: "log")
+    monkeypatch.setattr("coopsim.io.log.read_run_log", lambda path: "log")
     monkeypatch.setattr("coopsim.plots.comparison_plots", lambda data, out: [out / "joint_angles.png"])
     err = _Tty()
     monkeypatch.setattr("sys.stderr", err)

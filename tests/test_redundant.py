@@ -17,7 +17,7 @@ from coopsim.dynamics.manifold import constraint_jacobian
 from coopsim.compiled import api
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate
 from coopsim.core.model import ObjectMotion
-from coopsim.robots import robots_folder
+from coopsim.io.robots import robots_folder
 from coopsim.core.spatial import rot_log
 from coopsim.inverse.trajectory import (JointTrajectory, TrajectoryError, grasp_targets, object_motion_at,
                                 object_motion_trajectory, object_pose_of)

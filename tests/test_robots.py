@@ -1,4 +1,4 @@
-"""Arms from robot files (issue #11, `coopsim/robots.py`).
+"""Arms from robot files (issue #11, `coopsim/io/robots.py`).
 
 Independent checks: each arm read from a URDF is compared with the same chain built by Pinocchio's own
 URDF parser (`independent.pinocchio_urdf`: buildModelFromUrdf, every joint off the chain locked by
@@ -25,14 +25,14 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim import robots
+from coopsim.io import robots
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.harness import cross_validate
-from coopsim.log import link_frame_names, native_link_poses, scene_update
+from coopsim.io.log import link_frame_names, native_link_poses, scene_update
 from coopsim.mjcf import build_spec, qpos_address
 from coopsim.core.model import PRISMATIC, REVOLUTE
-from coopsim.robots import ROBOTS, read_chain, robot_file, robots_folder
-from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.io.robots import ROBOTS, read_chain, robot_file, robots_folder
+from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.core.errors import ScenarioError
 from coopsim.core.spatial import quat_to_rot
 from conftest import ROOT, SCENARIOS, mutated

@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from coopsim.core.model import torque_at
-from coopsim.scenario import load_scenario, model_from_dict
+from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.core.errors import ConstraintError, ScenarioError
 from coopsim.forward.simulate import initial_state
 from conftest import SCENARIOS, mutated, paper_residual_by_hand

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.scenario import model_from_dict
+from coopsim.io.scenario import model_from_dict
 from coopsim.core.errors import ScenarioError
 from conftest import SCENARIOS, mutated, run_cli
 

@@ -9,7 +9,7 @@ import yaml
 
 from coopsim.dynamics.closed_chain import position_residual
 from coopsim.core.model import ObjectMotion
-from coopsim.scenario import model_from_dict
+from coopsim.io.scenario import model_from_dict
 from coopsim.core.errors import ScenarioError
 from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import rot_log, rpy_to_rot

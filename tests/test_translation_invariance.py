@@ -30,7 +30,7 @@ from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics, positio
 from coopsim.compiled import api
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.kinematics import arm_pose
-from coopsim.scenario import model_from_dict
+from coopsim.io.scenario import model_from_dict
 from coopsim.forward.simulate import initial_state, simulate
 from conftest import SCENARIOS, consistent_states, rel_err
 

@@ -39,7 +39,7 @@ WAIT_S = 120.0      # the longest wait for a kernel another process compiles
 
 
 def _model():
-    from coopsim.scenario import load_scenario
+    from coopsim.io.scenario import load_scenario
 
     return load_scenario(SCENARIO)
 

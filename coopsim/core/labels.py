@@ -33,7 +33,7 @@ def plain_joint_labels(n: int) -> list[str]:
 
 
 def metadata_arms(metadata: Mapping) -> tuple[list[str], list[int]] | None:
-    """(arm names, joints per arm) of a log's "model" metadata record (as `coopsim.log.run_metadata`
+    """(arm names, joints per arm) of a log's "model" metadata record (as `coopsim.io.log.run_metadata`
     writes it), or None when it is missing or unreadable."""
     rec = metadata.get("model", {})
     try:

@@ -25,7 +25,7 @@ cannot carry as numbers, are written explicitly as the strings ``"NaN"``, ``"Inf
 samples. The condition number ``cond`` of a rank-deficient constraint matrix is +inf, which is why
 non-finite values are encoded rather than refused. A NaN's sign and payload are not kept.
 
-Files are written atomically (:func:`coopsim.atomic.atomic_path`: a temporary file in the target folder,
+Files are written atomically (:func:`coopsim.io.atomic.atomic_path`: a temporary file in the target folder,
 ``os.replace`` when complete; the folder is created if missing) and
 deterministically: no wall-clock content, a fixed library string, messages ordered by time then by the
 order of the streams given, so the same input gives a byte-identical file.
@@ -45,7 +45,7 @@ from typing import Any, Sequence
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from coopsim.atomic import atomic_path
+from coopsim.io.atomic import atomic_path
 from coopsim.dynamics.kinematics import arm_frames
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
@@ -53,9 +53,9 @@ from coopsim.core.model import Model
 from coopsim.core.errors import CoopsimError
 from coopsim.core.spatial import rot_to_quat, rots_to_quats
 
-LIBRARY = "coopsim.log"
+LIBRARY = "coopsim.io.log"
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"
-SERIES_COMMENT = "coopsim.log series v1: one message per sample; t is the sample time in s (float64)"
+SERIES_COMMENT = "coopsim.io.log series v1: one message per sample; t is the sample time in s (float64)"
 _RESERVED = ("timestamp", "t")
 _NONFINITE = {"NaN": float("nan"), "Infinity": float("inf"), "-Infinity": float("-inf")}
 _LEAF = {"f": "number", "i": "integer", "u": "integer", "b": "boolean"}

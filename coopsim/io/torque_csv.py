@@ -1,6 +1,6 @@
 """Joint torques as the CSV files a scenario's `torque: {csv: FILE}` reads back (one file per arm: a
 header row, then time s and one column per joint N·m; floats written in their shortest exact form, so
-a file read back gives the same numbers to the last bit). Written atomically (`coopsim.atomic`)."""
+a file read back gives the same numbers to the last bit). Written atomically (`coopsim.io.atomic`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coopsim.atomic import write_text_atomic
+from coopsim.io.atomic import write_text_atomic
 from coopsim.core.model import Model
 
 

@@ -349,7 +349,7 @@ def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> 
     """An arm read from a robot file (`robots.read_chain`): `robot` (a bundled robot, `robots.ROBOTS`)
     or `file` (URDF or MJCF, relative to the scenario's folder); `chain` {base, tip, lock} (defaults
     from the bundled robot); `end_effector` in the tip link's frame (default: that frame)."""
-    from coopsim import robots
+    from coopsim.io import robots
 
     try:
         if sec.has("robot"):
@@ -777,7 +777,7 @@ def load_yaml(path: Path):
 def parse_yaml_text(text: str, fail):
     """The data of YAML text under the rules of `load_yaml` (one document, no key twice, depth, expanded
     size; libyaml when present); fail(reason) with one line (the line, and the key) otherwise — e.g. a
-    `--set` value (`coopsim.overrides`)."""
+    `--set` value (`coopsim.io.overrides`)."""
     try:
         _check_events(text, fail)
         loader = _YAML_LOADER(text)
@@ -877,7 +877,7 @@ def load_scenario(path: str | Path, duration: float | None = None, overrides=())
     """Read and validate a scenario YAML file (see scenarios/*.yaml for the format). duration: the
     command line's --duration (s), in place of the file's; checked as the file's is, and the work
     limits apply to it. overrides: (PATH, value) pairs set in the file's data before it is validated
-    (`coopsim.overrides.apply_overrides`: the command line's `--set PATH=VALUE`)."""
+    (`coopsim.io.overrides.apply_overrides`: the command line's `--set PATH=VALUE`)."""
     if duration is not None:
         check_duration(duration)
     path = Path(path)
@@ -885,7 +885,7 @@ def load_scenario(path: str | Path, duration: float | None = None, overrides=())
         raise ScenarioError(f"{path}: scenario file not found")
     data = load_yaml(path)
     if overrides:
-        from coopsim.overrides import apply_overrides
+        from coopsim.io.overrides import apply_overrides
 
         data = apply_overrides(data, overrides, where=f"{path}: --set")
     return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem, duration=duration)
@@ -915,7 +915,7 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     line "WHERE: FIELD: reason"); where: the name errors start with (the file); base_dir: the folder
     that relative paths in the data (torque CSVs, robot files) are read from; default_name: the `name`
     when the data has none (made a safe file stem); duration: the command line's --duration in place
-    of the data's (see `load_scenario`). With `coopsim.overrides.apply_overrides` it is how a script
+    of the data's (see `load_scenario`). With `coopsim.io.overrides.apply_overrides` it is how a script
     varies a scenario:
 
         data = load_yaml(Path("scenarios/paper_planar_2x3.yaml"))
