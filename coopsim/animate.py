@@ -68,7 +68,7 @@ except Exception as _exc:   # MUJOCO_GL names a backend whose library is missing
                             f"libgl1-mesa-dri; OSMesa: libosmesa6) or unset MUJOCO_GL") from None
 
 from coopsim.io.atomic import atomic_path
-from coopsim.mjcf import build_spec, qpos_address
+from coopsim.twin.mjcf import build_spec, qpos_address
 
 SUFFIXES = (".gif", ".mp4")
 
@@ -187,7 +187,7 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
 def motion_from_run(model: Model, duration: float | None = None, progress=None) -> Motion:
     """Run the native model and the twin (`harness.cross_validate`, as `coopsim run` does, nothing
     written) and take both models' angles."""
-    from coopsim.harness import cross_validate
+    from coopsim.twin.harness import cross_validate
 
     cv = cross_validate(model, duration=duration, progress=progress)
     return Motion(model, cv.native.t, cv.native.q, cv.twin.q, "run")
@@ -678,7 +678,7 @@ def view(source: str | Path, label: str | None = None, overrides=()) -> None:
     would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when the window is closed. Without a display: CoopsimError."""
     import tempfile
 
-    from coopsim.mjcf import launch_viewer, mjcf_text
+    from coopsim.twin.mjcf import launch_viewer, mjcf_text
     from coopsim.io.scenario import load_scenario
 
     source = Path(source)

@@ -61,7 +61,7 @@ def _cmd_mjcf(args) -> int:
     from pathlib import Path
 
     from coopsim.io.atomic import write_text_atomic
-    from coopsim.mjcf import mjcf_text
+    from coopsim.twin.mjcf import mjcf_text
     from coopsim.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
 
@@ -82,8 +82,8 @@ def _cmd_mjcf(args) -> int:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from coopsim.compare import format_comparison
-    from coopsim.harness import control_series, cross_validate
+    from coopsim.twin.compare import format_comparison
+    from coopsim.twin.harness import control_series, cross_validate
     from coopsim.io.log import file_sha256, run_log
     from coopsim.plots import comparison_plots
     from coopsim.progress import ProgressBar
@@ -144,8 +144,8 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_validate(args) -> int:
-    from coopsim.compare import format_comparison
-    from coopsim.harness import cross_validate
+    from coopsim.twin.compare import format_comparison
+    from coopsim.twin.harness import cross_validate
     from coopsim.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
 

@@ -82,7 +82,7 @@ def run_summary(cv, log_path, plots) -> dict:
 def control_summary(cv) -> dict:
     """The controller along both runs: law, peak tracking error (joint angles rad, or object position m
     and orientation rad) at the last sample and over the run, saturation events (sample × joint), and the
-    largest differences of the open-loop replay (`coopsim.harness.CrossValidation.replay`)."""
+    largest differences of the open-loop replay (`coopsim.twin.harness.CrossValidation.replay`)."""
     out = {"law": cv.native.model.control.law}
     for who, rec in zip(("native", "mujoco"), cv.control):
         if out["law"] == "joint_pd":

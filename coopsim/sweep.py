@@ -299,7 +299,7 @@ def study_summary(model, study: Study) -> dict:
 
         return simulation_summary(simulate(model, duration=study.duration))
     if study.kind == "validate":
-        from coopsim.harness import cross_validate
+        from coopsim.twin.harness import cross_validate
 
         return cross_validate(model, duration=study.duration).comparison.as_dict()
     if study.kind == "inverse":

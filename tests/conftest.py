@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.io.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]

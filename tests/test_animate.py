@@ -17,7 +17,7 @@ from PIL import Image
 
 from coopsim import cli
 from coopsim.animate import Motion, RenderUnavailable, motion_from_log, probe_renderer, render_frames
-from coopsim.harness import cross_validate
+from coopsim.twin.harness import cross_validate
 from coopsim.io.log import file_sha256, write_run_log
 from coopsim.io.scenario import load_scenario
 from conftest import ROOT, SCENARIOS

@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from coopsim.control.controller import Controller, record
-from coopsim.compare import compare
-from coopsim.harness import control_series, cross_validate
+from coopsim.twin.compare import compare
+from coopsim.twin.harness import control_series, cross_validate
 from coopsim.io.log import log_data
 from coopsim.summary import control_summary
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback
 from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.io.scenario import load_scenario, model_from_dict

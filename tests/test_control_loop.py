@@ -142,7 +142,7 @@ def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_mod
     (measured 4.4e-3 m at 0.2 s); with J_mᵀ(Kp e + Kd ė) (2000 N/m, 20 N·m/rad; 100 N·s/m, 1 N·m·s/rad)
     it decays, to at most 5 % by 0.2 s (measured 1.5 %). On the native model, whose grasps are rigid
     (e = 0 to the closure tolerance), the same gains change the trajectory by ≤ 1e-12 rad."""
-    from coopsim.mujoco_run import run_twin
+    from coopsim.twin.mujoco_run import run_twin
     from coopsim.forward.simulate import initial_state, output_times
 
     zero = tuple(TorqueTable(np.zeros(1), np.zeros((1, tab.values.shape[1]))) for tab in carry.torques)

@@ -20,9 +20,9 @@ import pytest
 
 from coopsim import cli
 from coopsim.core.errors import ConstraintError, ScenarioError, SimulationError
-from coopsim.harness import cross_validate
+from coopsim.twin.harness import cross_validate
 from coopsim.io.log import read_mcap, write_run_log
-from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.io.scenario import load_scenario, load_yaml, model_from_dict
 from coopsim.forward.simulate import simulate
 from coopsim.summary import simulation_summary

@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from coopsim.inverse import solve as inv
-from coopsim.compare import orientation_error
-from coopsim.harness import cross_validate
+from coopsim.twin.compare import orientation_error
+from coopsim.twin.harness import cross_validate
 from coopsim.core.model import TorqueTable
 from coopsim.io.scenario import load_scenario
 from coopsim.inverse.trajectory import object_motion_trajectory, trajectory_at_times

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from coopsim.inverse import solve as inv
-from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.inverse.trajectory import JointTrajectory
 from inverse_cases import BUNDLED, run
 

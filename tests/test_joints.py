@@ -238,7 +238,7 @@ def test_units_follow_the_joint_types(gantry):
     """What a person reads names each joint's unit: the log records the joint types (plots take their
     axis units from them; a log without them is revolute), the agreement table takes its worst joint's
     unit, the text summary both."""
-    from coopsim.compare import _metric
+    from coopsim.twin.compare import _metric
     from coopsim.core.joints import COORDINATE, EFFORT, RATE, units_of
     from coopsim.core.labels import metadata_joint_types
     from coopsim.io.log import run_metadata

@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 
 from coopsim.io import log as L
 from coopsim.dynamics.closed_chain import arm_poses
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import quat_to_rot
 

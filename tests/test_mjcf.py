@@ -18,10 +18,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from coopsim.compare import orientation_error
-from coopsim.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_text, qpos_address
+from coopsim.twin.compare import orientation_error
+from coopsim.twin.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_text, qpos_address
 from coopsim.core.model import Model, TorqueFunction, torque_at
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import initial_state, output_times, simulate
 from conftest import ROOT, SCENARIOS
@@ -403,7 +403,7 @@ def test_scene_is_visual_only_and_frames_the_scene(name, twin_files):
 
 
 def test_viewer_launcher_starts_at_the_keyframe(monkeypatch, spatial):
-    """`python -m coopsim.mjcf FILE`: MuJoCo's viewer, loaded (and reloaded) at key 0, the loop closed."""
+    """`python -m coopsim.twin.mjcf FILE`: MuJoCo's viewer, loaded (and reloaded) at key 0, the loop closed."""
     import mujoco.viewer
 
     loaders = []

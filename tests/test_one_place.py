@@ -16,7 +16,7 @@ from coopsim.io import scenario
 from coopsim.inverse import trajectory
 from coopsim.dynamics import kinematics
 from coopsim.cli import build_parser
-from coopsim.compare import compare
+from coopsim.twin.compare import compare
 from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study
 from coopsim.core.labels import joint_labels, metadata_joint_labels
 from coopsim.io.log import LogData, run_metadata

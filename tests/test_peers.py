@@ -12,7 +12,7 @@ import pytest
 
 from coopsim.dynamics.manifold import consistent_state
 from coopsim.core.model import torque_at
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import forward, simulate
 from conftest import ROOT, SCENARIOS

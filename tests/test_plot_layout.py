@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from coopsim.io.log import read_mcap, run_metadata, write_mcap, write_run_log
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 

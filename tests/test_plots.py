@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from coopsim.io.log import read_mcap, write_run_log
-from coopsim.mujoco_run import run_twin
+from coopsim.twin.mujoco_run import run_twin
 from coopsim.plots import FILES, comparison_plots
 from coopsim.forward.simulate import simulate
 

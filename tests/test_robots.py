@@ -27,9 +27,9 @@ import yaml
 
 from coopsim.io import robots
 from coopsim.dynamics.closed_chain import arm_poses
-from coopsim.harness import cross_validate
+from coopsim.twin.harness import cross_validate
 from coopsim.io.log import link_frame_names, native_link_poses, scene_update
-from coopsim.mjcf import build_spec, qpos_address
+from coopsim.twin.mjcf import build_spec, qpos_address
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.io.robots import ROBOTS, read_chain, robot_file, robots_folder
 from coopsim.io.scenario import load_scenario, model_from_dict

@@ -5,10 +5,10 @@ Conventions are coopsim's (README, "Model and conventions"): SI units, rad; join
 arm after arm (`Model.dof_slices`); torques τ(t) (n,) N·m from `coopsim.core.model.torque_at`.
 
 MuJoCo peer (`mujoco_twin`, `twin_rollout`, `mujoco_rollout`, `mujoco_forward_us`): the twin of
-`coopsim.mjcf.build_spec` with the integrator, step and weld time constant chosen per call. The
+`coopsim.twin.mjcf.build_spec` with the integrator, step and weld time constant chosen per call. The
 rollout holds each control constant over one MuJoCo step; the torque of step k, [t_k, t_k + h], is
 τ(t_k + h/2): a midpoint zero-order hold, second-order accurate in h for a smooth τ (exact for
-constant torques; `coopsim.mujoco_run.run_twin` instead evaluates τ at every RK4 stage).
+constant torques; `coopsim.twin.mujoco_run.run_twin` instead evaluates τ at every RK4 stage).
 
 Pinocchio peer (`pinocchio_system`, `pinocchio_eval_us`, `pinocchio_trajectory`): one kinematic
 chain per arm, the object's inertia appended to the carrier arm's last link, one 6D rigid constraint
@@ -29,7 +29,7 @@ import mujoco.rollout
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.core.model import Model, torque_at
 
 INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")

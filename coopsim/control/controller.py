@@ -24,7 +24,7 @@ and `coopsim.compiled.control` (the whole evaluation compiled, called by the com
 every stage: the default engine; `Controller.packed` is its data). The 'bounded' distribution (a QP)
 and Python callables (`TorqueFeedback`) run on the 'stages' engine only (`Controller.compiled_reason`).
 The MuJoCo twin calls the controller through its control callback at every RK4 stage
-(`coopsim.mujoco_run`), compiled where it can be.
+(`coopsim.twin.mujoco_run`), compiled where it can be.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ import numpy as np
 from coopsim.core.joints import COORDINATE, RATE, joint_units
 from coopsim.core.labels import joint_labels
 from coopsim.core.model import ValidationThresholds
-from coopsim.mujoco_run import TwinResult
+from coopsim.twin.mujoco_run import TwinResult
 from coopsim.forward.simulate import SimResult
 from coopsim.core.spatial import orientation_error  # noqa: F401  (the metric; re-exported for the tests)
 

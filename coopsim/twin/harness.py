@@ -10,9 +10,9 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim.compare import Comparison, compare
+from coopsim.twin.compare import Comparison, compare
 from coopsim.core.model import Model, TorqueTable, ValidationThresholds
-from coopsim.mujoco_run import TwinResult, run_twin
+from coopsim.twin.mujoco_run import TwinResult, run_twin
 from coopsim.forward.simulate import SimResult, simulate
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from coopsim.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.core.model import Model, TorqueFunction, applied_torque, torque_at
 from coopsim.core.errors import CoopsimError
 from coopsim.core.results import SampledMotion

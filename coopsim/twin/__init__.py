@@ -1,0 +1,8 @@
+"""The MuJoCo twin: the same scenario as an MJCF model with weld constraints, run on the same torques,
+and the agreement with the native model.
+
+    mjcf.py        MjSpec → MJCF (`models/*.xml`), keyframe at the consistent state, the viewer
+    mujoco_run.py  the twin run (RK4, the same torques or controller)
+    compare.py     agreement metrics
+    harness.py     the cross-validation harness (native and twin, compared, logged)
+"""
