@@ -17,7 +17,7 @@ synthetic scenes, r arms × n joints, with power-law fits. Start-up: first-run c
 start-up, each a fresh Python process.
 
 Everything here returns plain data (dicts, lists of `RunRow`); `coopsim.bench_report` turns a report
-into tables and files, `coopsim.plots_bench` draws the figures. Wall times depend on the machine and
+into tables and files, `coopsim.plots.bench` draws the figures. Wall times depend on the machine and
 its load: compare within one report only.
 """
 

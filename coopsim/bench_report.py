@@ -271,7 +271,7 @@ def write_outputs(report: dict, out: str | Path) -> list[Path]:
     """Write bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and
     scaling.png into `out`, each atomically; returns the paths."""
     from coopsim.io.atomic import write_text_atomic
-    from coopsim.plots_bench import scaling_figure, work_precision_figure
+    from coopsim.plots.bench import scaling_figure, work_precision_figure
 
     out = Path(out)
     paths = [write_text_atomic(out / "bench.json", json_text(report)),

@@ -43,7 +43,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     hold). Returns (log path, plot paths)."""
     from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
     from coopsim.io.log import log_data, write_mcap
-    from coopsim.render import render_while
+    from coopsim.plots.render import render_while
 
     def work():
         during()
@@ -85,9 +85,9 @@ def _cmd_run(args) -> int:
     from coopsim.twin.compare import format_comparison
     from coopsim.twin.harness import control_series, cross_validate
     from coopsim.io.log import file_sha256, run_log
-    from coopsim.plots import comparison_plots
+    from coopsim.plots.run import comparison_plots
     from coopsim.progress import ProgressBar
-    from coopsim.render import FigureWorkers
+    from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario
     from coopsim.summary import run_summary
 
@@ -125,7 +125,7 @@ def _cmd_plot(args) -> int:
     from pathlib import Path
 
     from coopsim.io.log import read_run_log
-    from coopsim.plots import comparison_plots
+    from coopsim.plots.run import comparison_plots
     from coopsim.progress import ProgressBar
 
     log_path = Path(args.log)
@@ -173,9 +173,9 @@ def _cmd_inverse(args) -> int:
 
     from coopsim.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
     from coopsim.io.log import file_sha256, run_metadata
-    from coopsim.plots_inverse import inverse_plots
+    from coopsim.plots.inverse import inverse_plots
     from coopsim.progress import ProgressBar
-    from coopsim.render import FigureWorkers
+    from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
@@ -227,9 +227,9 @@ def _cmd_capacity(args) -> int:
     from coopsim.inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
     from coopsim.io.log import file_sha256, run_metadata
-    from coopsim.plots_inverse import capacity_plots
+    from coopsim.plots.inverse import capacity_plots
     from coopsim.progress import ProgressBar
-    from coopsim.render import FigureWorkers
+    from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario, require_motor_limits
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))

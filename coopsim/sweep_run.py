@@ -13,7 +13,7 @@ only the others.
 Outputs (`write_outputs`, one set: `coopsim.io.atomic.staged_folder`, files of earlier sets listed in
 sweep.json replaced, the checkpoint and anything else kept): results.parquet and results.csv (one row
 per point), sweep.json (the summary), sweep.mcap (one JSON message per point on /sweep/point, log time =
-the point index in seconds, for Foxglove's Plot panel), and the figures of `coopsim.plots_sweep`.
+the point index in seconds, for Foxglove's Plot panel), and the figures of `coopsim.plots.sweep`.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from coopsim.core.errors import CoopsimError
+from coopsim.core.labels import field_name
 from coopsim.sweep import Sweep, evaluate_point, matcher, one_line
 
 CHECKPOINT = "points.jsonl"
@@ -322,14 +323,6 @@ def _json_value(v: Any) -> Any:
     return nonfinite_name(v) if isinstance(v, float) and not math.isfinite(v) else v
 
 
-def field_name(column: str) -> str:
-    """A column's name as a JSON field that Foxglove's message paths can address: characters other than
-    letters, digits and '_' become '_' (`capacity.payload.min_energy.mass_kg` → `capacity_payload_min_energy_mass_kg`)."""
-    import re
-
-    return re.sub(r"[^A-Za-z0-9_]+", "_", column).strip("_") or "_"
-
-
 def point_log(sweep: Sweep, rows: list[dict]):
     """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
     (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
@@ -356,7 +349,7 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
     from coopsim.io.atomic import previous_set, staged_folder
     from coopsim.inverse_report import json_safe
     from coopsim.io.log import write_mcap
-    from coopsim.plots_sweep import sweep_figures
+    from coopsim.plots.sweep import sweep_figures
 
     out = Path(out)
     with staged_folder(out, replaces=previous_set(INDEX)) as stage:

@@ -1,4 +1,4 @@
-"""The work-precision benchmark (coopsim.bench, coopsim.bench_report, coopsim.plots_bench, `coopsim bench`):
+"""The work-precision benchmark (coopsim.bench, coopsim.bench_report, coopsim.plots.bench, `coopsim bench`):
 its pieces on tiny ladders and short runs. Correctness only: no timing is asserted."""
 
 from __future__ import annotations

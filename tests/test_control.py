@@ -150,13 +150,13 @@ def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
         assert not ch["saturated"].any()
     # The tracking-error figure's curves are exactly those errors (per arm, the largest joint's).
     from coopsim.io.log import run_metadata
-    from coopsim.plots import _arm_groups
-    from coopsim.plots_control import _errors, control_jobs
+    from coopsim.plots.figure import arm_groups
+    from coopsim.plots.control import _errors, control_jobs
 
     log = log_data(control_series(cv), run_metadata(model))
     assert [name for _, _, name in control_jobs(log)] == ["tracking_error.png", "internal_force.png"]
     for prefix, res in (("/native", cv.native), ("/mujoco", cv.twin)):
-        curves = _errors(log.topics[f"{prefix}/control"], _arm_groups(log, model.n_total))
+        curves = _errors(log.topics[f"{prefix}/control"], arm_groups(log, model.n_total))
         assert [c[0] for c in curves] == ["arm 1 (left)", "arm 2 (right)"]
         for (_, unit, y), sl in zip(curves, model.dof_slices):
             np.testing.assert_allclose(y, np.max(np.abs(sp - res.q)[:, sl], axis=1), rtol=1e-12)

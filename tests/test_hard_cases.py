@@ -251,8 +251,8 @@ def _quick_plots(fail: bool = False):
 
 
 def _run(monkeypatch, scenario: Path, out: Path, fail: bool = False) -> int:
-    monkeypatch.setattr("coopsim.render.FigureWorkers", _NoWorkers)
-    monkeypatch.setattr("coopsim.plots.comparison_plots", _quick_plots(fail))
+    monkeypatch.setattr("coopsim.plots.render.FigureWorkers", _NoWorkers)
+    monkeypatch.setattr("coopsim.plots.run.comparison_plots", _quick_plots(fail))
     return cli.main(["run", str(scenario), "--duration", "0.05", "--out", str(out), "--json"])
 
 
@@ -292,7 +292,7 @@ def test_inverse_writes_its_set_beside_a_run(tmp_path, monkeypatch, capsys):
         (Path(folder) / "inverse_torques.png").write_bytes(b"png")
         return [Path(folder) / "inverse_torques.png"]
 
-    monkeypatch.setattr("coopsim.plots_inverse.inverse_plots", plots)
+    monkeypatch.setattr("coopsim.plots.inverse.inverse_plots", plots)
     args = ["inverse", str(SCENARIOS / "paper_planar_2x3.yaml"), "--duration", "0.05", "--method", "min_energy",
             "--no-curve", "--out", str(out), "--json"]
     assert cli.main(args) == 0

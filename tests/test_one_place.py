@@ -109,7 +109,7 @@ def _synthetic_logs(n_t: int = 5):
 def test_every_registered_method_is_drawn_by_the_plots_with_its_label_and_colour():
     from matplotlib.colors import to_rgba
 
-    from coopsim.plots_inverse import (capacity_along_path_figure, capacity_motor_figure, inverse_internal_figure,
+    from coopsim.plots.inverse import (capacity_along_path_figure, capacity_motor_figure, inverse_internal_figure,
                                        inverse_norms_figure, inverse_torques_figure)
 
     ilog, clog = _synthetic_logs()

@@ -82,12 +82,12 @@ def legend_overlaps(fig) -> list[str]:
 
 
 def _check_jobs(jobs, scene: str = "planar_7r_pair"):
-    """Build every (builder, args, path) job's figure, lay it out and draw it as `coopsim.render` saves
+    """Build every (builder, args, path) job's figure, lay it out and draw it as `coopsim.plots.render` saves
     it (Agg canvas, `fixed_layout`; without rasterising and encoding the PNG, half the time); its title
     names the scene; no legend over a line."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from coopsim.render import fixed_layout
+    from coopsim.plots.render import fixed_layout
 
     for builder, args, path in jobs:
         fig = builder(*args)
@@ -99,19 +99,19 @@ def _check_jobs(jobs, scene: str = "planar_7r_pair"):
 
 
 def test_run_figures_keep_legends_off_the_lines(run_log, tmp_path):
-    from coopsim.plots import comparison_jobs
+    from coopsim.plots.run import comparison_jobs
 
     _check_jobs(comparison_jobs(run_log, tmp_path))
 
 
 def test_inverse_figures_keep_legends_off_the_lines(inverse_log, tmp_path):
-    from coopsim.plots_inverse import inverse_jobs
+    from coopsim.plots.inverse import inverse_jobs
 
     _check_jobs(inverse_jobs(inverse_log, tmp_path))
 
 
 def test_capacity_figures_keep_legends_off_the_lines(capacity_log, tmp_path):
-    from coopsim.plots_inverse import capacity_jobs
+    from coopsim.plots.inverse import capacity_jobs
 
     jobs = capacity_jobs(capacity_log, tmp_path)   # the payload mode's two figures are these builders again
     assert [Path(p).name for _, _, p in jobs] == ["capacity_motors.png", "capacity_along_path.png"]
@@ -121,7 +121,7 @@ def test_capacity_figures_keep_legends_off_the_lines(capacity_log, tmp_path):
 def test_work_precision_points_are_labelled_and_off_the_legend():
     """The committed benchmark's work-precision figure: every drawn run carries its tolerance or step
     as a label at its point, and the legend covers no line."""
-    from coopsim.plots_bench import work_precision_plot
+    from coopsim.plots.bench import work_precision_plot
 
     report = json.loads((ROOT / "validation" / "results" / "bench" / "bench.json").read_text())
     scenario = report["scenarios"][0]

@@ -10,7 +10,7 @@ import pytest
 
 from coopsim.io.log import read_mcap, write_run_log
 from coopsim.twin.mujoco_run import run_twin
-from coopsim.plots import FILES, comparison_plots
+from coopsim.plots.run import FILES, comparison_plots
 from coopsim.forward.simulate import simulate
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -72,7 +72,7 @@ def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
 
 def test_every_figure_names_its_scenario_and_settings(logs):
     """Titles carry the scenario's name and the integrator settings the log records (issue 10)."""
-    from coopsim import plots
+    from coopsim.plots import run as plots
     from coopsim.core.joints import COORDINATE
 
     both, native = logs
@@ -90,7 +90,7 @@ def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
     from coopsim.inverse_report import inverse_series, solve_study
     from coopsim.io.log import log_data, run_metadata
-    from coopsim.plots_inverse import MOTOR_LINES, inverse_torques_figure
+    from coopsim.plots.inverse import MOTOR_LINES, inverse_torques_figure
     from coopsim.io.scenario import load_scenario
     from conftest import SCENARIOS
 
@@ -112,7 +112,7 @@ def test_object_orientation_panel_against_the_heading_by_hand(logs):
     rotation vector from t = 0 is [0, 0, ψ(t) − ψ(0)] with ψ = 2 atan2(q_z, q_w) of the logged
     quaternion [w, x, y, z]; the difference panel is the angle between the two models' orientations,
     here |ψ_native − ψ_mujoco|."""
-    from coopsim import plots
+    from coopsim.plots import run as plots
 
     both, _ = logs
     fig = plots._object_figure(both)
@@ -158,7 +158,7 @@ def test_joint_angles_are_drawn_unwrapped(logs):
     """A log whose angles are wrapped into (−π, π] (joint 1 passing π mid-run) is drawn continuous, for
     both models, with 'unwrapped' in the axis label, and its difference panel stays at the models'
     difference (not 2π)."""
-    from coopsim import plots
+    from coopsim.plots import run as plots
     from coopsim.core.joints import COORDINATE
 
     both, _ = logs
@@ -178,7 +178,7 @@ def test_prismatic_coordinates_are_not_unwrapped(logs):
     are still unwrapped; each arm's axis names its units."""
     import json
 
-    from coopsim import plots
+    from coopsim.plots import run as plots
     from coopsim.core.joints import COORDINATE
 
     both, _ = logs
@@ -200,7 +200,7 @@ def test_costly_figures_are_handed_out_first_and_paths_keep_job_order():
     recording pool stands in for the processes); the paths come back in job order."""
     from concurrent.futures import Future
 
-    from coopsim.render import FigureWorkers
+    from coopsim.plots.render import FigureWorkers
 
     submitted = []
 

@@ -43,11 +43,11 @@ def test_inverse_and_capacity_report_their_stages_on_a_terminal(workdir, monkeyp
     from coopsim.cli import main
 
     monkeypatch.chdir(workdir)
-    from coopsim.render import FigureWorkers
+    from coopsim.plots.render import FigureWorkers
 
     for name in ("inverse_plots", "capacity_plots"):
-        monkeypatch.setattr(f"coopsim.plots_inverse.{name}", lambda log, folder, workers=None: [])
-    monkeypatch.setattr("coopsim.render.FigureWorkers", lambda: FigureWorkers(n=0))   # no worker processes
+        monkeypatch.setattr(f"coopsim.plots.inverse.{name}", lambda log, folder, workers=None: [])
+    monkeypatch.setattr("coopsim.plots.render.FigureWorkers", lambda: FigureWorkers(n=0))   # no worker processes
     err = _Tty()
     monkeypatch.setattr("sys.stderr", err)
     scenario = "scenarios/paper_planar_2x3.yaml"
@@ -127,7 +127,7 @@ def test_plot_reports_its_stages_on_a_terminal(tmp_path, monkeypatch, capsys):
     log = tmp_path / "run.mcap"
     log.write_bytes(b"stand-in")
     monkeypatch.setattr("coopsim.io.log.read_run_log", lambda path: "log")
-    monkeypatch.setattr("coopsim.plots.comparison_plots", lambda data, out: [out / "joint_angles.png"])
+    monkeypatch.setattr("coopsim.plots.run.comparison_plots", lambda data, out: [out / "joint_angles.png"])
     err = _Tty()
     monkeypatch.setattr("sys.stderr", err)
     assert main(["plot", str(log)]) == 0

@@ -40,12 +40,12 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
     command's figures, which are not compared, are skipped: they would cost seconds of the suite)."""
     import contextlib
 
-    import coopsim.plots_inverse
-    import coopsim.render
+    import coopsim.plots.inverse
+    import coopsim.plots.render
 
-    monkeypatch.setattr(coopsim.render, "FigureWorkers", lambda *a, **k: contextlib.nullcontext())
-    monkeypatch.setattr(coopsim.plots_inverse, "capacity_plots", lambda log, folder, workers=None: [])
-    monkeypatch.setattr(coopsim.plots_inverse, "inverse_plots", lambda log, folder, workers=None: [])
+    monkeypatch.setattr(coopsim.plots.render, "FigureWorkers", lambda *a, **k: contextlib.nullcontext())
+    monkeypatch.setattr(coopsim.plots.inverse, "capacity_plots", lambda log, folder, workers=None: [])
+    monkeypatch.setattr(coopsim.plots.inverse, "inverse_plots", lambda log, folder, workers=None: [])
     sweep = load_sweep(write_sweep(tmp_path, GRID))
     assert sweep.points.tolist() == [[2700, 0.3], [2700, 0.5], [2700, 0.7], [7850, 0.3], [7850, 0.5], [7850, 0.7]]
     row = evaluate_point(sweep, 4)

@@ -1,4 +1,4 @@
-"""Joint and arm labels: the one place they are made, for text, JSON, logs and plots.
+"""Joint, arm and column labels: the one place they are made, for text, JSON, logs and plots.
 
 Arms and joints are counted from 1 everywhere a person reads them: the third joint of the second arm is
 `arm 2 joint 3`. An arm the scenario names (not its default name `arm2`) keeps that name beside its
@@ -9,6 +9,7 @@ the arrays; only the labels count from 1.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping, Sequence
 
 
@@ -60,3 +61,9 @@ def metadata_joint_labels(metadata: Mapping, n: int) -> list[str]:
     arms = metadata_arms(metadata)
     labels = [] if arms is None else arm_joint_labels(*arms)
     return labels if len(labels) == n else plain_joint_labels(n)
+
+
+def field_name(column: str) -> str:
+    """A column's name as a JSON field that Foxglove's message paths can address: characters other than
+    letters, digits and '_' become '_' (`capacity.payload.min_energy.mass_kg` → `capacity_payload_min_energy_mass_kg`)."""
+    return re.sub(r"[^A-Za-z0-9_]+", "_", column).strip("_") or "_"

@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from coopsim.plots import LEGEND_FONT, legend_beside, legend_width, panel_grid
-from coopsim.render import save_figure
+from coopsim.core.labels import field_name
+from coopsim.plots.figure import LEGEND_FONT, legend_beside, legend_width, panel_grid
+from coopsim.plots.render import save_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -152,8 +153,6 @@ def _edges(centres: np.ndarray) -> np.ndarray:
 
 
 def figure_name(column: str, axes: int) -> str:
-    from coopsim.sweep_run import field_name
-
     return f"{'line' if axes == 1 else 'map' if axes == 2 else 'hist'}_{field_name(column)}.png"
 
 

@@ -1,6 +1,6 @@
 """Plots of a closed-loop run log (`coopsim.control.controller`): tracking error of both models and the native
 internal force, from the /native/control, /mujoco/control and /native/internal_wrench topics
-(`coopsim.io.log.control_series`). Drawn by `coopsim.plots.comparison_plots` when the log has a
+(`coopsim.io.log.control_series`). Drawn by `coopsim.plots.run.comparison_plots` when the log has a
 controller."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from coopsim.io.log import LogData
-from coopsim.plots import NATIVE, TWIN, _arm_groups, _finish_log_axis, _log_plot, run_title
+from coopsim.plots.figure import NATIVE, TWIN, arm_groups, finish_log_axis, log_plot, run_title
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -34,14 +34,14 @@ def tracking_error_figure(log: LogData) -> Figure:
     fig = Figure(figsize=(8, 4))
     ax = fig.subplots()
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
-    groups = _arm_groups(log, n)
+    groups = arm_groups(log, n)
     drawn = []
     for prefix, who, ls in ((NATIVE, "native", "-"), (TWIN, "MuJoCo", "--")):
         ch = log.topics.get(prefix + "/control")
         if ch is not None:
-            drawn += [_log_plot(ax, ch["t"], e, f"{who}: {label} ({unit})", ls=ls) for label, unit, e in _errors(ch, groups)]
+            drawn += [log_plot(ax, ch["t"], e, f"{who}: {label} ({unit})", ls=ls) for label, unit, e in _errors(ch, groups)]
     ax.set_title(run_title(log, "Tracking error", twin=TWIN + "/control" in log.topics), fontsize=9)
-    _finish_log_axis(ax, any(drawn), "tracking error (rad or m)")
+    finish_log_axis(ax, any(drawn), "tracking error (rad or m)")
     return fig
 
 

@@ -20,8 +20,8 @@ import numpy as np
 from coopsim.core.joints import EFFORT, units_of
 from coopsim.core.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
 from coopsim.io.log import LogData
-from coopsim.plots import legend_beside, legend_width, panel_grid, run_title
-from coopsim.render import FigureWorkers, render_figures
+from coopsim.plots.figure import legend_beside, legend_width, panel_grid, run_title
+from coopsim.plots.render import FigureWorkers, render_figures
 from coopsim.inverse.resolutions import RESOLUTIONS
 
 if TYPE_CHECKING:
@@ -157,7 +157,7 @@ def inverse_internal_figure(log: LogData) -> Figure:
 
 
 def inverse_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
-    """The figures of `inverse_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
+    """The figures of `inverse_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE)."""
     out = Path(out_dir)
     return [(inverse_torques_figure, (log,), out / "inverse_torques.png"),
             (inverse_norms_figure, (log,), out / "inverse_norms.png"),
@@ -232,7 +232,7 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
 
 
 def capacity_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
-    """The figures of `capacity_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE)."""
+    """The figures of `capacity_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE)."""
     out = Path(out_dir)
     jobs = []
     for mode in ("scaled", "payload"):

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from coopsim.plots import legend_beside, legend_width, panel_grid
-from coopsim.render import save_figure
+from coopsim.plots.figure import legend_beside, legend_width, panel_grid
+from coopsim.plots.render import save_figure
 
 ERROR_FLOOR = 1e-17  # rad: where an error of exactly zero is drawn
 _STYLE = {("native", "dop853"): ("C0", "o"), ("native", "dopri5"): ("C1", "o"), ("native", "rk4"): ("C2", "o"),

@@ -20,73 +20,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from coopsim.core.joints import COORDINATE, RATE, units_of
-from coopsim.core.labels import arm_label, metadata_arms, metadata_joint_labels, metadata_joint_types
+from coopsim.core.labels import metadata_joint_labels, metadata_joint_types
 from coopsim.io.log import LogData
-from coopsim.render import FigureWorkers, render_figures
+from coopsim.plots.figure import (NATIVE, TWIN, arm_groups, finish_log_axis, legend_beside, legend_width,
+                                  log_plot, panel_grid, run_title)
+from coopsim.plots.render import FigureWorkers, render_figures
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-NATIVE, TWIN = "/native", "/mujoco"
 FILES = ("joint_angles.png", "joint_rates.png", "object_motion.png", "constraint_violation.png")
 _AXES = ("x", "y", "z")
 PANEL, OBJECT_PANEL = (4.6, 2.7), (3.6, 2.7)   # inches: a joint panel, an object panel
-LEGEND_FONT = 8.0    # pt
-LEGEND_GAP = 0.12    # inches between a panel's right edge and its legend
-
-
-def legend_width(labels: list[str], fontsize: float = LEGEND_FONT) -> float:
-    """Width (inches) of a one-column legend of `labels` at `fontsize`: the longest label measured with
-    matplotlib's font metrics, plus matplotlib's default handle (2 em), text pad (0.8 em) and border
-    pads (0.4 em each side) and the frame."""
-    from matplotlib.font_manager import FontProperties
-    from matplotlib.textpath import TextToPath
-
-    prop, measure = FontProperties(size=fontsize), TextToPath()
-    text = max((measure.get_text_width_height_descent(s, prop, ismath=False)[0] for s in labels), default=0.0)
-    return (text + fontsize * (2.0 + 0.8 + 2 * 0.4) + 2.0) / 72.0
-
-
-def panel_grid(fig: Figure, rows: int, cols: int, size: tuple[float, float], legend: float = 0.0,
-               legend_after=None, suptitle: bool = True) -> np.ndarray:
-    """Axes (rows, cols) of panels `size` (width, height) inches on `fig`, with room `legend` inches
-    wide for a legend (`legend_beside`) right of each panel column in `legend_after` (default: the
-    last column; `legend` 0: none): an empty grid column, so the panels, the legends and the next
-    column's labels never meet. Sets the figure size for `coopsim.render.fixed_layout`'s margins and
-    gaps (`suptitle`: the figure will have one)."""
-    from coopsim.render import MARGIN
-
-    after = set(range(cols)[-1:] if legend_after is None else legend_after) if legend > 0 else set()
-    spare = max(legend + LEGEND_GAP - MARGIN["wgap"], 0.05)   # the legend starts inside the gap before its column
-    widths, index = [], []
-    for j in range(cols):
-        index.append(len(widths))
-        widths += [size[0]] + ([spare] if j in after else [])
-    fig.set_size_inches(MARGIN["left"] + MARGIN["right"] + sum(widths) + MARGIN["wgap"] * (len(widths) - 1),
-                        MARGIN["top"] + MARGIN["bottom"] + MARGIN["suptitle"] * suptitle + rows * size[1]
-                        + MARGIN["hgap"] * (rows - 1))
-    grid = fig.add_gridspec(rows, len(widths), width_ratios=widths)
-    return np.array([[fig.add_subplot(grid[i, index[j]]) for j in range(cols)] for i in range(rows)])
-
-
-def legend_beside(ax, handles: list | None = None, fontsize: float = LEGEND_FONT):
-    """The legend of `ax` (or of `handles`) outside it: right of the panel, LEGEND_GAP inches from it,
-    top edges aligned (in the room `panel_grid` keeps there)."""
-    from matplotlib.transforms import ScaledTranslation
-
-    at = ax.transAxes + ScaledTranslation(LEGEND_GAP, 0.0, ax.get_figure().dpi_scale_trans)
-    return ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), bbox_transform=at,
-                     borderaxespad=0.0, fontsize=fontsize)
-
-
-def _arm_groups(log: LogData, n: int) -> list[tuple[str, slice]]:
-    """(arm label, joint slice) per arm from the "model" metadata record; one group without it."""
-    arms = metadata_arms(log.metadata)
-    if arms is None or sum(arms[1]) != n:
-        return [("joints", slice(0, n))]
-    names, dofs = arms
-    ends = np.cumsum([0] + dofs)
-    return [(arm_label(a, m), slice(int(s), int(e))) for m, (a, s, e) in enumerate(zip(names, ends[:-1], ends[1:]))]
 
 
 def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[str]:
@@ -95,23 +40,6 @@ def _joint_labels(log: LogData, n: int, joint_names: list[str] | None) -> list[s
             raise ValueError(f"joint_names: expected {n} names, got {len(joint_names)}")
         return list(joint_names)
     return metadata_joint_labels(log.metadata, n)
-
-
-def run_title(log: LogData, what: str, twin: bool = False) -> str:
-    """A figure title naming the scenario and its settings, as the log's metadata records them:
-    'paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12; MuJoCo RK4 0.001 s)'. `twin`: name the
-    MuJoCo settings too."""
-    meta = log.metadata
-    name = meta.get("scenario", {}).get("name")
-    nat, mj = meta.get("native.integrator", {}), meta.get("mujoco", {})
-    settings = []
-    if "method" in nat:
-        settings.append(f"native {nat['method']}" + (f" rtol {nat['rtol']}" if nat["method"] != "rk4" else
-                                                     f" step {nat.get('step')} s"))
-    if twin and "integrator" in mj:
-        settings.append(f"MuJoCo {mj['integrator']} {mj.get('timestep')} s")
-    text = what if name is None else f"{name} — {what}"
-    return text + (f" ({'; '.join(settings)})" if settings else "")
 
 
 def _aligned(t: np.ndarray, t_other: np.ndarray, x_other: np.ndarray) -> np.ndarray:
@@ -127,30 +55,6 @@ def _twin(log: LogData, topic: str, key: str, t: np.ndarray) -> np.ndarray | Non
     """The twin's field on the native times, or None when the log has no twin topic."""
     d = log.topics.get(TWIN + topic)
     return None if d is None else _aligned(t, d["t"], d[key])
-
-
-def _log_plot(ax, t: np.ndarray, y: np.ndarray, label: str, **kw) -> bool:
-    """Plot positive values of y on a log axis; return whether anything was drawn."""
-    y = np.where(y > 0, y, np.nan)
-    if not np.any(np.isfinite(y)):
-        return False
-    ax.semilogy(t, y, label=label, **kw)
-    return True
-
-
-def _finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
-    """Labels and a grid at the decades (minor ticks off: over ten decades they are ~80 tick objects
-    an axis, a third of the figure's drawing time); a note when nothing was drawn."""
-    from matplotlib.ticker import LogLocator, NullLocator
-
-    ax.set_ylabel(ylabel)
-    ax.set_xlabel("time (s)")
-    if ax.get_yscale() == "log":   # not when nothing was drawn (a zero difference): the axis stays linear
-        ax.yaxis.set_major_locator(LogLocator(numticks=8))
-        ax.yaxis.set_minor_locator(NullLocator())
-    ax.grid(True, alpha=0.3)
-    if not drawn:
-        ax.text(0.5, 0.5, "difference exactly zero", ha="center", va="center", transform=ax.transAxes)
 
 
 STYLES = ("native model", "MuJoCo twin")   # the legend entries of the line styles (solid, dashed)
@@ -181,10 +85,10 @@ def _compare_columns(axes, t: np.ndarray, x: np.ndarray, y: np.ndarray | None, l
     if y is not None:
         d = np.abs(x - y) if diff is None else diff
         colors = [f"C{j % 10}" for j in range(d.shape[1])] if d.shape[1] > 1 else ["black"]
-        drawn = [_log_plot(axes[1], t, d[:, j], labels[j] if diff is None else diff_ylabel, color=c)
+        drawn = [log_plot(axes[1], t, d[:, j], labels[j] if diff is None else diff_ylabel, color=c)
                  for j, c in enumerate(colors)]
         axes[1].set_title(diff_title)
-        _finish_log_axis(axes[1], any(drawn), diff_ylabel)
+        finish_log_axis(axes[1], any(drawn), diff_ylabel)
     return handles + _style_handles(y is not None)
 
 
@@ -213,7 +117,7 @@ def _joint_figure(log: LogData, key: str, quantity: str, kind: int, labels: list
     types = metadata_joint_types(log.metadata, x.shape[1])
     if key == "angle":
         x, y = _unwrap_revolute(x, types), _unwrap_revolute(y, types)
-    groups = _arm_groups(log, x.shape[1])
+    groups = arm_groups(log, x.shape[1])
     styles = list(STYLES[:1 + (y is not None)])
     fig = Figure()
     axes = panel_grid(fig, 1 if y is None else 2, len(groups), PANEL,
@@ -272,20 +176,20 @@ def _constraint_figure(log: LogData) -> Figure:
     labels = ["native loop-closure residual max |Φ|"] + (["MuJoCo weld violation"] if twin is not None else [])
     fig = Figure()
     ax = panel_grid(fig, 1, 1, (6.0, 3.0), legend=legend_width(labels), suptitle=False)[0, 0]
-    drawn = [_log_plot(ax, nat["t"], nat["residual_pos"], labels[0])]
+    drawn = [log_plot(ax, nat["t"], nat["residual_pos"], labels[0])]
     if twin is not None:
-        drawn.append(_log_plot(ax, twin["t"], np.abs(twin["weld_violation"]), labels[1], ls="--"))
+        drawn.append(log_plot(ax, twin["t"], np.abs(twin["weld_violation"]), labels[1], ls="--"))
     ax.set_title(run_title(log, "Constraint violation", twin=twin is not None), fontsize=9)
-    _finish_log_axis(ax, any(drawn), "violation (m or rad)")
+    finish_log_axis(ax, any(drawn), "violation (m or rad)")
     if any(drawn):
         legend_beside(ax)
     return fig
 
 
 def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[tuple]:
-    """The figures of `comparison_plots` as `coopsim.render` jobs (builder, args, out_dir/FILE); a closed
-    loop's log adds `coopsim.plots_control`'s tracking_error.png and internal_force.png."""
-    from coopsim.plots_control import control_jobs
+    """The figures of `comparison_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE); a closed
+    loop's log adds `coopsim.plots.control`'s tracking_error.png and internal_force.png."""
+    from coopsim.plots.control import control_jobs
 
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
@@ -299,10 +203,10 @@ def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | 
 def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None,
                      workers: FigureWorkers | None = None) -> list[Path]:
     """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for
-    a closed loop, `coopsim.plots_control`'s tracking_error.png and internal_force.png) into out_dir
+    a closed loop, `coopsim.plots.control`'s tracking_error.png and internal_force.png) into out_dir
     (created if missing; each file replaced atomically) and return their paths. joint_names
     (n,) labels the joints (default: `coopsim.core.labels` of the log's model metadata, else joint 1, joint 2,
-    …); workers: where to draw (`coopsim.render`; default: processes started for this call)."""
+    …); workers: where to draw (`coopsim.plots.render`; default: processes started for this call)."""
     jobs = comparison_jobs(log, out_dir, joint_names)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     return render_figures(jobs, workers, first=(FILES.index("object_motion.png"),))   # six panels: twice the others' time
