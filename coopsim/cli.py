@@ -16,7 +16,7 @@ def _cmd_simulate(args) -> int:
     from coopsim.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
     from coopsim.forward.simulate import simulate
-    from coopsim.summary import format_simulation_summary, simulation_summary
+    from coopsim.report.summary import format_simulation_summary, simulation_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     with ProgressBar(enabled=not args.json) as bar:
@@ -89,7 +89,7 @@ def _cmd_run(args) -> int:
     from coopsim.progress import ProgressBar
     from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario
-    from coopsim.summary import run_summary
+    from coopsim.report.summary import run_summary
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
@@ -171,7 +171,7 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from coopsim.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
+    from coopsim.report.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
     from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots.inverse import inverse_plots
     from coopsim.progress import ProgressBar
@@ -213,7 +213,7 @@ def _cmd_inverse(args) -> int:
 
 def _summary_text(summary: dict, log_path, plots, index) -> str:
     """The JSON text of an inverse or capacity summary, its "files" (log, plots, the summary) set first."""
-    from coopsim.inverse_report import json_safe
+    from coopsim.report.inverse_report import json_safe
 
     summary["files"] = [str(log_path)] + [str(p) for p in plots] + [str(index)]
     return json.dumps(json_safe(summary), indent=2) + "\n"
@@ -224,7 +224,7 @@ def _cmd_capacity(args) -> int:
 
     import numpy as np
 
-    from coopsim.inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
+    from coopsim.report.inverse_report import (capacity_metadata, capacity_series, capacity_study, capacity_summary,
                                  format_capacity_summary, json_safe)
     from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots.inverse import capacity_plots

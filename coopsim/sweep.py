@@ -295,7 +295,7 @@ def study_summary(model, study: Study) -> dict:
     without its trade-off curve, `capacity_summary`."""
     if study.kind == "simulate":
         from coopsim.forward.simulate import simulate
-        from coopsim.summary import simulation_summary
+        from coopsim.report.summary import simulation_summary
 
         return simulation_summary(simulate(model, duration=study.duration))
     if study.kind == "validate":
@@ -303,12 +303,12 @@ def study_summary(model, study: Study) -> dict:
 
         return cross_validate(model, duration=study.duration).comparison.as_dict()
     if study.kind == "inverse":
-        from coopsim.inverse_report import add_checks, inverse_summary, solve_study
+        from coopsim.report.inverse_report import add_checks, inverse_summary, solve_study
 
         s = solve_study(model, study.option("methods"), duration=study.duration,
                         bounds=(study.option("bound_force"), study.option("bound_moment")))
         return inverse_summary(add_checks(s, study.option("replay"), curve=False))
-    from coopsim.inverse_report import capacity_study, capacity_summary
+    from coopsim.report.inverse_report import capacity_study, capacity_summary
     from coopsim.io.scenario import require_motor_limits
 
     require_motor_limits(model, model.name)

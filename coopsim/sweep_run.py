@@ -347,7 +347,7 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
     import pyarrow.parquet as pq
 
     from coopsim.io.atomic import previous_set, staged_folder
-    from coopsim.inverse_report import json_safe
+    from coopsim.report.inverse_report import json_safe
     from coopsim.io.log import write_mcap
     from coopsim.plots.sweep import sweep_figures
 

@@ -14,7 +14,7 @@ from coopsim.control.controller import Controller, record
 from coopsim.twin.compare import compare
 from coopsim.twin.harness import control_series, cross_validate
 from coopsim.io.log import log_data
-from coopsim.summary import control_summary
+from coopsim.report.summary import control_summary
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback
 from coopsim.core.errors import CoopsimError, ScenarioError

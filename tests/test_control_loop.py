@@ -80,7 +80,7 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
     they then agree to the tolerance instead: measured 4.5e-11 rad). Saturation clips in the saturated
     variant, within the motor lines, and is counted (`summary.json`: `native.controller`); the summary
     names the engine that ran."""
-    from coopsim.summary import simulation_summary
+    from coopsim.report.summary import simulation_summary
 
     for name, model in _variants(hold, carry):
         a, b = simulate(model), simulate(model, engine="stages")
@@ -205,7 +205,7 @@ def test_a_bounded_distribution_without_solution_falls_back_and_says_so(hold, fa
     non-squeezing: its torque exactly), the run goes on on the 'stages' engine, and one RunWarning names
     the first such evaluation's time and configuration, the reason and their count (2: the 2nd and 3rd
     stages of the first step, t = 1 ms); the summary carries it. Without failures: no warning."""
-    from coopsim.summary import simulation_summary
+    from coopsim.report.summary import simulation_summary
 
     model = _bounded(hold)
     failing_qp.update({1})

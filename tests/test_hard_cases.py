@@ -25,7 +25,7 @@ from coopsim.io.log import read_mcap, write_run_log
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.io.scenario import load_scenario, load_yaml, model_from_dict
 from coopsim.forward.simulate import simulate
-from coopsim.summary import simulation_summary
+from coopsim.report.summary import simulation_summary
 from conftest import SCENARIOS
 
 HARD = SCENARIOS / "hard"
@@ -157,7 +157,7 @@ def test_fast_motion_adaptive_keeps_accuracy_and_rk4_says_when_it_cannot():
 def test_passive_joints_forward_and_inverse():
     """Passive joints get no torque forward (a torque on one is refused); the minimum-energy inverse
     keeps them at zero and its replay gives the forward motion back; `paper` loads them."""
-    from coopsim.inverse_report import inverse_study
+    from coopsim.report.inverse_report import inverse_study
 
     model = hard("passive_joints", duration=0.3)
     P = model.motors.passive

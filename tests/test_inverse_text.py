@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from coopsim.inverse_report import METHOD_COLUMNS, format_inverse_summary
+from coopsim.report.inverse_report import METHOD_COLUMNS, format_inverse_summary
 
 
 def _summary(replay: bool) -> dict:

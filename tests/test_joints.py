@@ -23,7 +23,7 @@ import yaml
 from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.compiled import api
 from coopsim.dynamics.gibbs_appell import bias_forces, mass_matrix
-from coopsim.inverse_report import capacity_study, inverse_study
+from coopsim.report.inverse_report import capacity_study, inverse_study
 from coopsim.core.joints import joint_units
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
 from coopsim.core.model import PRISMATIC, REVOLUTE

@@ -17,7 +17,7 @@ from coopsim.inverse import trajectory
 from coopsim.dynamics import kinematics
 from coopsim.cli import build_parser
 from coopsim.twin.compare import compare
-from coopsim.inverse_report import _capacity_entry, capacity_study, inverse_study
+from coopsim.report.inverse_report import _capacity_entry, capacity_study, inverse_study
 from coopsim.core.labels import joint_labels, metadata_joint_labels
 from coopsim.io.log import LogData, run_metadata
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method

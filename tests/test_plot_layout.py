@@ -36,7 +36,7 @@ def run_log(model, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def inverse_log(model, tmp_path_factory):
-    from coopsim.inverse_report import inverse_series, inverse_study
+    from coopsim.report.inverse_report import inverse_series, inverse_study
 
     study = inverse_study(model, curve=False)
     path = tmp_path_factory.mktemp("inverse") / "inverse.mcap"
@@ -45,7 +45,7 @@ def inverse_log(model, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def capacity_log(model, tmp_path_factory):
-    from coopsim.inverse_report import capacity_metadata, capacity_series, capacity_study, capacity_summary
+    from coopsim.report.inverse_report import capacity_metadata, capacity_series, capacity_study, capacity_summary
 
     study = capacity_study(model, optimise=False)
     meta = run_metadata(model, None, capacity_metadata(capacity_summary(study)))

@@ -88,7 +88,7 @@ def test_every_figure_names_its_scenario_and_settings(logs):
 
 def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
-    from coopsim.inverse_report import inverse_series, solve_study
+    from coopsim.report.inverse_report import inverse_series, solve_study
     from coopsim.io.log import log_data, run_metadata
     from coopsim.plots.inverse import MOTOR_LINES, inverse_torques_figure
     from coopsim.io.scenario import load_scenario

@@ -13,7 +13,7 @@ import yaml
 from scipy.optimize import minimize, nnls
 
 from coopsim.inverse import solve as inv
-from coopsim.inverse_report import format_inverse_summary, inverse_study, inverse_summary
+from coopsim.report.inverse_report import format_inverse_summary, inverse_study, inverse_summary
 from coopsim.inverse.qp import QPError, solve_qp, solve_qps
 from conftest import SCENARIOS, run_cli
 from inverse_cases import problem, run

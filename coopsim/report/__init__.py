@@ -1,0 +1,7 @@
+"""Reports of results as text and JSON: the PASS table and `summary.json` of a run, and the inverse
+and capacity study's summary, series and checks.
+
+    summary.py         a run's summary (agreement, warnings, settings)
+    inverse_report.py  the inverse-dynamics and capacity study: what `coopsim inverse` and
+                       `coopsim capacity` report and log
+"""
