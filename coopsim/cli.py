@@ -13,7 +13,7 @@ from coopsim.inverse.resolutions import METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
     from coopsim.forward.simulate import simulate
     from coopsim.report.summary import format_simulation_summary, simulation_summary
@@ -62,7 +62,7 @@ def _cmd_mjcf(args) -> int:
 
     from coopsim.io.atomic import write_text_atomic
     from coopsim.twin.mjcf import mjcf_text
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
 
     _announce_compile()                     # the keyframes come from the native model's initial state
@@ -86,7 +86,7 @@ def _cmd_run(args) -> int:
     from coopsim.twin.harness import control_series, cross_validate
     from coopsim.io.log import file_sha256, run_log
     from coopsim.plots.run import comparison_plots
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario
     from coopsim.report.summary import run_summary
@@ -126,7 +126,7 @@ def _cmd_plot(args) -> int:
 
     from coopsim.io.log import read_run_log
     from coopsim.plots.run import comparison_plots
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
 
     log_path = Path(args.log)
     if not log_path.is_file():
@@ -146,7 +146,7 @@ def _cmd_plot(args) -> int:
 def _cmd_validate(args) -> int:
     from coopsim.twin.compare import format_comparison
     from coopsim.twin.harness import cross_validate
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
 
     results, overrides = [], _overrides(args)
@@ -174,7 +174,7 @@ def _cmd_inverse(args) -> int:
     from coopsim.report.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
     from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots.inverse import inverse_plots
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario
 
@@ -228,7 +228,7 @@ def _cmd_capacity(args) -> int:
                                  format_capacity_summary, json_safe)
     from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots.inverse import capacity_plots
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.progress import ProgressBar
     from coopsim.plots.render import FigureWorkers
     from coopsim.io.scenario import load_scenario, require_motor_limits
 
@@ -255,9 +255,9 @@ def _cmd_capacity(args) -> int:
 def _cmd_sweep(args) -> int:
     from pathlib import Path
 
-    from coopsim.progress import ProgressBar
-    from coopsim.sweep import load_sweep
-    from coopsim.sweep_run import require_packages, run_sweep, write_outputs
+    from coopsim.apps.progress import ProgressBar
+    from coopsim.apps.sweep import load_sweep
+    from coopsim.apps.sweep_run import require_packages, run_sweep, write_outputs
 
     if sum([args.serial, args.scheduler is not None, args.workers is not None]) > 1:
         raise CoopsimError("--serial, --workers and --scheduler: give at most one")
@@ -281,9 +281,9 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from coopsim.bench import FULL, QUICK, run_bench
-    from coopsim.bench_report import json_text, markdown_report, write_outputs
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.bench import FULL, QUICK, run_bench
+    from coopsim.apps.bench_report import json_text, markdown_report, write_outputs
+    from coopsim.apps.progress import ProgressBar
 
     stage: list[str] = []
 
@@ -306,7 +306,7 @@ def _cmd_animate(args) -> int:
     import time
     from pathlib import Path
 
-    from coopsim.animate import check_output
+    from coopsim.apps.animate import check_output
 
     source = Path(args.source)
     if args.out is not None:
@@ -318,8 +318,8 @@ def _cmd_animate(args) -> int:
             raise CoopsimError(f"--{name}: must be positive, got {getattr(args, name):g}")
     if args.duration is not None and not args.duration > 0:
         raise CoopsimError(f"--duration: must be positive, got {args.duration:g}")
-    from coopsim.animate import animate, motion_from_log, probe_renderer, scenario_motion
-    from coopsim.progress import ProgressBar
+    from coopsim.apps.animate import animate, motion_from_log, probe_renderer, scenario_motion
+    from coopsim.apps.progress import ProgressBar
 
     start = time.perf_counter()
     probe_renderer()                        # no OpenGL: one line now, not after running the models
@@ -358,7 +358,7 @@ def _cmd_animate(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from coopsim.animate import view
+    from coopsim.apps.animate import view
 
     overrides = _overrides(args)
     if not args.source.lower().endswith(".xml"):
@@ -584,13 +584,13 @@ COMPILE_NOTICES = {      # what a first run compiles, by compile group (`coopsim
 
 def _announce_compile() -> None:
     """Say so when a first run on this machine starts compiling part of the native model, and compile
-    it on all cores (`coopsim.compiled.warmup`)."""
+    it on all cores (`coopsim.apps.warmup`)."""
     from coopsim.compiled.api import set_compile_notice
 
     def notice(group):
         def say():
             print(f"coopsim: compiling {COMPILE_NOTICES[group]}...", file=sys.stderr, flush=True)
-            from coopsim.compiled.warmup import warm_up_group
+            from coopsim.apps.warmup import warm_up_group
 
             warm_up_group(group)
         return say

@@ -53,7 +53,7 @@ def pytest_sessionstart(session):
     """Compile the native model once, before any test (and before xdist starts its workers, whose
     processes and the CLI subprocesses then load it from numba's cache instead of compiling it each)."""
     if not hasattr(session.config, "workerinput"):
-        from coopsim.compiled.warmup import warm_up
+        from coopsim.apps.warmup import warm_up
 
         warm_up(control=True)
 

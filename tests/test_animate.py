@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 
 from coopsim import cli
-from coopsim.animate import Motion, RenderUnavailable, motion_from_log, probe_renderer, render_frames
+from coopsim.apps.animate import Motion, RenderUnavailable, motion_from_log, probe_renderer, render_frames
 from coopsim.twin.harness import cross_validate
 from coopsim.io.log import file_sha256, write_run_log
 from coopsim.io.scenario import load_scenario
@@ -186,7 +186,7 @@ def test_view_opens_the_twin_at_the_keyframe(monkeypatch, capsys):
     import mujoco
     import mujoco.viewer
 
-    import coopsim.animate
+    import coopsim.apps.animate
 
     seen = []
 
@@ -195,8 +195,8 @@ def test_view_opens_the_twin_at_the_keyframe(monkeypatch, capsys):
         seen.append(float(np.max(np.abs(d.efc_pos[: d.nefc]))))
 
     monkeypatch.setattr(mujoco.viewer, "launch", launch)
-    monkeypatch.setattr(coopsim.animate, "_has_display", lambda: True)
-    monkeypatch.setattr(coopsim.animate, "_check_window", lambda: None)
+    monkeypatch.setattr(coopsim.apps.animate, "_has_display", lambda: True)
+    monkeypatch.setattr(coopsim.apps.animate, "_check_window", lambda: None)
     assert cli.main(["view", str(SCENARIOS / f"{PAPER}.yaml")]) == 0
     assert cli.main(["view", str(ROOT / "models" / f"{PAPER}.xml")]) == 0
     assert len(seen) == 2 and max(seen) <= 1e-12, seen

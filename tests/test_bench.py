@@ -1,4 +1,4 @@
-"""The work-precision benchmark (coopsim.bench, coopsim.bench_report, coopsim.plots.bench, `coopsim bench`):
+"""The work-precision benchmark (coopsim.apps.bench, coopsim.apps.bench_report, coopsim.plots.bench, `coopsim bench`):
 its pieces on tiny ladders and short runs. Correctness only: no timing is asserted."""
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim import bench, bench_report
-from coopsim.bench import Ladders, RunRow
-from coopsim.bench_report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
+from coopsim.apps import bench
+from coopsim.apps import bench_report
+from coopsim.apps.bench import Ladders, RunRow
+from coopsim.apps.bench_report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
 from coopsim.cli import build_parser, main
 from coopsim.core.errors import CoopsimError
 from conftest import SCENARIOS

@@ -1,11 +1,12 @@
-"""The first compile's split (coopsim.compiled.warmup), checked on the cache the session's warm-up
+"""The first compile's split (coopsim.apps.warmup), checked on the cache the session's warm-up
 (conftest) filled: every compile group is on disk, and each kernel the warm-up compiles from its
 types alone is cached for that one signature only: a caller passing other types would compile the
 kernel a second time on a first run."""
 
 import pytest
 
-from coopsim.compiled import api, warmup
+from coopsim.compiled import api
+from coopsim.apps import warmup
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import sys
 
-from coopsim.progress import ProgressBar
+from coopsim.apps.progress import ProgressBar
 
 
 class _Tty(io.StringIO):
@@ -140,7 +140,8 @@ def test_bench_shows_one_bar_per_stage(tmp_path, monkeypatch):
     """`coopsim bench` on a terminal: each stage it announces is a bar that ends at 100 % (with the time
     it took) when the next begins or the benchmark ends (run_bench and its outputs are stand-ins here:
     the stages are what is checked); with --json nothing."""
-    from coopsim import bench, bench_report
+    from coopsim.apps import bench
+    from coopsim.apps import bench_report
     from coopsim.cli import main
 
     def fake_bench(paths, ladders, log):

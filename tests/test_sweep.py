@@ -1,4 +1,4 @@
-"""`coopsim sweep` (coopsim/sweep.py, sweep_run.py): rows equal the single-run commands, serial = LocalCluster
+"""`coopsim sweep` (coopsim/apps/sweep.py, sweep_run.py): rows equal the single-run commands, serial = LocalCluster
 = a real Dask cluster bit for bit, resume after a kill, bad sweep files as one-line errors."""
 
 import json
@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from conftest import ROOT, SCENARIOS, run_cli
-from coopsim.sweep import evaluate_point, flatten, load_sweep, study_row
-from coopsim.sweep_run import read_rows, run_sweep, write_outputs
+from coopsim.apps.sweep import evaluate_point, flatten, load_sweep, study_row
+from coopsim.apps.sweep_run import read_rows, run_sweep, write_outputs
 
 pytest.importorskip("dask.distributed")
 pytest.importorskip("pyarrow")
@@ -219,7 +219,7 @@ def test_serial_local_cluster_and_real_cluster_give_identical_tables(tmp_path, r
 
 
 def _run_serial(path: Path, out: Path) -> None:
-    from coopsim.sweep_run import run_sweep
+    from coopsim.apps.sweep_run import run_sweep
 
     run_sweep(load_sweep(path), out, serial=True)
 
@@ -248,10 +248,10 @@ def test_resume_after_a_kill_gives_the_same_table_without_recomputing(tmp_path, 
     assert 2 <= finished < 6, f"killed after {finished} points"
     with open(ckpt, "a") as f:
         f.write('{"row": {"point": 5, "error": nu')              # a line cut short
-    import coopsim.sweep_run
+    import coopsim.apps.sweep_run
 
     ran = []
-    monkeypatch.setattr(coopsim.sweep_run, "evaluate_point", lambda sw, i: ran.append(i) or evaluate_point(sw, i))
+    monkeypatch.setattr(coopsim.apps.sweep_run, "evaluate_point", lambda sw, i: ran.append(i) or evaluate_point(sw, i))
     out = run_cli("sweep", path, "--serial", "--resume", "--out", tmp_path / "out", "--json", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)

@@ -27,8 +27,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from coopsim.sweep import evaluate_point, load_sweep  # noqa: E402
-from coopsim.sweep_run import run_sweep, write_outputs  # noqa: E402
+from coopsim.apps.sweep import evaluate_point, load_sweep  # noqa: E402
+from coopsim.apps.sweep_run import run_sweep, write_outputs  # noqa: E402
 
 
 def cpu_seconds() -> float:

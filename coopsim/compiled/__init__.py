@@ -27,8 +27,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py          one arm's inverse kinematics and rates
     api.py         the Python entry points (batches on threads, parameter sets) and error reporting
-    warmup.py      the first compile, on two cores, no kernel compiled twice
 
+The first compile, on two cores with no kernel compiled twice, is `coopsim.apps.warmup`'s.
 Tested against the reference stages at random states of every bundled scenario (stage terms ≤ 1e-12
 relative; accelerations within that plus eps·cond of the constraint system).
 """

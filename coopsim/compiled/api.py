@@ -51,7 +51,7 @@ class Compiled(NamedTuple):
 
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles
-    it, `warmup.warm_up`); "extras", inverse kinematics and the capacity objective (`capacity`, a
+    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics and the capacity objective (`capacity`, a
     trajectory given as object motion: their first use compiles them, a few seconds); "control", the
     controllers (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),

@@ -1,4 +1,4 @@
-"""Figures of the work-precision benchmark (`coopsim.bench`), PNG via matplotlib's Agg canvas.
+"""Figures of the work-precision benchmark (`coopsim.apps.bench`), PNG via matplotlib's Agg canvas.
 
 `work_precision_figure`: one scenario, log–log, x the max joint error rad, y the wall time s; one
 line per (family, method) in ladder order, each point labelled with its tolerance or step (native:

@@ -26,7 +26,7 @@ from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loa
 from coopsim.inverse.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
 
 DEFINITIONS = ("paper", "nonsqueezing")
-Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.progress.ProgressBar`
+Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.apps.progress.ProgressBar`
 
 
 def _report(progress: Progress | None, stage: str, fraction: float) -> None:

@@ -21,7 +21,7 @@ Then this process loads what the children wrote. A wait ends when the kernel is 
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
 it needs itself. Without `control` the extras compile on their first use (`capacity`, object-motion
 trajectories), the controllers on the first closed-loop run (`warm_up_group`).
-`python -m coopsim.compiled.warmup` compiles everything.
+`python -m coopsim.apps.warmup` compiles everything.
 """
 
 from __future__ import annotations
@@ -188,7 +188,7 @@ def warm_up(control: bool = False) -> None:
             warm_up_group("control")
         return
     names = [name for name in CHILDREN if control or name != "control"]
-    children = [subprocess.Popen([sys.executable, "-m", "coopsim.compiled.warmup", name],
+    children = [subprocess.Popen([sys.executable, "-m", "coopsim.apps.warmup", name],
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in names]
     model = _model()
     try:

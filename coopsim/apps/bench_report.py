@@ -1,4 +1,4 @@
-"""Tables and files of a work-precision benchmark report (`coopsim.bench.run_bench`): Markdown, CSV,
+"""Tables and files of a work-precision benchmark report (`coopsim.apps.bench.run_bench`): Markdown, CSV,
 strict JSON, and `write_outputs` (every file written atomically)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coopsim.bench import ATOL_RATIO, EVAL_RATIO_SCENES, EVAL_RATIO_TARGET, OUTPUT_DT, REFERENCE_ATOL, REFERENCE_RTOL
+from coopsim.apps.bench import ATOL_RATIO, EVAL_RATIO_SCENES, EVAL_RATIO_TARGET, OUTPUT_DT, REFERENCE_ATOL, REFERENCE_RTOL
 
 CSV_FIELDS = ("scenario", "family", "method", "setting", "param", "wall_s", "loop_s", "max_error_rad",
               "final_violation", "evals", "weld_factor", "pareto", "note")

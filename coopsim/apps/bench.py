@@ -16,7 +16,7 @@ per dynamics evaluation, from Python and amortised in a compiled loop. Scaling: 
 synthetic scenes, r arms × n joints, with power-law fits. Start-up: first-run compile time and cached
 start-up, each a fresh Python process.
 
-Everything here returns plain data (dicts, lists of `RunRow`); `coopsim.bench_report` turns a report
+Everything here returns plain data (dicts, lists of `RunRow`); `coopsim.apps.bench_report` turns a report
 into tables and files, `coopsim.plots.bench` draws the figures. Wall times depend on the machine and
 its load: compare within one report only.
 """
@@ -124,7 +124,7 @@ def load_peers():
     name = "coopsim_validation_peers"
     if name in sys.modules:
         return sys.modules[name]
-    path = Path(__file__).resolve().parents[1] / "validation" / "peers.py"
+    path = Path(__file__).resolve().parents[2] / "validation" / "peers.py"
     if not path.is_file():
         raise CoopsimError(f"coopsim bench needs {path} (validation/peers.py of the source checkout)")
     spec = importlib.util.spec_from_file_location(name, path)
@@ -610,14 +610,14 @@ _STARTUP_SCRIPT = ("import json, time; t0 = time.perf_counter(); from coopsim.io
                    "from coopsim.forward.simulate import simulate; m = load_scenario({path!r}); t1 = time.perf_counter(); "
                    "{warm}simulate(m, duration=0.05); t2 = time.perf_counter(); simulate(m, duration=0.05); "
                    "t3 = time.perf_counter(); print(json.dumps({{'imports': t1 - t0, 'first': t2 - t1, 'again': t3 - t2}}))")
-_WARM_UP = "from coopsim.compiled.warmup import warm_up; warm_up(); "   # what the CLI does on a first run
+_WARM_UP = "from coopsim.apps.warmup import warm_up; warm_up(); "   # what the CLI does on a first run
 
 
 def _source_stamps() -> dict[str, int]:
-    """Modification times (ns) of the compiled kernels' sources (coopsim/compiled/*.py): numba's
+    """Modification times (ns) of the compiled kernels' sources (coopsim/compiled/**/*.py): numba's
     cache is keyed on them."""
-    root = Path(__file__).resolve().parent / "compiled"
-    return {str(p): p.stat().st_mtime_ns for p in sorted(root.glob("*.py"))}
+    root = Path(__file__).resolve().parents[1] / "compiled"
+    return {str(p): p.stat().st_mtime_ns for p in sorted(root.rglob("*.py"))}
 
 
 def startup_process(path: str, warm: bool, env: dict | None = None) -> tuple[float, dict]:
@@ -649,7 +649,7 @@ def _startup_once(path: str) -> dict:
 def startup_times(scenario: str | Path, attempts: int = 2) -> dict:
     """Wall time s of a fresh `python -c` process that imports coopsim and simulates 0.05 s of
     `scenario` twice: 'compile_s' with NUMBA_CACHE_DIR an empty temporary folder, compiling every
-    kernel first as the CLI's first run does (`coopsim.compiled.warmup`, two processes), 'cached_s'
+    kernel first as the CLI's first run does (`coopsim.apps.warmup`, two processes), 'cached_s'
     the same again with that cache filled and no warm-up; '..._inside_s': imports and the first run,
     as the process measures them; 'jit_load_s': the first run less the second (numba's import and
     loading the compiled kernels from the cache); 'interpreter_s': the cached process's time before its
@@ -752,7 +752,7 @@ def source_state() -> dict:
     uncommitted edits included."""
     import hashlib
 
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for p in sorted(root.rglob("*.py")):
         digest.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes())

@@ -3,7 +3,7 @@
 Execution (`run_points`): in this process (`serial`), on an embedded `dask.distributed.LocalCluster`
 (default: one worker process per core, one thread each), or on an existing cluster (`scheduler`, an
 address such as tcp://10.0.0.5:8786); the rows are the same whatever runs them (each point is a pure
-function of the sweep, `coopsim.sweep.evaluate_point`) and are ordered by point index.
+function of the sweep, `coopsim.apps.sweep.evaluate_point`) and are ordered by point index.
 
 Checkpoint: `DIR/points.jsonl`, a header line {"sweep": digest, "points": P} then one line per finished
 point ({"row": ...}, floats exact), appended, flushed and fsynced as each point arrives. `resume` keeps
@@ -30,7 +30,7 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError
 from coopsim.core.labels import field_name
-from coopsim.sweep import Sweep, evaluate_point, matcher, one_line
+from coopsim.apps.sweep import Sweep, evaluate_point, matcher, one_line
 
 CHECKPOINT = "points.jsonl"
 # Dask's housekeeping on the embedded cluster, made sparse for points that take about a second: no
@@ -334,12 +334,12 @@ def point_log(sweep: Sweep, rows: list[dict]):
     ns = time_ns(t)
     messages = tuple({"timestamp": stamp(int(k))} | {fields[c]: _json_value(r.get(c)) for c in names}
                      for k, r in zip(ns, rows))
-    schema = {"type": "object", "title": "coopsim.sweep.Point",
+    schema = {"type": "object", "title": "coopsim.apps.sweep.Point",
               "description": "one sweep point: its axis values, error (null if none) and study columns",
               "properties": {"timestamp": {"type": "object"}} | {fields[c]: {} for c in names}}
     meta = {"sweep": {"name": sweep.name, "file": sweep.file, "scenario": sweep.scenario, "digest": sweep.digest,
                       "study": sweep.study.kind, "columns": json.dumps(fields)}}
-    return [JsonTopic("/sweep/point", "coopsim.sweep.Point", schema, t, messages)], meta
+    return [JsonTopic("/sweep/point", "coopsim.apps.sweep.Point", schema, t, messages)], meta
 
 
 def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = True) -> list[Path]:
