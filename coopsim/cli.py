@@ -14,11 +14,12 @@ from coopsim.inverse.resolutions import METHODS, methods_help
 
 def _cmd_simulate(args) -> int:
     from coopsim.apps.progress import ProgressBar
+    from coopsim.control.controller import closed_loop
     from coopsim.io.scenario import load_scenario
     from coopsim.forward.simulate import simulate
     from coopsim.report.summary import format_simulation_summary, simulation_summary
 
-    model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
+    model = closed_loop(load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args)))
     with ProgressBar(enabled=not args.json) as bar:
         res = simulate(model, duration=args.duration, progress=lambda f: bar("native", f))
         bar("native", 1.0)

@@ -19,6 +19,7 @@ from coopsim.twin.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback
 from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.io.scenario import load_scenario, model_from_dict
+from coopsim.control.controller import closed_loop
 from coopsim.forward.simulate import simulate
 from conftest import SCENARIOS
 
@@ -45,13 +46,13 @@ def test_pd_with_gravity_compensation_holds_the_spatial_pair(hold):
     (Convergence to the set-point from the hanging equilibrium 0.18 rad away: the bundled scenario,
     README.)"""
     model, sp = _at_setpoint(hold, 0.05)
-    res = simulate(model)
+    res = simulate(closed_loop(model))
     held = float(np.max(np.abs(res.q - sp)))
     assert held <= 1e-6, f"PD + gravity compensation drifted {held:.3g} rad from the set-point"
     assert float(np.max(np.abs(hold.q0 - sp))) > 0.1, "the set-point is the hanging equilibrium: nothing to hold"
 
     sag_model, _ = _at_setpoint(hold, 0.05, compensation="none")
-    sag = float(np.max(np.abs(simulate(sag_model).q[-1] - sp)))
+    sag = float(np.max(np.abs(simulate(closed_loop(sag_model)).q[-1] - sp)))
     assert sag > 1e-3, f"PD without compensation stayed within {sag:.3g} rad: the hold test proves nothing"
 
 
@@ -83,10 +84,10 @@ def test_a_notebook_callable_runs_in_the_loop_like_the_scenario_controller(hold)
     model, sp = _at_setpoint(hold, 0.02, compensation="none")
     kp, kd = model.control.kp, model.control.kd
     notebook = replace(model, control=None, torques=TorqueFeedback(lambda t, q, qd: kp * (sp - q) - kd * qd))
-    a, b = simulate(model), simulate(notebook)
+    a, b = simulate(closed_loop(model)), simulate(closed_loop(notebook))
     assert float(np.max(np.abs(a.q - b.q))) <= 1e-12
     assert float(np.max(np.abs(a.q - a.q[0]))) > 1e-4, "the chain did not move"
-    ref = simulate(notebook, engine="reference")
+    ref = simulate(closed_loop(notebook), engine="reference")
     assert float(np.max(np.abs(ref.q - b.q))) <= 1e-9
 
 
@@ -113,7 +114,7 @@ def test_a_set_point_off_the_loop_closure_is_refused_by_name(hold):
     model = replace(hold, control=replace(hold.control, setpoint=hold.control.setpoint + 0.1))
     with pytest.raises(CoopsimError, match=r"^control\.setpoint: closing the loop at the set-point needs a joint "
                                            r"correction of [0-9.]+ rad \(> integrator\.max_initial_correction"):
-        simulate(model)
+        simulate(closed_loop(model))
 
 
 def test_computed_torque_on_redundant_arms_is_refused_by_name():
@@ -124,7 +125,7 @@ def test_computed_torque_on_redundant_arms_is_refused_by_name():
     m = load_scenario(SCENARIOS / "hard" / "planar_4arm_mixed.yaml")
     with pytest.raises(ControlError, match=r"^control\.law: computed_torque needs as many joints per arm as "
                                            r"constrained rows \(arm 'south' has 4 joints for 3 rows\)$"):
-        simulate(replace(m, control=ControlSettings("computed_torque", np.zeros(m.n_total), np.zeros(m.n_total))))
+        simulate(closed_loop(replace(m, control=ControlSettings("computed_torque", np.zeros(m.n_total), np.zeros(m.n_total)))))
 
 
 def test_native_and_twin_closed_loops_agree_and_a_wrong_sign_fails(hold):
@@ -218,7 +219,7 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     from coopsim.core.spatial import quat_to_rot
 
     model, perfect, traj = carry
-    res = simulate(perfect)
+    res = simulate(closed_loop(perfect))
     pos, ang = _object_errors(model, res)
     assert pos.max() <= 1e-8 and ang.max() <= 1e-8, f"tracking error {pos.max():.3g} m, {ang.max():.3g} rad"
     # A controller that held the bar still would be off by its motion (measured 5.6e-6 m by 0.1 s).
@@ -227,7 +228,7 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     assert float(np.max(np.abs(res.tau - ff))) <= 1e-8
 
     squeeze = 2.0
-    sq = simulate(replace(perfect, control=replace(perfect.control, squeeze=squeeze)))
+    sq = simulate(closed_loop(replace(perfect, control=replace(perfect.control, squeeze=squeeze))))
     assert float(np.max(np.abs(sq.object_pos - res.object_pos))) <= 1e-9
     dF = sq.internal_wrench[:, :, :3] - res.internal_wrench[:, :, :3]
     for i, quat in enumerate(sq.object_quat):
@@ -246,7 +247,7 @@ def test_computed_torque_with_a_mass_error_recovers_from_a_pulse(carry):
     pulse = (replace(model.torques[0], times=np.array([0.0, 0.05, 0.1, 0.15, 0.6])),) + model.torques[1:]
     hit = replace(perfect, torques=pulse, duration=0.4, control=model.control,
                   integrator=replace(perfect.integrator, method="rk4", step=0.025, output_dt=0.1))
-    pos, _ = _object_errors(model, simulate(hit))
+    pos, _ = _object_errors(model, simulate(closed_loop(hit)))
     peak = int(np.argmax(pos))
     assert pos.max() <= 5e-5, f"tracking error {pos.max():.3g} m"
     assert 0 < peak < len(pos) - 1 and np.all(np.diff(pos[peak:]) < 0) and pos[-1] <= 0.5 * pos[peak], \
@@ -295,7 +296,7 @@ def test_exported_torque_csv_read_back_by_a_scenario_reproduces_the_carry(carry,
     read = model_from_dict(data, where="carry.yaml", base_dir=tmp_path)
     for tab, sl in zip(read.torques, model.dof_slices):
         np.testing.assert_array_equal(tab.values, tau[:, sl])   # exact round trip
-    res = simulate(read)
+    res = simulate(closed_loop(read))
     q_ref, _, _ = trajectory_at_times(traj, res.t)
     assert float(np.max(np.abs(res.q - q_ref))) <= 1e-6
     assert float(np.max(np.abs(res.q - res.q[0]))) > 0.05, "the carry did not move"

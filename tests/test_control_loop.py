@@ -14,6 +14,7 @@ import pytest
 from coopsim.control.controller import Controller, ControlError
 from coopsim.core.model import ControlSettings, TorqueTable
 from coopsim.io.scenario import load_scenario
+from coopsim.control.controller import closed_loop
 from coopsim.forward.simulate import simulate
 from conftest import SCENARIOS
 
@@ -83,7 +84,7 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
     from coopsim.report.summary import simulation_summary
 
     for name, model in _variants(hold, carry):
-        a, b = simulate(model), simulate(model, engine="stages")
+        a, b = simulate(closed_loop(model)), simulate(closed_loop(model), engine="stages")
         assert (a.engine, b.engine) == ("compiled", "stages"), name
         dq, dtau = float(np.max(np.abs(a.q - b.q))), float(np.max(np.abs(a.tau - b.tau)))
         assert dq <= 1e-10 and dtau <= 1e-10, f"{name}: {dq:.3g} rad, {dtau:.3g} N·m"
@@ -164,7 +165,7 @@ def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_mod
     assert err["with"][-1] <= 0.05 * e0, f"grasp feedback left {err['with'][-1]:.3g} m of {e0:.3g} m"
 
     short = dict(duration=0.05, integrator=replace(base.integrator, output_dt=0.025))
-    a, b = simulate(replace(base, **short)), simulate(replace(fed, **short))
+    a, b = simulate(closed_loop(replace(base, **short))), simulate(closed_loop(replace(fed, **short)))
     assert float(np.max(np.abs(a.q - b.q))) <= 1e-12
 
 
@@ -218,14 +219,14 @@ def test_a_bounded_distribution_without_solution_falls_back_and_says_so(hold, fa
 
     failing_qp.clear()
     failing_qp.update({4, 5})            # 2 calls above; the run's stages 1, 2, 3 are calls 3, 4, 5
-    res = simulate(model)
+    res = simulate(closed_loop(model))
     assert res.engine == "stages"
     [w] = [w for w in res.warnings if w.kind == "distribution_fallback"]
     assert w.values == {"fallbacks": 2.0} and w.t == pytest.approx(0.001)
     assert "injected: no verified minimiser" in w.reason and "'nonsqueezing'" in w.reason
     assert w.as_dict() in simulation_summary(res)["warnings"]
     failing_qp.clear()
-    assert not [w for w in simulate(model).warnings if w.kind == "distribution_fallback"]
+    assert not [w for w in simulate(closed_loop(model)).warnings if w.kind == "distribution_fallback"]
 
 
 def test_a_bounded_distribution_without_solution_stops_the_run_when_told(hold, failing_qp):
@@ -237,7 +238,7 @@ def test_a_bounded_distribution_without_solution_stops_the_run_when_told(hold, f
 
     failing_qp.update({2})
     with pytest.raises(ControlError) as err:
-        simulate(_bounded(hold, fallback="error"))
+        simulate(closed_loop(_bounded(hold, fallback="error")))
     msg = str(err.value)
     assert msg.startswith("control.fallback: error: the 'bounded' distribution has no solution at t=0.001 s, q=[")
     assert msg.endswith("rad: injected: no verified minimiser") and "\n" not in msg

@@ -10,7 +10,7 @@ from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.model import TorqueTable
 from coopsim.forward.simulate import simulate
 from coopsim.core.errors import ConstraintRankWarning, SimulationError
-from conftest import MujocoReference
+from conftest import SCENARIOS, MujocoReference
 
 
 def _free(model, duration=10.0, seed=0, **integrator):
@@ -98,3 +98,21 @@ def test_non_finite_dynamics_stop_with_time_configuration_and_reason(paper):
     huge = tuple(TorqueTable(np.zeros(1), np.full((1, a.n), 1e308)) for a in paper.arms)
     with pytest.raises(SimulationError, match=r"failed at t=.* s, q=\[.*\] rad: non-finite"):
         simulate(replace(paper, torques=huge, duration=0.1))
+
+
+def test_a_control_section_runs_only_once_its_loop_is_closed():
+    """simulate takes a torque source and knows no controller: a scenario's control: section is put in
+    the loop by the caller (coopsim.control.closed_loop); left open, simulate says so instead of
+    running the torque tables alone."""
+    from coopsim.control.controller import closed_loop
+    from coopsim.core.errors import CoopsimError
+    from coopsim.core.model import loop_controller
+    from coopsim.io.scenario import load_scenario
+
+    model = load_scenario(SCENARIOS / "control" / "control_spatial_hold.yaml", duration=0.02)
+    with pytest.raises(CoopsimError, match=r"control: section is not in the loop: close it first"):
+        simulate(model)
+    closed = closed_loop(model)
+    assert loop_controller(closed) is closed.torques.fn and loop_controller(model) is None
+    res = simulate(closed)
+    assert res.engine == "compiled" and res.control_counts is not None and np.all(np.isfinite(res.q))

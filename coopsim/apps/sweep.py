@@ -294,10 +294,11 @@ def study_summary(model, study: Study) -> dict:
     files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
     without its trade-off curve, `capacity_summary`."""
     if study.kind == "simulate":
+        from coopsim.control.controller import closed_loop
         from coopsim.forward.simulate import simulate
         from coopsim.report.summary import simulation_summary
 
-        return simulation_summary(simulate(model, duration=study.duration))
+        return simulation_summary(simulate(closed_loop(model), duration=study.duration))
     if study.kind == "validate":
         from coopsim.twin.harness import cross_validate
 

@@ -367,6 +367,32 @@ class Controller:
         P = api.compiled(self.plant).P
         return api.compiled(self.plant).Ps, api.fresh_workspace(P), control_struct(self.packed)
 
+    def loop_record(self) -> tuple:
+        """`compiled_loop`, its evaluation counters reset for a new run (`coopsim.core.model.LoopController`)."""
+        self.packed.count[:] = 0
+        return self.compiled_loop
+
+    def loop_counts(self) -> tuple:
+        """The compiled laws' evaluation counters since `loop_record` (`coopsim.compiled.control`)."""
+        return tuple(int(c) for c in self.packed.count)
+
+    def loop_torques(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """τ (N, n) N·m of the compiled controller at the samples t (N,) s, q, qd (N, n)."""
+        return self.compiled_commands(t, q, qd).tau
+
+    def run_warnings(self) -> list:
+        """A `distribution_fallback` RunWarning when the controller fell back from 'bounded' (at its
+        first evaluation that did, with their count), else none."""
+        from coopsim.forward.diagnostics import run_warning
+
+        if not self.fallbacks:
+            return []
+        t, q, reason = self.fallbacks[0]
+        count, fallback = len(self.fallbacks), self.settings.fallback
+        return [run_warning("distribution_fallback", t, q, f"the 'bounded' distribution has no solution ({reason}); "
+                            f"the {fallback!r} distribution was used there and at {count - 1} later controller "
+                            f"evaluations (control.fallback)", fallbacks=count)]
+
     def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`, about 10 µs)."""
         from coopsim.compiled import api
@@ -434,12 +460,6 @@ def closed_loop(model: Model) -> Model:
     if model.control is None or isinstance(model.torques, TorqueFeedback):
         return model
     return replace(model, torques=TorqueFeedback(Controller(model)))
-
-
-def controller_of(model: Model) -> Controller | None:
-    """The Controller a closed-loop model feeds back through (None for any other torque)."""
-    fn = getattr(model.torques, "fn", None)
-    return fn if isinstance(fn, Controller) else None
 
 
 def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Callable
+from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -114,6 +114,52 @@ class TorqueFeedback(TorqueFunction):
     (`coopsim.control.controller.closed_loop`)."""
 
     fn: Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+@runtime_checkable
+class LoopController(Protocol):
+    """A controller the forward pipeline runs in the loop, as the `fn` of a TorqueFeedback: the
+    reference time loop calls it, τ = fn(t, q, q̇); the compiled time loop evaluates it from its record
+    (`coopsim.control.controller.Controller` is one). The forward pipeline knows controllers only
+    through this protocol.
+
+    Attributes:
+        model: the model whose torque tables the controller's command is added to (the compiled time
+            loop runs on it).
+        compiled_reason: why the controller cannot run in the compiled time loop; None when it can.
+    """
+
+    model: "Model"
+    compiled_reason: str | None
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """τ (n,) N·m at time t s and state q (n,), qd (n,)."""
+
+    def loop_record(self) -> tuple:
+        """The record the compiled time loop evaluates (`coopsim.compiled.api.integrate_chain`'s
+        controller), its evaluation counters reset for a new run."""
+
+    def loop_counts(self) -> tuple:
+        """The compiled evaluations' counters since `loop_record`."""
+
+    def loop_torques(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """τ (N, n) N·m at the samples t (N,) s, q, qd (N, n) of a run."""
+
+    def run_warnings(self) -> list:
+        """What the controller reports about the run so far (`coopsim.forward.diagnostics.RunWarning`s)."""
+
+
+def loop_controller(model: "Model") -> LoopController | None:
+    """The in-the-loop controller a model's torques feed back through; None for any other torque source.
+
+    Args:
+        model: a Model, closed loop or not.
+
+    Returns:
+        `model.torques.fn` when the torques are a TorqueFeedback whose function is a LoopController.
+    """
+    fn = getattr(model.torques, "fn", None)
+    return fn if isinstance(fn, LoopController) else None
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,14 +29,15 @@ from functools import cached_property
 import numpy as np
 
 from coopsim.forward import diagnostics
-from coopsim.core.errors import ConstraintError, ConstraintRankWarning, SimulationError
+from coopsim.core.errors import ConstraintError, ConstraintRankWarning, CoopsimError, SimulationError
 from coopsim.dynamics.closed_chain import ChainAcceleration, ChainTerms, chain_terms, forward_dynamics, position_residual
 from coopsim.forward.diagnostics import RunWarning, describe_state, run_warning
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
 from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
 from coopsim.core.results import Projection
-from coopsim.core.model import IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque, torque_at
+from coopsim.core.model import (IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque, loop_controller,
+                                torque_at)
 from coopsim.core.results import SampledMotion
 from coopsim.core.spatial import rot_to_quat
 
@@ -198,10 +199,10 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     start = time.perf_counter()
-    from coopsim.control.controller import closed_loop, controller_of
-
-    model = closed_loop(model)
-    ctrl = controller_of(model)
+    if model.control is not None and not isinstance(model.torques, TorqueFeedback):
+        raise CoopsimError(f"{model.name}: the scenario's control: section is not in the loop: close it first "
+                           f"(coopsim.control.closed_loop(model))")
+    ctrl = loop_controller(model)
     if isinstance(model.torques, TorqueFeedback) and engine == "compiled":
         engine = "compiled" if ctrl is not None and ctrl.compiled_reason is None else "stages"
     elif isinstance(model.torques, TorqueFunction) and engine != "stages":
@@ -245,9 +246,7 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
     y0 = np.concatenate([init.q, init.qd])
     fixed = fixed_step if fixed_step is not None else (s.step if s.method == "rk4" else None)
     h_max = np.inf if s.max_step is None else s.max_step
-    loop = None if controller is None else controller.compiled_loop
-    if loop is not None:
-        controller.packed.count[:] = 0
+    loop = None if controller is None else controller.loop_record()
     run = api.integrate_chain(kernel_model, y0, t_out, s.method, rtol=s.rtol, atol=s.atol, h_max=h_max,
                               fixed_step=fixed, progress=progress, controller=loop, land=loop is not None)
     n = model.n_total
@@ -260,8 +259,8 @@ def _simulate_compiled(model: Model, init: Projection, t_out: np.ndarray, progre
                               f"{_compiled_reason(kernel_model, run)}")
     counts, tau = None, None
     if controller is not None:
-        counts = tuple(int(c) for c in controller.packed.count)
-        tau = controller.compiled_commands(t_out, run.Y[:, :n], run.Y[:, n:]).tau
+        counts = controller.loop_counts()
+        tau = controller.loop_torques(t_out, run.Y[:, :n], run.Y[:, n:])
     smp = api.sample_states(kernel_model, t_out, run.Y, tau)
     stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
                             n_projections=run.counts[3])
@@ -310,7 +309,7 @@ def _simulate_reference(model: Model, init: Projection, t_out: np.ndarray, progr
     except IntegrationError as exc:
         n = model.n_total
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
-    events += _fallback_events(model)
+    events += _controller_warnings(model)
     return replace(_sample(model, t_out, Y, init, stats, time.perf_counter() - start), events=tuple(events))
 
 
@@ -348,24 +347,15 @@ def _simulate_stages(model: Model, init: Projection, t_out: np.ndarray, progress
                              atol=s.atol, step=step, project=project if s.stabilization == "projection" else None)
     except IntegrationError as exc:
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
-    events += _fallback_events(model)
+    events += _controller_warnings(model)
     tau = np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
     return _sampled_result(model, t_out, Y, api.sample_states(model, t_out, Y, tau), init, stats, start, events)
 
 
-def _fallback_events(model: Model) -> list[RunWarning]:
-    """A `distribution_fallback` RunWarning when the run's controller fell back from 'bounded' (at its
-    first evaluation that did, with their count), else none."""
-    from coopsim.control.controller import controller_of
-
-    ctrl = controller_of(model)
-    if ctrl is None or not ctrl.fallbacks:
-        return []
-    t, q, reason = ctrl.fallbacks[0]
-    count, fallback = len(ctrl.fallbacks), ctrl.settings.fallback
-    return [run_warning("distribution_fallback", t, q, f"the 'bounded' distribution has no solution ({reason}); the "
-                        f"{fallback!r} distribution was used there and at {count - 1} later controller evaluations "
-                        f"(control.fallback)", fallbacks=count)]
+def _controller_warnings(model: Model) -> list[RunWarning]:
+    """The run warnings of the model's in-the-loop controller (none without one)."""
+    ctrl = loop_controller(model)
+    return [] if ctrl is None else list(ctrl.run_warnings())
 
 
 def _sample(model: Model, t: np.ndarray, Y: np.ndarray, init: Projection, stats, wall: float) -> SimResult:

@@ -712,7 +712,7 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     if failures:
         return Replay(None, np.nan, np.nan, tuple(failures))
     tables = tuple(TorqueTable(t_stage, tau[:, sl]) for sl in model.dof_slices)
-    replay_model = replace(model, torques=tables, q0=traj.q[0], qd0=traj.qd[0], duration=float(tr[-1]),
+    replay_model = replace(model, torques=tables, control=None, q0=traj.q[0], qd0=traj.qd[0], duration=float(tr[-1]),
                            integrator=replace(model.integrator, method=REPLAY_METHOD, output_dt=dt))
     sim = simulate(replay_model, fixed_step=dt)
     return Replay(sim, float(np.max(np.abs(sim.q - traj.q))), float(np.max(np.abs(sim.qd - traj.qd))))

@@ -43,9 +43,10 @@ def trajectory_of(model: Model, duration: float | None = None, progress: Progres
         traj = object_motion_trajectory(model, model.inverse.object_motion)
         _report(progress, "ik", 1.0)
         return traj, None
+    from coopsim.control.controller import closed_loop
     from coopsim.forward.simulate import simulate
 
-    res = simulate(model, duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
+    res = simulate(closed_loop(model), duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res
 
 

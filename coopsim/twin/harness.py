@@ -11,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from coopsim.twin.compare import Comparison, compare
-from coopsim.core.model import Model, TorqueTable, ValidationThresholds
+from coopsim.core.model import Model, TorqueTable, ValidationThresholds, loop_controller
 from coopsim.twin.mujoco_run import TwinResult, run_twin
 from coopsim.forward.simulate import SimResult, simulate
 
@@ -37,7 +37,9 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
     replaces the model the twin is built from (same joints), e.g. to prove the harness can fail."""
     if duration is not None:
         model = replace(model, duration=duration)
-    native = simulate(model, progress=None if progress is None else lambda f: progress("native", f))
+    from coopsim.control.controller import closed_loop
+
+    native = simulate(closed_loop(model), progress=None if progress is None else lambda f: progress("native", f))
     twin = run_twin(twin_model or model, native.initial.q, native.initial.qd, native.t,
                     progress=None if progress is None else lambda f: progress("mujoco", f))
     records = _control_records(native, twin, twin_model or model)
@@ -56,12 +58,12 @@ def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:
 
 def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> tuple | None:
     """The controllers of both runs evaluated at their samples (None without a controller)."""
-    from coopsim.control.controller import closed_loop, controller_of, record
+    from coopsim.control.controller import closed_loop, record
 
-    ctrl = controller_of(native.model)
+    ctrl = loop_controller(native.model)
     if ctrl is None:
         return None
-    twin_ctrl = controller_of(closed_loop(twin_model))
+    twin_ctrl = loop_controller(closed_loop(twin_model))
     return record(ctrl, native.t, native.q, native.qd), record(twin_ctrl, twin.t, twin.q, twin.qd)
 
 
