@@ -8,7 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from coopsim.inverse.solve import inverse_problem
+from coopsim.inverse.problem import inverse_problem
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory

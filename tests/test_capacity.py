@@ -7,7 +7,10 @@ import numpy as np
 import pytest
 
 from coopsim.inverse import capacity as cap
-from coopsim.inverse import solve as inv
+from coopsim.inverse.distributions import nonsqueezing_metric
+from coopsim.inverse.problem import inverse_problem, torques_of
+from coopsim.inverse.solve import default_bounds, distribute, resolution_for, resolve
+from coopsim.inverse import solve
 from coopsim.core.model import Motors
 from coopsim.inverse.qp import QPError
 from conftest import MujocoReference, mujoco_kkt_acceleration
@@ -43,9 +46,9 @@ def _violation(model, traj, method, res_nominal, mode, mass):
     """Largest excess of the torques over the motor lines when the inverse dynamics is run afresh on a
     model carrying `mass` (scaled object or payload), with the nominal resolution's virtual bodies."""
     m2 = cap.scaled_model(model, mass) if mode == "scaled" else cap.payload_model(model, PAYLOAD, mass)
-    P2 = inv.inverse_problem(m2, traj)
+    P2 = inverse_problem(m2, traj)
     R = replace(res_nominal, method=method)
-    tau = inv.resolve(P2, R).tau
+    tau = resolve(P2, R).tau
     lo, hi = cap.torque_limits(model.motors, traj.qd)
     excess = np.maximum(tau - hi, lo - tau)
     i, j = np.unravel_index(int(np.argmax(excess)), excess.shape)
@@ -60,7 +63,7 @@ def test_closed_form_equals_brute_force(method, mode):
     and sample the closed form names."""
     m, _, traj = run(PAPER)
     P = problem(PAPER)
-    R = inv.resolution_for(m, method)
+    R = resolution_for(m, method)
     c = cap.method_capacity(P, R, m.motors, mode)
     assert c.feasible and c.lower == 0.0
     below, _, _ = _violation(m, traj, method, R, mode, c.mass * (1 - 1e-6))
@@ -75,7 +78,7 @@ def test_paper_scenario_capacities_as_measured():
     (arm 2's for the zero-internal ones, arm 1's for minimum energy) on its τ_max line."""
     m, _, traj = run(PAPER)
     P = problem(PAPER)
-    got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in METHODS}
+    got = {k: cap.method_capacity(P, resolution_for(m, k), m.motors) for k in METHODS}
     # regression pins (numbers produced by coopsim itself)
     assert got["paper"].mass == pytest.approx(21.7141, rel=1e-5)
     assert got["nonsqueezing"].mass == pytest.approx(24.5475, rel=1e-5)
@@ -90,7 +93,7 @@ def test_paper_scenario_capacities_as_measured():
         c, i, j = got[k], got[k].sample, got[k].joint
         heavy = cap.scaled_model(m, c.mass)
         one = type(traj)(traj.t[i:i + 1], traj.q[i:i + 1], traj.qd[i:i + 1], traj.qdd[i:i + 1], traj.source)
-        tau = inv.resolve(inv.inverse_problem(heavy, one), inv.resolution_for(m, k)).tau[0]
+        tau = resolve(inverse_problem(heavy, one), resolution_for(m, k)).tau[0]
         qdd = mujoco_kkt_acceleration(heavy, MujocoReference(heavy, with_object=True), traj.q[i], traj.qd[i], tau)
         off = float(np.max(np.abs(qdd - traj.qdd[i])))
         assert off <= 1e-10, f"{k}: MuJoCo θ̈ under the torques at {c.mass:.6g} kg off the trajectory by {off:.3g} rad/s²"
@@ -118,8 +121,8 @@ def test_lp_bound_is_above_every_resolution(name):
     m = _with_motors(m, res, traj)
     P = problem(name)
     for mode in cap.MODES:
-        caps = [cap.method_capacity(P, inv.resolution_for(m, k), m.motors, mode) for k in METHODS]
-        _, best = cap.optimise_weights(P, inv.resolution_for(m, "min_energy"), m.motors, mode, max_evals=60)
+        caps = [cap.method_capacity(P, resolution_for(m, k), m.motors, mode) for k in METHODS]
+        _, best = cap.optimise_weights(P, resolution_for(m, "min_energy"), m.motors, mode, max_evals=60)
         lp = cap.lp_capacity(P, m.motors, m.motors.passive, mode)
         assert np.isfinite(lp.mass) and lp.feasible
         for c in caps + [best]:
@@ -132,7 +135,7 @@ def test_optimised_weights_raise_the_minimum_energy_capacity():
     the motor that saturates first with equal weights (the paper's closing suggestion)."""
     m, _, _ = run(PAPER)
     P = problem(PAPER)
-    R = inv.resolution_for(m, "min_energy")
+    R = resolution_for(m, "min_energy")
     w, best = cap.optimise_weights(P, R, m.motors)
     lp = cap.lp_capacity(P, m.motors, m.motors.passive, zero_feasible=True)
     # regression pin (number produced by coopsim itself); no independent value: that it bounds every
@@ -151,13 +154,13 @@ def test_payload_model_matches_the_payload_wrench():
     m, _, traj = run(PAPER)
     P = problem(PAPER)
     sub = type(traj)(traj.t[::50], traj.q[::50], traj.qd[::50], traj.qdd[::50], traj.source)
-    P2 = inv.inverse_problem(cap.payload_model(m, PAYLOAD, 7.5), sub)
+    P2 = inverse_problem(cap.payload_model(m, PAYLOAD, 7.5), sub)
     d = P2.p_C - P.p_C[::50]                      # the composite's centre moved by 7.5/26.34 × 0.2 m
     assert np.max(np.abs(np.linalg.norm(d, axis=1) - 7.5 * 0.2 / (m.object.mass + 7.5))) <= 1e-15
     y_old_C = P2.y.copy()                         # its net wrench, moments taken about the old centre
     y_old_C[:, 2] += d[:, 0] * P2.y[:, 1] - d[:, 1] * P2.y[:, 0]
     assert np.max(np.abs(y_old_C - (P.y[::50] + 7.5 * P.y_payload[::50]))) <= 1e-12
-    P0 = inv.inverse_problem(cap.payload_model(m, PAYLOAD, 0.0), sub)
+    P0 = inverse_problem(cap.payload_model(m, PAYLOAD, 0.0), sub)
     assert np.max(np.abs(P0.y - P.y[::50])) <= 1e-15
 
 
@@ -167,11 +170,11 @@ def test_lp_with_an_internal_wrench_bound_lies_between():
     m, _, _ = run(PAPER)
     P = problem(PAPER)
     sub = P
-    R = inv.resolution_for(m, "min_energy")
-    bound = inv.default_bounds(P, R)
-    Mstar = inv.nonsqueezing_metric(sub, R.masses, R.inertias)
+    R = resolution_for(m, "min_energy")
+    bound = default_bounds(P, R)
+    Mstar = nonsqueezing_metric(sub, R.masses, R.inertias)
     lp_b = cap.lp_capacity(sub, m.motors, m.motors.passive, internal_bound=bound, Mstar=Mstar, zero_feasible=True)
-    ns = cap.method_capacity(sub, inv.resolution_for(m, "nonsqueezing"), m.motors)
+    ns = cap.method_capacity(sub, resolution_for(m, "nonsqueezing"), m.motors)
     assert ns.mass * (1 - 1e-9) <= lp_b.mass <= 158.4125
 
 
@@ -182,13 +185,13 @@ def test_energy_stress_curve():
     P = problem(PAPER)
     sub = type(P)(**{k: (getattr(P, k)[::10] if k in _SAMPLED and getattr(P, k) is not None else getattr(P, k))
                      for k in P.__dataclass_fields__})
-    R = inv.resolution_for(m, "min_energy")
-    peak = inv.default_bounds(sub, R, fraction=1.0)
+    R = resolution_for(m, "min_energy")
+    peak = default_bounds(sub, R, fraction=1.0)
     curve = cap.energy_stress_curve(sub, R, peak)
     energies = [c["energy"] for c in curve]
     assert np.all(np.diff(energies) >= -1e-12)
-    assert energies[0] == pytest.approx(inv.energy(inv.resolve(sub, R)), rel=1e-9)
-    assert energies[-1] == pytest.approx(inv.energy(inv.resolve(sub, replace(R, method="nonsqueezing"))), rel=1e-9)
+    assert energies[0] == pytest.approx(solve.energy(resolve(sub, R)), rel=1e-9)
+    assert energies[-1] == pytest.approx(solve.energy(resolve(sub, replace(R, method="nonsqueezing"))), rel=1e-9)
 
 
 _SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist",
@@ -203,14 +206,14 @@ def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
     instead of returning a capacity computed from that wrong fit."""
     m, _, _ = run(PAPER)
     P = problem(PAPER)
-    R = inv.resolution_for(m, "min_energy")
-    fb, mb = inv.default_bounds(P, R)
+    R = resolution_for(m, "min_energy")
+    fb, mb = default_bounds(P, R)
     bounded = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
     mu = m.object.mass
     off = {}
     for name, res in (("min_energy", R), ("bounded", bounded)):
         a, b = cap.affine_torques(P, res, "scaled")
-        tau = inv.torques_of(P, inv.distribute(P, mu * P.y_unit, res))
+        tau = torques_of(P, distribute(P, mu * P.y_unit, res))
         off[name] = float(np.max(np.abs(tau - (a + mu * b))))
     assert off["min_energy"] <= 1e-12 and off["bounded"] >= 0.1, off
     msg = ("method_capacity: resolution 'bounded' has no closed-form capacity: its internal-wrench bounds make it "
@@ -221,7 +224,7 @@ def test_method_capacity_refuses_the_nonlinear_bounded_resolution():
             cap.method_capacity(P, bounded, m.motors, mode)
         assert str(exc.value) == msg
     with pytest.raises(ValueError, match="resolution 'bounded' has no closed-form capacity"):
-        cap.method_capacity(P, inv.resolution_for(m, "bounded"), m.motors)     # even with infinite bounds
+        cap.method_capacity(P, resolution_for(m, "bounded"), m.motors)     # even with infinite bounds
     with pytest.raises(ValueError, match="unknown method 'nope'; expected one of paper, nonsqueezing, min_energy, "
                                          "bounded"):
         cap.method_capacity(P, replace(R, method="nope"), m.motors)

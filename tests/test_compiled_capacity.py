@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from coopsim.inverse import capacity as cap
-from coopsim.inverse import solve as inv
+from coopsim.inverse.distributions import min_energy_setup
+from coopsim.inverse.problem import InverseRankWarning, torques_of
+from coopsim.inverse import distributions
 from coopsim.compiled.capacity import min_energy_mass_interval
 from inverse_cases import BUNDLED, model, problem
 
@@ -19,15 +21,15 @@ WITH_MOTORS = [n for n in BUNDLED if np.any(np.isfinite(model(n).motors.stall_to
 def _setup(name: str, mode: str = "scaled", duration: float | None = None):
     m, P = model(name), problem(name, duration)
     y0, y1 = cap.mass_line(P, mode)
-    setup = inv.min_energy_setup(P, np.stack([y0, y0 + y1]), m.motors.passive)
+    setup = min_energy_setup(P, np.stack([y0, y0 + y1]), m.motors.passive)
     lo, hi = cap.torque_limits(m.motors, P.qd)
     return m, P, setup, lo, hi
 
 
 def _numpy_interval(P, setup, w, lo, hi, act):
-    f0, f1 = inv.min_energy_solve(P, setup, w)
-    a = inv.torques_of(P, f0)
-    b = inv.torques_of(P, f1) - a
+    f0, f1 = distributions.min_energy_solve(P, setup, w)
+    a = torques_of(P, f0)
+    b = torques_of(P, f1) - a
     return cap.mass_interval(*cap.mass_limits(a[:, act], b[:, act], lo[:, act], hi[:, act]))
 
 
@@ -63,7 +65,7 @@ def test_uncertified_samples_take_the_numpy_path():
     strict = replace(P, rank_tol=0.5)
     assert not min_energy_mass_interval(setup.D, setup.u, w, lo, hi, act, setup.regular, 0.5)[2]
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", inv.InverseRankWarning)
+        warnings.simplefilter("ignore", InverseRankWarning)
         got = cap.min_energy_interval(strict, setup, w, lo, hi, act)
         ref = _numpy_interval(strict, setup, w, lo, hi, act)
     assert got == ref and got[0] != pytest.approx(_numpy_interval(P, setup, w, lo, hi, act)[0], rel=1e-6)

@@ -215,7 +215,8 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     of the closed-chain IK trajectory (`coopsim.inverse.solve.stage_torques` at its knots) to ≤ 1e-8 N·m
     (measured 7e-13 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 4.4e-16 m)
     and the internal force changes by exactly the command along each grasp line (≤ 1e-6 N)."""
-    from coopsim.inverse import solve as inv
+    from coopsim.inverse.replay import stage_torques
+    from coopsim.inverse.solve import resolution_for
     from coopsim.core.spatial import quat_to_rot
 
     model, perfect, traj = carry
@@ -224,7 +225,7 @@ def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforwar
     assert pos.max() <= 1e-8 and ang.max() <= 1e-8, f"tracking error {pos.max():.3g} m, {ang.max():.3g} rad"
     # A controller that held the bar still would be off by its motion (measured 5.6e-6 m by 0.1 s).
     assert float(np.max(np.linalg.norm(res.object_pos - res.object_pos[0], axis=1))) > 1e-6, "the bar did not move"
-    ff = inv.stage_torques(model, traj, inv.resolution_for(model, "min_energy"), res.t)
+    ff = stage_torques(model, traj, resolution_for(model, "min_energy"), res.t)
     assert float(np.max(np.abs(res.tau - ff))) <= 1e-8
 
     squeeze = 2.0
@@ -280,13 +281,14 @@ def test_exported_torque_csv_read_back_by_a_scenario_reproduces_the_carry(carry,
     (`coopsim.io.torque_csv`, what `coopsim inverse --torques-csv` writes) every 5 ms and read back by the
     scenario's `torque: {csv: …}`, drive the forward model along the prescribed motion to ≤ 1e-6 rad over
     2 s (measured 4.3e-7 rad; 4.4e-5 rad at 50 ms: the error is the piecewise-linear table's, O(dt²))."""
-    from coopsim.inverse import solve as inv
+    from coopsim.inverse.replay import stage_torques
+    from coopsim.inverse.solve import resolution_for
     from coopsim.io.torque_csv import write_torque_csvs
     from coopsim.inverse.trajectory import trajectory_at_times
 
     model, _, traj = carry
     t = np.linspace(0.0, 2.0, 401)
-    tau = inv.stage_torques(model, traj, inv.resolution_for(model, "min_energy"), t)
+    tau = stage_torques(model, traj, resolution_for(model, "min_energy"), t)
     paths = write_torque_csvs(tmp_path / "carry", model, t, tau)
     data = yaml.safe_load(CARRY.read_text())
     del data["control"]

@@ -178,9 +178,9 @@ def failing_qp(monkeypatch):
     """`coopsim.inverse.solve.solve_qps` reporting no solution at the calls whose numbers are in the returned
     set (1-based; the real solver runs, its answer is dropped there). With actuated arms the bounded QP
     always has one (zero internal wrench is feasible), so the failure is injected."""
-    import coopsim.inverse.solve as inv
+    from coopsim.inverse import distributions
 
-    real, calls, failing = inv.solve_qps, [0], set()
+    real, calls, failing = distributions.solve_qps, [0], set()
 
     def solve(*args):
         out = real(*args)
@@ -191,7 +191,7 @@ def failing_qp(monkeypatch):
             out.messages[:] = ["injected: no verified minimiser"] * len(out.messages)
         return out
 
-    monkeypatch.setattr(inv, "solve_qps", solve)
+    monkeypatch.setattr(distributions, "solve_qps", solve)   # the bounded resolution's QP
     return failing
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.replay import stage_torques
+from coopsim.inverse.solve import resolution_for
 from coopsim.twin.compare import orientation_error
 from coopsim.twin.harness import cross_validate
 from coopsim.core.model import TorqueTable
@@ -51,7 +52,7 @@ def _driven(model, duration=None):
     traj = object_motion_trajectory(model, model.inverse.object_motion)
     T = CARRY_DURATION if duration is None else duration
     tk = np.linspace(0.0, T, int(round(T / CARRY_TABLE_DT)) + 1)
-    tau = inv.stage_torques(model, traj, inv.resolution_for(model, "min_energy"), tk)
+    tau = stage_torques(model, traj, resolution_for(model, "min_energy"), tk)
     tables = tuple(TorqueTable(tk, tau[:, sl]) for sl in model.dof_slices)
     return replace(model, torques=tables, q0=traj.q[0], qd0=traj.qd[0], duration=T), traj
 

@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.distributions import grasp_line_frames, internal_bound_components, internal_bound_rows, internal_operator, internal_wrench, min_energy_distribution, min_energy_torques_jacobian_form, nonsqueezing_metric, paper_distribution, virtual_masses
+from coopsim.inverse.problem import InverseProblem, InverseRankWarning, grasp_wrenches, torques_of
+from coopsim.inverse.solve import cost_of, resolution_for
+from coopsim.inverse import distributions
+from coopsim.inverse import replay
+from coopsim.inverse import solve
 from coopsim.dynamics.closed_chain import chain_terms, forward_dynamics
 from coopsim.core.spatial import cross
 from inverse_cases import problem, run
@@ -20,7 +25,7 @@ def _results(name=PAPER):
     P = problem(name)
     out = {}
     for method in ("paper", "nonsqueezing", "min_energy"):
-        out[method] = inv.resolve(P, inv.resolution_for(m, method))
+        out[method] = solve.resolve(P, resolution_for(m, method))
     return m, P, out
 
 
@@ -62,9 +67,9 @@ def test_forward_input_torques_are_recovered_as_a_distribution():
     (residual <= 1e-12) and its grasp wrenches are the simulation's (<= 1e-12 N, N·m)."""
     m, res, _ = run(PAPER)
     P = problem(PAPER)
-    f, resid = inv.distribution_of_torques(P, res.tau)
+    f, resid = distributions.distribution_of_torques(P, res.tau)
     assert np.max(resid) <= 1e-12
-    assert np.max(np.abs(inv.grasp_wrenches(P, f) - res.grasp_wrench)) <= 1e-12
+    assert np.max(np.abs(grasp_wrenches(P, f) - res.grasp_wrench)) <= 1e-12
 
 
 def test_minimum_energy_costs_least_at_every_sample():
@@ -72,13 +77,13 @@ def test_minimum_energy_costs_least_at_every_sample():
     'bounded' and 200 random feasible distributions per sample (relative slack 1e-12)."""
     m, P, res = _results()
     run_res = run(PAPER)[1]
-    R = inv.resolution_for(m, "min_energy")
+    R = resolution_for(m, "min_energy")
     cmin = res["min_energy"].cost
-    others = [res["paper"].cost, res["nonsqueezing"].cost, inv.cost_of(run_res.tau, R.weights)]
-    fb, mb = inv.default_bounds(P, R)
+    others = [res["paper"].cost, res["nonsqueezing"].cost, cost_of(run_res.tau, R.weights)]
+    fb, mb = solve.default_bounds(P, R)
     sub = slice(0, len(P.t), 25)
     Pb = _subproblem(P, sub)
-    others_sub = [inv.resolve(Pb, replace(R, method="bounded", force_bound=fb, moment_bound=mb)).cost]
+    others_sub = [solve.resolve(Pb, replace(R, method="bounded", force_bound=fb, moment_bound=mb)).cost]
     for other in others:
         assert np.all(cmin <= other * (1 + 1e-12) + 1e-15)
     for other in others_sub:
@@ -104,7 +109,7 @@ def _subproblem(P, sl):
         fields[k] = fields[k][sl]
     if fields["y_payload"] is not None:
         fields["y_payload"] = fields["y_payload"][sl]
-    return inv.InverseProblem(**fields)
+    return InverseProblem(**fields)
 
 
 def test_paper_energy_form_equals_grasp_wrench_form():
@@ -112,16 +117,16 @@ def test_paper_energy_form_equals_grasp_wrench_form():
     torques to 1e-12 N·m, with unequal weights too."""
     m, P, _ = _results()
     w = np.array([1.0, 2.0, 0.5, 3.0, 1.0, 0.25])
-    R = replace(inv.resolution_for(m, "min_energy"), weights=w)
-    tau = inv.resolve(P, R).tau
-    assert np.max(np.abs(inv.min_energy_torques_jacobian_form(P, P.y, w) - tau)) <= 1e-12
+    R = replace(resolution_for(m, "min_energy"), weights=w)
+    tau = solve.resolve(P, R).tau
+    assert np.max(np.abs(min_energy_torques_jacobian_form(P, P.y, w) - tau)) <= 1e-12
 
 
 def test_nonsqueezing_matches_erhart_hirche_closed_form():
     """With the virtual centroid at C (paper bar: m₁* = m₂* = m/2), G⁺ᴹ is E&H's block form: in the
     plane f_i = (m_i*/m*) f_o − m_i* (n_o/J*_zz) r_i × ẑ and n_i = (J_i*_zz/J*_zz) n_o, J* = Σ J_i* + m_i* |r_i|²."""
     m, P, res = _results()
-    R = inv.resolution_for(m, "nonsqueezing")
+    R = resolution_for(m, "nonsqueezing")
     assert R.masses == pytest.approx([m.object.mass / 2] * 2, rel=1e-14)
     f = res["nonsqueezing"].f.reshape(len(P.t), 2, 3)
     worst = 0.0
@@ -144,9 +149,9 @@ def test_paper_inverse_puts_a_bending_pair_in_the_object():
     m, P, _ = _results()
     y = np.zeros_like(P.y)
     y[:, :2] = [3.0, -2.0]
-    f = inv.paper_distribution(P, y)
-    R = inv.resolution_for(m, "nonsqueezing")
-    F_I = inv.internal_wrench(P, f, "nonsqueezing", inv.nonsqueezing_metric(P, R.masses, R.inertias))
+    f = paper_distribution(P, y)
+    R = resolution_for(m, "nonsqueezing")
+    F_I = internal_wrench(P, f, "nonsqueezing", nonsqueezing_metric(P, R.masses, R.inertias))
     s = -P.grasp_offset
     expect = cross(s, np.array([3.0, -2.0, 0.0]) / 2)
     assert np.max(np.abs(F_I[..., :3])) <= 1e-12
@@ -159,11 +164,11 @@ def test_passive_joint_by_flag_and_by_large_weight():
     m, P, _ = _results()
     passive = np.zeros(6, bool)
     passive[2] = True
-    R = replace(inv.resolution_for(m, "min_energy"), passive=passive)
-    flagged = inv.resolve(P, R)
+    R = replace(resolution_for(m, "min_energy"), passive=passive)
+    flagged = solve.resolve(P, R)
     assert np.max(np.abs(flagged.tau[:, 2])) <= 1e-12
     assert np.max(np.abs(np.einsum("nij,nj->ni", P.A, flagged.f) - P.y)) <= 1e-12
-    heavy = inv.resolve(P, replace(inv.resolution_for(m, "min_energy"), weights=np.where(passive, 1e8, 1.0)))
+    heavy = solve.resolve(P, replace(resolution_for(m, "min_energy"), weights=np.where(passive, 1e8, 1.0)))
     assert np.max(np.abs(heavy.tau - flagged.tau)) <= 1e-6
 
 
@@ -178,15 +183,15 @@ def test_minimum_energy_with_a_singular_or_non_square_jacobian():
     JT = sub.JT.copy()
     JT[:, 5, :] = 0.0
     sing = replace(sub, JT=JT)
-    f = inv.min_energy_distribution(sing, sing.y, w, np.zeros(6, bool))
+    f = min_energy_distribution(sing, sing.y, w, np.zeros(6, bool))
     assert np.max(np.abs(np.einsum("nij,nj->ni", sing.A, f) - sing.y)) <= 1e-12
-    cost = inv.cost_of(inv.torques_of(sing, f), w)
-    assert np.all(cost <= inv.cost_of(inv.torques_of(sing, inv.paper_distribution(sing, sing.y)), w) + 1e-15)
+    cost = cost_of(torques_of(sing, f), w)
+    assert np.all(cost <= cost_of(torques_of(sing, paper_distribution(sing, sing.y)), w) + 1e-15)
     with pytest.raises(np.linalg.LinAlgError):
-        inv.min_energy_torques_jacobian_form(sing, sing.y, w)
+        min_energy_torques_jacobian_form(sing, sing.y, w)
     extra = np.concatenate([sub.JT[:, :3], sub.JT[:, 2:3] * 0.5, sub.JT[:, 3:]], axis=1)
     wide = replace(sub, JT=extra, tau_arms=np.insert(sub.tau_arms, 3, 0.0, axis=1))
-    f = inv.min_energy_distribution(wide, wide.y, np.ones(7), np.zeros(7, bool))
+    f = min_energy_distribution(wide, wide.y, np.ones(7), np.zeros(7, bool))
     assert np.max(np.abs(np.einsum("nij,nj->ni", wide.A, f) - wide.y)) <= 1e-12
 
 
@@ -196,22 +201,22 @@ def test_bounded_resolution_spans_minimum_energy_to_nonsqueezing():
     the cost lies between; an independent SLSQP solve of a sample finds no cheaper point (1e-9)."""
     m, P, _ = _results()
     sub = _subproblem(P, slice(0, len(P.t), 25))
-    R = inv.resolution_for(m, "min_energy")
-    free = inv.resolve(sub, replace(R, method="bounded"))
-    assert np.max(np.abs(free.tau - inv.resolve(sub, R).tau)) <= 1e-9
-    tight = inv.resolve(sub, replace(R, method="bounded", force_bound=0.0, moment_bound=0.0))
-    assert np.max(np.abs(tight.tau - inv.resolve(sub, replace(R, method="nonsqueezing")).tau)) <= 1e-9
-    fb, mb = inv.default_bounds(P, R)
+    R = resolution_for(m, "min_energy")
+    free = solve.resolve(sub, replace(R, method="bounded"))
+    assert np.max(np.abs(free.tau - solve.resolve(sub, R).tau)) <= 1e-9
+    tight = solve.resolve(sub, replace(R, method="bounded", force_bound=0.0, moment_bound=0.0))
+    assert np.max(np.abs(tight.tau - solve.resolve(sub, replace(R, method="nonsqueezing")).tau)) <= 1e-9
+    fb, mb = solve.default_bounds(P, R)
     half = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
-    mid = inv.resolve(sub, half)
-    Mstar = inv.nonsqueezing_metric(sub, R.masses, R.inertias)
-    L = inv.internal_operator(sub, "nonsqueezing", Mstar)
+    mid = solve.resolve(sub, half)
+    Mstar = nonsqueezing_metric(sub, R.masses, R.inertias)
+    L = internal_operator(sub, "nonsqueezing", Mstar)
     for i in range(len(sub.t)):
-        C, bound = inv.internal_bound_rows(sub, i, L[i], half)
+        C, bound = internal_bound_rows(sub, i, L[i], half)
         assert np.all(np.abs(C @ mid.f[i]) <= bound + 1e-9)
     assert np.all(mid.cost >= free.cost * (1 - 1e-12)) and np.all(mid.cost <= tight.cost * (1 + 1e-12))
     i = int(np.argmax(mid.cost - free.cost))
-    C, bound = inv.internal_bound_rows(sub, i, L[i], half)
+    C, bound = internal_bound_rows(sub, i, L[i], half)
     obj = lambda f: 0.5 * np.sum(R.weights * (sub.tau_arms[i] + sub.JT[i] @ f) ** 2)  # noqa: E731
     cons = [{"type": "eq", "fun": lambda f: sub.A[i] @ f - sub.y[i]},
             {"type": "ineq", "fun": lambda f: bound - C @ f}, {"type": "ineq", "fun": lambda f: bound + C @ f}]
@@ -223,11 +228,11 @@ def test_virtual_masses_centroid_and_fallback():
     """Two grasps at ±0.2 m: equal halves, centroid at C; grasps at −0.1 and 0.3: 3:1 shares (lever
     rule); three grasps with C on the segment of two of them (the 3-arm plate): equal shares, the
     centroid 0.05 m from C is reported."""
-    m_, off = inv.virtual_masses(np.array([[-0.2, 0, 0], [0.2, 0, 0]]), 10.0)
+    m_, off = virtual_masses(np.array([[-0.2, 0, 0], [0.2, 0, 0]]), 10.0)
     assert m_ == pytest.approx([5.0, 5.0], rel=1e-14) and np.max(np.abs(off)) <= 1e-15
-    m_, off = inv.virtual_masses(np.array([[-0.1, 0, 0], [0.3, 0, 0]]), 8.0)
+    m_, off = virtual_masses(np.array([[-0.1, 0, 0], [0.3, 0, 0]]), 8.0)
     assert m_ == pytest.approx([6.0, 2.0], rel=1e-12) and np.max(np.abs(off)) <= 1e-15
-    m_, off = inv.virtual_masses(np.array([[-0.15, 0, 0], [0.15, 0, 0], [0.0, 0, 0.15]]), 3.0)
+    m_, off = virtual_masses(np.array([[-0.15, 0, 0], [0.15, 0, 0], [0.0, 0, 0.15]]), 3.0)
     assert m_ == pytest.approx([1.0, 1.0, 1.0], rel=1e-14) and off == pytest.approx([0, 0, 0.05], abs=1e-15)
 
 
@@ -237,13 +242,13 @@ def test_replaying_the_torques_reproduces_the_paper_run(method):
     through the forward dynamics from the run's first state, reproduce the 5 s paper trajectory to
     <= 1e-8 rad (and 1e-8 rad/s)."""
     m, _, traj = run(PAPER)
-    R = inv.resolution_for(m, "min_energy")
+    R = resolution_for(m, "min_energy")
     if method == "bounded":
-        fb, mb = inv.default_bounds(problem(PAPER), R)
+        fb, mb = solve.default_bounds(problem(PAPER), R)
         R = replace(R, method="bounded", force_bound=fb, moment_bound=mb)
     else:
         R = replace(R, method=method)
-    rep = inv.replay(m, traj, R)
+    rep = replay.replay(m, traj, R)
     assert rep.max_angle_error <= 1e-8, f"{method}: replay off by {rep.max_angle_error:.3g} rad"
     assert rep.max_rate_error <= 1e-8
 
@@ -271,18 +276,18 @@ def test_internal_bound_rows_carry_explicit_kinds():
     wrench projected on the grasp-line frames by hand (1e-12)."""
     m, P, res = _results()
     sub = _subproblem(P, slice(0, len(P.t), 10))
-    R = inv.resolution_for(m, "min_energy")
-    Mstar = inv.nonsqueezing_metric(sub, R.masses, R.inertias)
-    rows = inv.internal_bound_components(inv.grasp_line_frames(sub), inv.internal_operator(sub, "nonsqueezing", Mstar),
+    R = resolution_for(m, "min_energy")
+    Mstar = nonsqueezing_metric(sub, R.masses, R.inertias)
+    rows = internal_bound_components(grasp_line_frames(sub), internal_operator(sub, "nonsqueezing", Mstar),
                                          7.0, 7.0)
     assert rows.kind.tolist() == [0, 0, 0, 1, 1, 1] * 2
-    assert [inv.RowKind(k).name for k in rows.kind[:6]] == ["FORCE"] * 3 + ["MOMENT"] * 3
+    assert [distributions.RowKind(k).name for k in rows.kind[:6]] == ["FORCE"] * 3 + ["MOMENT"] * 3
     assert np.all(rows.bound == 7.0)
-    frames = inv.grasp_line_frames(P)
+    frames = grasp_line_frames(P)
     F_I = res["min_energy"].internal_nonsqueezing
     fc = np.einsum("nmij,nmj->nmi", frames, F_I[..., :3])
     mc = np.einsum("nmij,nmj->nmi", frames, F_I[..., 3:])
-    fb, mb = inv.default_bounds(P, R)
+    fb, mb = solve.default_bounds(P, R)
     assert fb == pytest.approx(0.5 * np.max(np.abs(fc)), rel=1e-12, abs=1e-15)
     assert mb == pytest.approx(0.5 * np.max(np.abs(mc)), rel=1e-12, abs=1e-15)
 
@@ -297,7 +302,7 @@ def test_parallel_rows_of_different_length_are_both_bounded():
     c = np.array([1.0, 0.5, 0.0, 0.0, 0.0, 0.0])
     L[0, 0], L[0, 6] = c, 2 * c                         # arm 1 and arm 2 axial: parallel, lengths 1 : 2
     L[0, 3], L[0, 9] = c[::-1], -c[::-1]                # arm 1 and arm 2 torsion: opposite, equal length
-    rows = inv.internal_bound_components(frames, L, 1.0, 1.0)
+    rows = internal_bound_components(frames, L, 1.0, 1.0)
     assert rows.keep[0].tolist() == [True, False, False, True, False, False, True, False, False, False, False, False]
 
 
@@ -305,7 +310,7 @@ def _squeeze_blind(P):
     """P with every arm's Jacobian made blind to forces along its grasp line (JT_m ← JT_m (I − e eᵀ) in
     the force rows): the internal squeeze v = [e; 0; −e; 0]/√2 then moves no joint, so the energy is flat
     along v (the minimum-energy Hessian loses rank) and [Jᵀ; A] loses a column."""
-    e = inv.grasp_line_frames(P)[:, :, 0]                 # (N, 2, 3), e₂ = −e₁
+    e = grasp_line_frames(P)[:, :, 0]                 # (N, 2, 3), e₂ = −e₁
     JT = P.JT.copy()
     for m in range(2):
         Pe = np.broadcast_to(np.eye(3), (len(P.t), 3, 3)) - e[:, m, :, None] * e[:, m, None, :]
@@ -323,13 +328,13 @@ def test_minimum_energy_where_the_equations_lose_rank():
     _, P, _ = _results()
     sub, v = _squeeze_blind(_subproblem(P, slice(0, len(P.t), 100)))
     w = np.ones(6)
-    with pytest.warns(inv.InverseRankWarning, match=r"minimum energy: the equations lost rank \(rank_tol 1e-10\) "
+    with pytest.warns(InverseRankWarning, match=r"minimum energy: the equations lost rank \(rank_tol 1e-10\) "
                       r"at 6 of 6 samples: t=0 s, q=\[.*\] rad \(constraints rank 3 of 3, energy Hessian rank 2 "
                       r"of 3\)"):
-        f = inv.min_energy_distribution(sub, sub.y, w, np.zeros(6, bool))
+        f = min_energy_distribution(sub, sub.y, w, np.zeros(6, bool))
     assert np.max(np.abs(np.einsum("nij,nj->ni", sub.A, f) - sub.y)) <= 1e-12
     assert np.max(np.abs(np.einsum("ni,ni->n", f, v))) <= 1e-12
-    c0, c1 = (inv.cost_of(inv.torques_of(sub, x), w) for x in (f, f + 0.3 * v))
+    c0, c1 = (cost_of(torques_of(sub, x), w) for x in (f, f + 0.3 * v))
     assert np.max(np.abs(c1 - c0) / c0) <= 1e-12
 
 
@@ -346,19 +351,19 @@ def test_the_rank_decision_is_the_scenarios_rank_tol():
     blind, v = _squeeze_blind(sub)
     near = replace(sub, JT=blind.JT + 1e-5 * (sub.JT - blind.JT))
     w = np.ones(6)
-    with pytest.warns(inv.InverseRankWarning, match="energy Hessian rank 2 of 3"):
-        f_tol = inv.min_energy_distribution(near, near.y, w, np.zeros(6, bool))
+    with pytest.warns(InverseRankWarning, match="energy Hessian rank 2 of 3"):
+        f_tol = min_energy_distribution(near, near.y, w, np.zeros(6, bool))
     assert np.max(np.abs(np.einsum("ni,ni->n", f_tol, v))) <= 1e-6
     strict = replace(near, rank_tol=1e-12)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        f = inv.min_energy_distribution(strict, strict.y, w, np.zeros(6, bool))
+        f = min_energy_distribution(strict, strict.y, w, np.zeros(6, bool))
     assert np.min(np.abs(np.einsum("ni,ni->n", f, v))) >= 1e3
-    tau = inv.torques_of(strict, f)
+    tau = torques_of(strict, f)
     grad = np.einsum("nji,nj->ni", strict.JT, tau)                  # J Q τ (Q = I)
     Z = np.stack([_null(strict.A[i]) for i in range(len(strict.t))])
     assert np.max(np.abs(np.einsum("nji,nj->ni", Z, grad))) <= 1e-10 * np.max(np.abs(grad))
-    assert np.all(inv.cost_of(tau, w) <= inv.cost_of(inv.torques_of(near, f_tol), w))
+    assert np.all(cost_of(tau, w) <= cost_of(torques_of(near, f_tol), w))
 
 
 def test_passive_row_that_cannot_be_met_is_least_squares_with_a_warning():
@@ -372,8 +377,8 @@ def test_passive_row_that_cannot_be_met_is_least_squares_with_a_warning():
     bad = replace(sub, JT=JT)
     passive = np.zeros(6, bool)
     passive[2] = True
-    with pytest.warns(inv.InverseRankWarning, match=r"t=0 s, q=\[.*\(constraints rank 3 of 4"):
-        f = inv.min_energy_distribution(bad, bad.y, np.ones(6), passive)
+    with pytest.warns(InverseRankWarning, match=r"t=0 s, q=\[.*\(constraints rank 3 of 4"):
+        f = min_energy_distribution(bad, bad.y, np.ones(6), passive)
     assert np.max(np.abs(np.einsum("nij,nj->ni", bad.A, f) - bad.y)) <= 1e-12
 
 
@@ -384,11 +389,11 @@ def test_torques_to_grasp_wrenches_where_the_rank_is_lost():
     P = problem(PAPER)
     sl = slice(0, len(P.t), 100)
     sub, v = _squeeze_blind(_subproblem(P, sl))
-    f_min = inv.resolve(sub, inv.resolution_for(m, "paper")).f
-    tau = inv.torques_of(sub, f_min)
-    with pytest.warns(inv.InverseRankWarning, match=r"lost rank \(rank_tol 1e-10\) at 6 of 6 samples: t=0 s, "
+    f_min = solve.resolve(sub, resolution_for(m, "paper")).f
+    tau = torques_of(sub, f_min)
+    with pytest.warns(InverseRankWarning, match=r"lost rank \(rank_tol 1e-10\) at 6 of 6 samples: t=0 s, "
                                                      r"q=\[.*\] rad \(rank 5 of 6\)"):
-        f, resid = inv.distribution_of_torques(sub, tau)
+        f, resid = distributions.distribution_of_torques(sub, tau)
     assert np.max(resid) <= 1e-12
     assert np.max(np.abs(np.einsum("ni,ni->n", f, v))) <= 1e-12
-    assert np.max(np.abs(inv.torques_of(sub, f) - tau)) <= 1e-12
+    assert np.max(np.abs(torques_of(sub, f) - tau)) <= 1e-12

@@ -25,7 +25,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.problem import inverse_problem
+from coopsim.inverse.resolutions import METHODS
+from coopsim.inverse.solve import default_bounds, resolution_for, resolve
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.inverse.trajectory import JointTrajectory
 from inverse_cases import BUNDLED, run
@@ -84,13 +86,13 @@ def _sampled_problem(name: str):
     m, _, traj = run(name)
     idx = np.linspace(0, len(traj.t) - 1, SAMPLES).round().astype(int)
     sub = JointTrajectory(traj.t[idx], traj.q[idx], traj.qd[idx], traj.qdd[idx], traj.source)
-    return m, inv.inverse_problem(m, sub)
+    return m, inverse_problem(m, sub)
 
 
 def _resolutions(m, P):
-    base = inv.resolution_for(m, "min_energy")
-    fb, mb = inv.default_bounds(P, base)
-    return {k: replace(base, method=k, force_bound=fb, moment_bound=mb) for k in inv.METHODS}
+    base = resolution_for(m, "min_energy")
+    fb, mb = default_bounds(P, base)
+    return {k: replace(base, method=k, force_bound=fb, moment_bound=mb) for k in METHODS}
 
 
 def _rel(a, b) -> float:
@@ -110,7 +112,7 @@ def test_resolutions_move_mujocos_arms_and_object_as_prescribed(name):
     arms, carried = OpenArms(m, with_object=False), OpenArms(m, with_object=True)
     S = m.rows
     worst = {"torque": 0.0, "qdd": 0.0, "object": 0.0}
-    results = {k: inv.resolve(P, res) for k, res in _resolutions(m, P).items()}
+    results = {k: resolve(P, res) for k, res in _resolutions(m, P).items()}
     assert not results["bounded"].failures
     assert np.max(np.abs(results["bounded"].tau - results["min_energy"].tau)) > 1e-6
     for i in range(len(P.t)):

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from coopsim.inverse import capacity as cap
-from coopsim.inverse import solve as inv
+from coopsim.inverse.solve import default_bounds, distribute, resolution_for
+from coopsim.inverse import resolutions
 from coopsim.io import scenario
 from coopsim.inverse import trajectory
 from coopsim.dynamics import kinematics
@@ -34,7 +35,7 @@ PAPER = "paper_planar_2x3"
 def test_registry_lists_every_resolution_once_with_its_function_label_and_linearity():
     assert METHODS == ("paper", "nonsqueezing", "min_energy", "bounded")
     assert LINEAR_METHODS == ("paper", "nonsqueezing", "min_energy")
-    assert inv.METHODS is METHODS and inv.LINEAR_METHODS is LINEAR_METHODS
+    assert resolutions.METHODS is METHODS and resolutions.LINEAR_METHODS is LINEAR_METHODS
     assert len({m.label for m in RESOLUTIONS.values()}) == len(METHODS)
     assert len({m.color for m in RESOLUTIONS.values()}) == len(METHODS)
     for k, m in RESOLUTIONS.items():
@@ -67,13 +68,13 @@ def test_every_registered_method_is_distributed_and_handled_or_refused_by_capaci
     and refuses the others with the registry's reason."""
     m = model(PAPER)
     P = problem(PAPER)
-    fb, mb = inv.default_bounds(P, inv.resolution_for(m, "min_energy"))
+    fb, mb = default_bounds(P, resolution_for(m, "min_energy"))
     for k, meth in RESOLUTIONS.items():
-        res = inv.resolution_for(m, k, force_bound=fb, moment_bound=mb)
+        res = resolution_for(m, k, force_bound=fb, moment_bound=mb)
         f, failures = meth.distribute(P, P.y, res)
         assert failures == ()
         assert np.max(np.abs(np.einsum("nij,nj->ni", P.A, f) - P.y)) <= 1e-12, k
-        assert np.array_equal(inv.distribute(P, P.y, res), f)
+        assert np.array_equal(distribute(P, P.y, res), f)
         if meth.linear:
             c = cap.method_capacity(P, res, m.motors)
             assert c.feasible and c.mass == pytest.approx({"paper": 21.71, "nonsqueezing": 24.55,

@@ -12,7 +12,9 @@ import pytest
 import yaml
 from scipy.optimize import minimize, nnls
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.distributions import grasp_line_frames
+from coopsim.inverse.problem import SampleFailureWarning, inverse_problem
+from coopsim.inverse.solve import default_bounds, resolution_for, resolve
 from coopsim.report.inverse_report import format_inverse_summary, inverse_study, inverse_summary
 from coopsim.inverse.qp import QPError, solve_qp, solve_qps
 from conftest import SCENARIOS, run_cli
@@ -199,24 +201,24 @@ def test_infeasible_samples_are_reported_by_the_bounded_resolution():
     and listed in the result's failures, and every other sample is verified (passive torque 0, bound
     held, object balance) — nothing is raised; the study's text summary names them."""
     m, traj = _passive_paper(1.5)
-    P = inv.inverse_problem(m, traj)
-    R = replace(inv.resolution_for(m, "min_energy"), method="bounded", force_bound=0.0088, moment_bound=0.0088)
+    P = inverse_problem(m, traj)
+    R = replace(resolution_for(m, "min_energy"), method="bounded", force_bound=0.0088, moment_bound=0.0088)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        out = inv.resolve(P, R)
+        out = resolve(P, R)
     failed = np.array([f.index for f in out.failures])
     assert 50 <= len(failed) < len(P.t) and {f.reason for f in out.failures} == {"infeasible"}
     assert [f.time for f in out.failures] == P.t[failed].tolist()
-    msgs = [str(w.message) for w in caught if issubclass(w.category, inv.SampleFailureWarning)]
+    msgs = [str(w.message) for w in caught if issubclass(w.category, SampleFailureWarning)]
     assert len(msgs) == 1 and f"no solution at {len(failed)} of {len(P.t)} samples: t=0 s (infeasible)" in msgs[0]
     bad = np.zeros(len(P.t), bool)
     bad[failed] = True
     assert np.all(np.isnan(out.tau[bad])) and np.all(np.isfinite(out.tau[~bad]))
     assert np.max(np.abs(out.tau[~bad][:, 2])) <= 1e-12
     assert np.max(np.abs(np.einsum("nij,nj->ni", P.A[~bad], out.f[~bad]) - P.y[~bad])) <= 1e-14
-    assert np.max(np.abs(inv.grasp_line_frames(P)[~bad] @ out.internal_nonsqueezing[~bad][..., :3, None])) <= 0.0088 + 1e-12
+    assert np.max(np.abs(grasp_line_frames(P)[~bad] @ out.internal_nonsqueezing[~bad][..., :3, None])) <= 0.0088 + 1e-12
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", inv.SampleFailureWarning)
+        warnings.simplefilter("ignore", SampleFailureWarning)
         study = inverse_study(m, ("bounded",), duration=1.5, bounds=(0.0088, 0.0088), curve=False)
     text = format_inverse_summary(inverse_summary(study))
     assert f"bounded: NO SOLUTION at {len(failed)} of {len(P.t)} samples, left out (nan): t=0 s (infeasible)" in text
@@ -255,8 +257,8 @@ def test_bounded_resolution_is_exact_on_the_paper_run():
     sample of the 5 s paper run (half-peak bound, most samples with an active bound)."""
     m, _, _ = run("paper_planar_2x3")
     P = problem("paper_planar_2x3")
-    R = inv.resolution_for(m, "min_energy")
-    fb, mb = inv.default_bounds(P, R)
-    out = inv.resolve(P, replace(R, method="bounded", force_bound=fb, moment_bound=mb))
+    R = resolution_for(m, "min_energy")
+    fb, mb = default_bounds(P, R)
+    out = resolve(P, replace(R, method="bounded", force_bound=fb, moment_bound=mb))
     assert not out.failures
     assert np.max(np.abs(np.einsum("nij,nj->ni", P.A, out.f) - P.y)) <= 1e-15

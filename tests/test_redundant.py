@@ -10,7 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.problem import inverse_problem
+from coopsim.inverse.solve import resolution_for, resolve
+from coopsim.inverse import replay
 from coopsim.dynamics.closed_chain import position_residual
 from coopsim.forward.diagnostics import joint_limits
 from coopsim.dynamics.manifold import constraint_jacobian
@@ -86,7 +88,7 @@ def _replays(m, traj):
     9.0e-12, 6.6e-12 and 4.4e-12 rad). The hanging posture does not run away: see
     `test_hanging_pandas_are_not_unstable_open_loop`."""
     for method in ("paper", "nonsqueezing", "min_energy"):
-        rep = inv.replay(m, traj, inv.resolution_for(m, method))
+        rep = replay.replay(m, traj, resolution_for(m, method))
         assert rep.max_angle_error <= 1e-8 and rep.max_rate_error <= 1e-7, (method, rep.max_angle_error,
                                                                             rep.max_rate_error)
 
@@ -99,8 +101,8 @@ def _capacities_as_measured(m, traj):
     pins: numbers produced by coopsim itself (README table)."""
     from coopsim.inverse import capacity as cap
 
-    P = inv.inverse_problem(m, traj)
-    got = {k: cap.method_capacity(P, inv.resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
+    P = inverse_problem(m, traj)
+    got = {k: cap.method_capacity(P, resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
     assert got["paper"].mass == pytest.approx(3.54011, rel=1e-4) and (got["paper"].joint, got["paper"].time) == (12, 2.52)
     assert got["nonsqueezing"].mass == pytest.approx(10.6110, rel=1e-4) and got["nonsqueezing"].joint == 12
     assert got["min_energy"].mass == pytest.approx(32.6194, rel=1e-4) and (got["min_energy"].joint,
@@ -136,9 +138,9 @@ def test_hanging_pandas_are_not_unstable_open_loop():
     for name, bound, above in (("robots/panda_pair_tray", 8.0, True), (CARRY, 1.4, False)):
         m = model(name)
         z = np.zeros((1, m.n_total))
-        P = inv.inverse_problem(m, JointTrajectory(np.zeros(1), m.q0[None], z, z, "object_motion"))
+        P = inverse_problem(m, JointTrajectory(np.zeros(1), m.q0[None], z, z, "object_motion"))
         for method in ("paper", "nonsqueezing", "min_energy"):
-            rate = _largest_growth_rate(m, m.q0, inv.resolve(P, inv.resolution_for(m, method)).tau[0])
+            rate = _largest_growth_rate(m, m.q0, resolve(P, resolution_for(m, method)).tau[0])
             assert (rate >= bound) if above else (rate <= bound), (name, method, rate)
 
 

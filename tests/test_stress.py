@@ -4,7 +4,7 @@ part's Newton–Euler equations), peak-stress formulas, and what the resolutions
 import numpy as np
 import pytest
 
-from coopsim.inverse import solve as inv
+from coopsim.inverse.solve import resolution_for, resolve
 from coopsim.core.spatial import box_inertia, cross
 from coopsim.inverse.stress import decompose_internal, grasp_line_axes, line_frame, section_loads
 from inverse_cases import problem, run
@@ -66,7 +66,7 @@ def test_section_loads_agree_with_the_other_part():
     (N, N·m): the whole bar's Newton–Euler balance, seen from both sides of every cut."""
     m, _, _ = run(PAPER)
     P = problem(PAPER)
-    res = inv.resolve(P, inv.resolution_for(m, "min_energy"))
+    res = resolve(P, resolution_for(m, "min_energy"))
     sub = slice(0, len(P.t), 40)
     box, mass, S = m.object.box, m.object.mass, m.rows
     s = section_loads(mass, box, m.object.grasp_pos, P.R_o[sub], P.twist[sub], P.acc[sub], m.gravity,
@@ -97,7 +97,7 @@ def test_what_zero_internal_force_protects_on_the_paper_run():
     sub = slice(0, len(P.t), 5)
     peaks = {}
     for method in ("paper", "nonsqueezing", "min_energy"):
-        res = inv.resolve(P, inv.resolution_for(m, method))
+        res = resolve(P, resolution_for(m, method))
         s = section_loads(m.object.mass, m.object.box, m.object.grasp_pos, P.R_o[sub], P.twist[sub], P.acc[sub],
                           m.gravity, res.grasp_wrench[sub], m.rows)
         peaks[method] = (float(np.max(s.peak_normal)), float(np.max(s.peak_shear)))

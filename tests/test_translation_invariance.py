@@ -137,25 +137,29 @@ def _inverse_numbers(model, traj, every: int):
     grasp wrenches, both internal wrenches and their grasp-line components, the grasp-line frames; the
     closed-form capacities (scaled and payload) of the linear resolutions and the LP bound."""
     from coopsim.inverse import capacity as cap
-    from coopsim.inverse import solve as inv
+    from coopsim.inverse.distributions import grasp_line_frames
+    from coopsim.inverse.problem import inverse_problem
+    from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
+    from coopsim.inverse.solve import resolution_for, resolve
+    from coopsim.inverse import solve
     from coopsim.inverse.stress import decompose_internal
     from coopsim.inverse.trajectory import JointTrajectory
 
     sub = JointTrajectory(traj.t[::every], traj.q[::every], traj.qd[::every], traj.qdd[::every], traj.source)
-    P = inv.inverse_problem(model, sub, np.array([0.1, 0.0, 0.0]))
-    frames = inv.grasp_line_frames(P)
+    P = inverse_problem(model, sub, np.array([0.1, 0.0, 0.0]))
+    frames = grasp_line_frames(P)
     out = {"frames": frames, "grasp_offset": P.grasp_offset}
-    base = inv.resolution_for(model, "min_energy")
-    bounds = inv.default_bounds(P, base)
+    base = resolution_for(model, "min_energy")
+    bounds = solve.default_bounds(P, base)
     out["default_bounds"] = np.array(bounds)
-    for k in inv.METHODS:
+    for k in METHODS:
         R = replace(base, method=k, force_bound=bounds[0], moment_bound=bounds[1])
-        r = inv.resolve(P, R)
+        r = resolve(P, R)
         out.update({f"{k}.tau": r.tau, f"{k}.grasp_wrench": r.grasp_wrench, f"{k}.internal_paper": r.internal_paper,
                     f"{k}.internal_nonsqueezing": r.internal_nonsqueezing})
         for part, v in decompose_internal(r.internal_nonsqueezing, frames[:, :, 0]).items():
             out[f"{k}.{part}"] = v
-        if k in inv.LINEAR_METHODS:
+        if k in LINEAR_METHODS:
             for mode in cap.MODES:
                 c = cap.method_capacity(P, R, model.motors, mode)
                 out[f"{k}.capacity.{mode}"] = np.array([c.mass, c.lower])

@@ -187,7 +187,8 @@ class Controller:
         import warnings
 
         from coopsim.forward.diagnostics import describe_state
-        from coopsim.inverse.solve import SampleFailureWarning, distribute, resolution_for
+        from coopsim.inverse.solve import distribute, resolution_for
+        from coopsim.inverse.problem import SampleFailureWarning
 
         failures: list = []
         with warnings.catch_warnings():
@@ -241,7 +242,7 @@ class Controller:
         """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
         messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
         the null space of the grasp matrix."""
-        from coopsim.inverse.solve import inverse_problem, torques_of
+        from coopsim.inverse.problem import inverse_problem, torques_of
         from coopsim.inverse.trajectory import JointTrajectory
 
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")

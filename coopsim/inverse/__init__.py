@@ -1,11 +1,15 @@
 """The inverse side: the object's motion → joint motion → torques, their distribution among the arms,
 the internal wrench and object stress, and the dynamic load carrying capacity.
 
-    trajectory.py   object-motion trajectories and the closed-chain IK of every arm
-    solve.py        the inverse-dynamics problem (eqs. 28–32), the distributions, resolve, replay
-    resolutions.py  the registry of redundancy resolutions (paper W⁺, non-squeezing, minimum energy,
-                    bounded)
-    qp.py           the small QPs and LPs (bounded resolution, the LP bound)
-    stress.py       section loads and stress in the object
-    capacity.py     the DLCC (eq. 36 motor lines), closed form per linear resolution and the LP bound
+    trajectory.py     object-motion trajectories and the closed-chain IK of every arm
+    problem.py        the inverse-dynamics problem along a trajectory (eqs. 28–32) and its result
+    distributions.py  the redundancy resolutions' kernels: paper W⁺, non-squeezing, minimum energy
+                      (eqs. 33–35), bounded; the internal wrench
+    solve.py          a resolution chosen by name, distributed at every sample, resolved torques
+    replay.py         resolved torques fed back through the forward model
+    resolutions.py    the registry of redundancy resolutions (paper W⁺, non-squeezing, minimum energy,
+                      bounded)
+    qp.py             the small QPs and LPs (bounded resolution, the LP bound)
+    stress.py         section loads and stress in the object
+    capacity.py       the DLCC (eq. 36 motor lines), closed form per linear resolution and the LP bound
 """

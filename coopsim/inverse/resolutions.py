@@ -1,7 +1,7 @@
 """The redundancy resolutions of the inverse dynamics: one registry that every reader uses.
 
 Each resolution is one entry of RESOLUTIONS: its pure function (the net object wrench → grasp wrenches,
-through the kernels of `coopsim.inverse.solve`), its label and colour (plots), whether its distribution is
+through the kernels of `coopsim.inverse.distributions`), its label and colour (plots), whether its distribution is
 linear in the net wrench (then `coopsim.inverse.capacity.method_capacity` has a closed form; otherwise it is
 refused with the entry's reason) and its line of CLI help. The inverse study runs METHODS, the capacity
 study LINEAR_METHODS, `coopsim inverse --method` offers METHODS, and the plots take labels, colours and
@@ -17,25 +17,25 @@ from typing import Callable, NamedTuple
 
 
 def _paper(prob, y, res):
-    from coopsim.inverse.solve import paper_distribution
+    from coopsim.inverse.distributions import paper_distribution
 
     return paper_distribution(prob, y), ()
 
 
 def _nonsqueezing(prob, y, res):
-    from coopsim.inverse.solve import nonsqueezing_distribution, nonsqueezing_metric
+    from coopsim.inverse.distributions import nonsqueezing_distribution, nonsqueezing_metric
 
     return nonsqueezing_distribution(prob, y, nonsqueezing_metric(prob, res.masses, res.inertias)), ()
 
 
 def _min_energy(prob, y, res):
-    from coopsim.inverse.solve import min_energy_distribution
+    from coopsim.inverse.distributions import min_energy_distribution
 
     return min_energy_distribution(prob, y, res.weights, res.passive), ()
 
 
 def _bounded(prob, y, res):
-    from coopsim.inverse.solve import bounded_min_energy_distribution, nonsqueezing_metric
+    from coopsim.inverse.distributions import bounded_min_energy_distribution, nonsqueezing_metric
 
     failures: list = []
     f = bounded_min_energy_distribution(prob, y, res, nonsqueezing_metric(prob, res.masses, res.inertias), failures)

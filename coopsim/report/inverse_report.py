@@ -15,8 +15,10 @@ from typing import Callable
 import numpy as np
 
 from coopsim.inverse import capacity as cap
-from coopsim.inverse.solve import (InverseResult, default_bounds, distribution_of_torques, energy, failure_text, grasp_line_frames,
-                      inverse_problem, nan_peak, replay, resolution_for, resolve, result_of, virtual_masses)
+from coopsim.inverse.solve import default_bounds, energy, nan_peak, resolution_for, resolve, result_of
+from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem
+from coopsim.inverse.distributions import distribution_of_torques, grasp_line_frames, virtual_masses
+from coopsim.inverse.replay import replay
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.io.log import Series, nonfinite_name

@@ -1,0 +1,73 @@
+"""The torques of a resolved inverse study fed back through the forward model: the replay that checks
+the inverse dynamics (the trajectory must come back), and the torques as a Python torque function.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from coopsim.core.model import Model, TorqueFunction, TorqueTable
+from coopsim.inverse.trajectory import JointTrajectory, trajectory_at_times
+from coopsim.inverse.problem import InverseError, Resolution, SampleFailure, inverse_problem, torques_of
+from coopsim.inverse.solve import distribute
+
+
+@dataclass(frozen=True, eq=False)
+class Replay:
+    """Forward simulation driven by a resolution's torques: sim (SimResult on the trajectory's sample
+    times), max_angle_error rad and max_rate_error rad/s against the trajectory. When the resolution
+    has no torques at some stage times (SampleFailure) nothing is simulated: sim None, errors nan,
+    `failures` (SampleFailure, indices into the stage times) says where."""
+
+    sim: object
+    max_angle_error: float
+    max_rate_error: float
+    failures: tuple = ()
+
+
+def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.ndarray,
+                  failures: list | None = None) -> np.ndarray:
+    """τ (M, n) N·m of resolution `res` along `traj` at times t (M,) (relative to traj.t[0]): the
+    trajectory's quintic Hermite interpolant at each t, then the inverse dynamics of those states
+    (nan where `res` has no solution; those times are appended to `failures`)."""
+    q, qd, qdd = trajectory_at_times(traj, traj.t[0] + np.asarray(t, dtype=float))
+    prob = inverse_problem(model, JointTrajectory(np.asarray(t, dtype=float), q, qd, qdd, traj.source))
+    return torques_of(prob, distribute(prob, prob.y, res, failures))
+
+
+def torque_function(model: Model, traj: JointTrajectory, res: Resolution) -> TorqueFunction:
+    """τ(t) of resolution `res` along `traj` at any time t (relative to traj.t[0]), as a Python
+    function (for the reference engine; `replay` tabulates it at the integrator's stage times)."""
+    return TorqueFunction(lambda t: stage_torques(model, traj, res, np.array([t]))[0])
+
+
+REPLAY_METHOD = "dop853"
+
+
+def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
+    """Simulate the closed chain from the trajectory's first state with the torques of `res`, sampled at
+    the trajectory's (uniform) sample times: DOP853 at fixed steps of one sample interval, the torques
+    evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
+    time loop meets every stage on a knot of the table."""
+    from coopsim.compiled.integrate import stage_times, tableau
+    from coopsim.forward.simulate import output_times, simulate
+
+    tr = traj.t - traj.t[0]
+    dt = float(tr[1])
+    t_out = output_times(float(tr[-1]), dt)
+    if len(t_out) != len(tr) or not np.allclose(t_out, tr, rtol=0, atol=1e-9 * dt):
+        raise InverseError("replay: the trajectory's samples are not evenly spaced")
+    tab = tableau(REPLAY_METHOD)
+    t_stage = np.unique(np.concatenate([stage_times(a, b, dt, tab.C, tab.stages)
+                                        for a, b in zip(t_out[:-1], t_out[1:])]))
+    failures: list[SampleFailure] = []
+    tau = stage_torques(model, traj, res, t_stage, failures)
+    if failures:
+        return Replay(None, np.nan, np.nan, tuple(failures))
+    tables = tuple(TorqueTable(t_stage, tau[:, sl]) for sl in model.dof_slices)
+    replay_model = replace(model, torques=tables, control=None, q0=traj.q[0], qd0=traj.qd[0], duration=float(tr[-1]),
+                           integrator=replace(model.integrator, method=REPLAY_METHOD, output_dt=dt))
+    sim = simulate(replay_model, fixed_step=dt)
+    return Replay(sim, float(np.max(np.abs(sim.q - traj.q))), float(np.max(np.abs(sim.qd - traj.qd))))
