@@ -389,7 +389,7 @@ def _scenario_paths(given: list[str], hard: bool = False) -> list[str]:
     meaningful MuJoCo twin)."""
     from pathlib import Path
 
-    from coopsim.io.scenario import load_yaml
+    from coopsim.io.yaml_rules import load_yaml
 
     if given:
         return given

@@ -23,7 +23,8 @@ from coopsim.core.errors import ConstraintError, ScenarioError, SimulationError
 from coopsim.twin.harness import cross_validate
 from coopsim.io.log import read_mcap, write_run_log
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
-from coopsim.io.scenario import load_scenario, load_yaml, model_from_dict
+from coopsim.io.scenario import load_scenario, model_from_dict
+from coopsim.io.yaml_rules import load_yaml
 from coopsim.forward.simulate import simulate
 from coopsim.report.summary import simulation_summary
 from conftest import SCENARIOS

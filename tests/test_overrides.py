@@ -9,7 +9,8 @@ import yaml
 
 from conftest import SCENARIOS, mutated, run_cli
 from coopsim.io.overrides import OverrideError, apply_overrides, format_path, parse_assignment, parse_path
-from coopsim.io.scenario import load_scenario, load_yaml
+from coopsim.io.scenario import load_scenario
+from coopsim.io.yaml_rules import load_yaml
 
 CARRY = SCENARIOS / "paper_planar_2x3_carry.yaml"
 

@@ -40,7 +40,8 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.io.overrides import apply_overrides, parse_path
-from coopsim.io.scenario import _Section, load_yaml, model_from_dict
+from coopsim.io.scenario import _Section, model_from_dict
+from coopsim.io.yaml_rules import load_yaml
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
 DESIGNS = ("grid", "sobol", "halton")

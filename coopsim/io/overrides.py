@@ -1,6 +1,6 @@
 """Scenario overrides: `--set PATH=VALUE` on the command line, the axes and fixed settings of a sweep.
 
-An override replaces one field of the parsed scenario data (the dict `coopsim.io.scenario.load_yaml`
+An override replaces one field of the parsed scenario data (the dict `coopsim.io.yaml_rules.load_yaml`
 returns) before the model is built, so the result is validated exactly like a file that says so, with
 the same one-line errors (`coopsim.io.scenario.model_from_dict`). No I/O here.
 
@@ -9,7 +9,7 @@ PATH addresses a field as the error lines name it: mapping keys joined by dots, 
 `inverse.object_motion.waypoints[2].position`. Every key and index before the last must exist in the
 data; the last key of a mapping may be new (an optional field the file leaves out: the validator then
 checks that it is one), a list index must be within the list. VALUE is YAML (`0.25`, `[0.1, 0, 0]`,
-`{position: [0.1, 0, 0]}`, `rk4`), read with the scenario file's rules (`coopsim.io.scenario.parse_yaml_text`).
+`{position: [0.1, 0, 0]}`, `rk4`), read with the scenario file's rules (`coopsim.io.yaml_rules.parse_yaml_text`).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import re
 from typing import Any, Iterable
 
 from coopsim.core.errors import CoopsimError
+from coopsim.io.yaml_rules import parse_yaml_text
 
 _KEY = re.compile(r"[^.\[\]=\s]+")
 _INDEX = re.compile(r"\[(\d+)\]")
@@ -61,8 +62,6 @@ def format_path(parts: Iterable[str | int]) -> str:
 
 def parse_assignment(text: str, where: str = "--set") -> tuple[str, Any]:
     """'PATH=VALUE' → (PATH, the YAML value); OverrideError naming `where` otherwise."""
-    from coopsim.io.scenario import parse_yaml_text
-
     path, eq, value = text.partition("=")
     path = path.strip()
     if not eq or not path:

@@ -7,7 +7,7 @@ Angles are in radians unless the key ends in `_deg`; every other quantity is SI.
 and the `_deg` forms of joint coordinates (`angles_deg`, `rates_deg`, `initial_guess_deg`) are refused
 where a prismatic joint would read them.
 
-Files are read defensively (README, "Scenario files"): UTF-8 text of at most MAX_FILE_BYTES; YAML
+Files are read defensively (README, "Scenario files"; `coopsim.io.yaml_rules`): UTF-8 text of at most MAX_FILE_BYTES; YAML
 without duplicate keys, nested at most MAX_DEPTH levels and at most MAX_NODES values with every alias
 expanded; numbers are real numbers (not booleans or quoted text), finite and at most MAX_MAGNITUDE in
 size; `name` is a safe file stem; a run may ask for at most MAX_OUTPUT_SAMPLES output samples and
@@ -16,7 +16,6 @@ MAX_STEPS fixed steps (rk4, max_step, MuJoCo).
 
 from __future__ import annotations
 
-import codecs
 import csv
 import io
 import math
@@ -24,24 +23,33 @@ import re
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
 from coopsim.dynamics.kinematics import arm_pose, reach_check
 from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
+from coopsim.io.yaml_rules import read_text, load_yaml
+
 
 _REQUIRED = object()
 
+
 MAX_MAGNITUDE = 1e9             # |x| of any number in a scenario or a torque CSV
-MAX_FILE_BYTES = 64 << 20       # a scenario or a torque CSV
-MAX_DEPTH = 32                  # YAML nesting (the bundled scenarios use 8)
-MAX_NODES = 1_000_000           # YAML values with every alias expanded
+
+
 MAX_OUTPUT_SAMPLES = 200_000    # duration / integrator.output_dt (and an object motion's samples)
+
+
 MAX_STEPS = 10_000_000          # duration / step of rk4, of max_step, of the MuJoCo twin
+
+
 MAX_ITERATIONS = 10_000         # mujoco.iterations
+
+
 MAX_NAME = 100                  # characters of `name`
+
+
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
 
 
@@ -455,7 +463,7 @@ def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     def bad(reason: str, line: int | None = None):
         sec.fail("csv", f"{path.name}: " + ("" if line is None else f"line {line}: ") + reason)
 
-    text = _read_text(path, bad)
+    text = read_text(path, bad)
     if "\0" in text:
         bad("holds a NUL character: not a text file", text.count("\n", 0, text.index("\0")) + 1)
     reader = csv.reader(io.StringIO(text, newline=""))
@@ -503,22 +511,6 @@ def _csv_number(x: str) -> float | None:
         return float(x)
     except ValueError:
         return None
-
-
-def _read_text(path: Path, fail) -> str:
-    """The text of a UTF-8 file (a byte-order mark is skipped) of at most MAX_FILE_BYTES; otherwise
-    fail(reason) with one line naming the first byte that is not UTF-8 and its line."""
-    size = path.stat().st_size
-    if size > MAX_FILE_BYTES:
-        fail(f"{size / 2 ** 20:.0f} MiB: larger than the {MAX_FILE_BYTES >> 20} MiB a file may hold")
-    raw = path.read_bytes()
-    if raw.startswith(codecs.BOM_UTF8):
-        raw = raw[len(codecs.BOM_UTF8):]
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw.count(b"\n", 0, exc.start) + 1
-        fail(f"not UTF-8 text: byte 0x{raw[exc.start]:02x} on line {line} is not UTF-8 (save the file as UTF-8)")
 
 
 def _motors(sec: _Section, info: dict):
@@ -755,122 +747,6 @@ def require_motor_limits(model: Model, where: str) -> None:
     if not np.any(np.isfinite(m.stall_torque) & ~m.passive):
         raise ScenarioError(f"{where}: arms[].motors: the load capacity needs motor limits (stall_torque, "
                             f"no_load_speed), and no joint has one")
-
-
-_YAML_LOADER = yaml.CSafeLoader if getattr(yaml, "__with_libyaml__", False) else yaml.SafeLoader
-_MERGE = "tag:yaml.org,2002:merge"
-
-
-def load_yaml(path: Path):
-    """The data of a YAML file, read defensively: UTF-8 text of at most MAX_FILE_BYTES, one document,
-    no key twice in a mapping, nested at most MAX_DEPTH levels and holding at most MAX_NODES values with
-    every alias expanded (a "billion laughs" document is refused before anything is built). A first
-    pass over the parser's events checks all that (iteratively: no recursion to overflow); then the
-    document is composed and constructed (libyaml's parser and composer when present, PyYAML's safe
-    constructor). ScenarioError with one line naming the file (and the line, and the key) otherwise."""
-    def fail(reason: str):
-        raise ScenarioError(f"{path}: {reason}")
-
-    return parse_yaml_text(_read_text(path, fail), fail)
-
-
-def parse_yaml_text(text: str, fail):
-    """The data of YAML text under the rules of `load_yaml` (one document, no key twice, depth, expanded
-    size; libyaml when present); fail(reason) with one line (the line, and the key) otherwise — e.g. a
-    `--set` value (`coopsim.io.overrides`)."""
-    try:
-        _check_events(text, fail)
-        loader = _YAML_LOADER(text)
-        try:
-            node = loader.get_single_node()
-            return None if node is None else loader.construct_document(node)
-        finally:
-            loader.dispose()
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        context = getattr(exc, "context", None)
-        fail(f"malformed YAML{at}: " + " ".join((problem + (f" ({context})" if context else "")).split()))
-
-
-class _Open:
-    """A collection being read in `_check_events`: its path, expanded size and height so far; for a
-    mapping the keys seen (key -> line) and whether a key comes next."""
-
-    __slots__ = ("path", "size", "height", "anchor", "keys", "key_next", "label", "index")
-
-    def __init__(self, path: str, anchor, mapping: bool):
-        self.path, self.size, self.height, self.anchor = path, 1, 1, anchor
-        self.keys, self.key_next, self.label, self.index = ({} if mapping else None), True, "?", 0
-
-    def child_path(self) -> str:
-        if self.keys is None:
-            return f"{self.path}[{self.index}]"
-        return "?" if self.key_next else (f"{self.path}.{self.label}" if self.path else self.label)
-
-
-def _check_events(text: str, fail) -> None:
-    """Depth, expanded size and duplicate keys of a YAML document, from its parse events."""
-    from yaml.events import (AliasEvent, CollectionEndEvent, MappingStartEvent, ScalarEvent, SequenceStartEvent,
-                             StreamEndEvent)
-
-    loader = _YAML_LOADER(text)
-    try:
-        stack: list[_Open] = []
-        anchors: dict = {}          # anchor -> (expanded size, height)
-        while True:
-            ev = loader.get_event()
-            line = ev.start_mark.line + 1 if ev.start_mark is not None else 0
-            if isinstance(ev, (MappingStartEvent, SequenceStartEvent)):
-                if len(stack) >= MAX_DEPTH:
-                    fail(f"line {line}: nested more than {MAX_DEPTH} levels deep")
-                path = stack[-1].child_path() if stack else ""
-                stack.append(_Open(path, ev.anchor, isinstance(ev, MappingStartEvent)))
-                continue
-            if isinstance(ev, CollectionEndEvent):
-                done = stack.pop()
-                size, height = done.size, done.height
-                if done.anchor is not None:
-                    anchors[done.anchor] = (size, height)
-            elif isinstance(ev, ScalarEvent):
-                size, height = 1, 1
-                if ev.anchor is not None:
-                    anchors[ev.anchor] = (1, 1)
-            elif isinstance(ev, AliasEvent):
-                size, height = anchors.get(ev.anchor, (1, 1))   # undefined: the composer says so
-                if len(stack) + height > MAX_DEPTH + 1:   # collections nested, the alias's own included
-                    fail(f"line {line}: this alias nests its value more than {MAX_DEPTH} levels deep")
-            elif isinstance(ev, StreamEndEvent):
-                return
-            else:               # stream and document start, document end
-                continue
-            if not stack:
-                continue
-            parent = stack[-1]
-            parent.size += size
-            parent.height = max(parent.height, height + 1)
-            if parent.size > MAX_NODES:
-                fail(f"line {line}: aliases expand {parent.path or 'the document'} to more than "
-                     f"{MAX_NODES:,} values (at most {MAX_NODES:,})")
-            if parent.keys is None:
-                parent.index += 1
-            elif parent.key_next:
-                parent.key_next, parent.label = False, "?"
-                if isinstance(ev, ScalarEvent):
-                    parent.label = ev.value
-                    tag = ev.tag if ev.tag not in (None, "!") else loader.resolve(yaml.ScalarNode, ev.value, ev.implicit)
-                    if tag != _MERGE:
-                        key = (tag, ev.value)
-                        if key in parent.keys:
-                            field = f"{parent.path}.{ev.value}" if parent.path else ev.value
-                            fail(f"{field}: duplicate key (lines {parent.keys[key]} and {line}: the second would "
-                                 f"silently replace the first)")
-                        parent.keys[key] = line
-            else:
-                parent.key_next = True
-    finally:
-        loader.dispose()
 
 
 def load_scenario(path: str | Path, duration: float | None = None, overrides=()) -> Model:
