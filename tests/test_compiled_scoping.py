@@ -19,26 +19,12 @@ import numpy as np
 from coopsim.compiled import api
 from coopsim.compiled.toolchain import resolution
 from conftest import SCENARIOS
+from test_compiled_linking import MODULE
 
 PAPER = str(SCENARIOS / "paper_planar_2x3.yaml")
 
-COOPMOD = textwrap.dedent('''
-    from coopsim.compiled.toolchain.jit import entry, kernel
+COOPMOD = MODULE   # a kernel (axpy) and two entries calling it, compiled with coopsim's decorators
 
-
-    @kernel
-    def axpy(a, x, y):
-        s = 0.0
-        for i in range(x.shape[0]):
-            y[i] += a * x[i]
-            s += y[i]
-        return s
-
-
-    @entry
-    def first(a, x, y):
-        return axpy(a, x, y)
-''')
 
 USERMOD = textwrap.dedent('''
     from numba import njit
@@ -79,7 +65,7 @@ COMPILE = textwrap.dedent('''
     (cres,) = usermod.user.overloads.values()
     out["user_lazy"], out["user_finalized"] = linking.is_lazy(cres.library), cres.library._finalized
     out["user_hits"] = sum(usermod.user.stats.cache_hits.values())
-    out["making_lazy"] = linking._making()
+    out["making_lazy"] = linking._MAKING_LAZY.active
 
 
     def kinds(fn):
@@ -252,8 +238,8 @@ def test_setting_an_environment_is_numbas_unless_a_lazy_librarys_executable_is_m
     codegen.JITCPUCodegen.set_env(engine, "present", env)
     assert slot[0] == id(env) and asked == ["present"]          # numba's: one look-up, then the write
     slot[0], asked[:] = None, []
-    with linking._making_lazy():
+    with linking._MAKING_LAZY():
         codegen.JITCPUCodegen.set_env(engine, "missing", env)    # numba would write through address 0
         codegen.JITCPUCodegen.set_env(engine, "present", env)
     assert slot[0] == id(env) and asked == ["missing", "present", "present"]
-    assert not linking._making()
+    assert not linking._MAKING_LAZY.active

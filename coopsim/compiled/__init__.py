@@ -10,6 +10,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
       resolution.py  numba's call-type resolution, remembered (each operation's signature found once)
       loading.py     compiled code loaded from numba's cache without numba's compiler registries
       numba_range.py the numba versions those three follow (they act on coopsim's functions only)
+      scope.py       the per-thread scope that keeps them to coopsim's compiles
     packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
     structs.py     both as numba StructRefs (passed by reference, fields read without reference
                    counting), built by cached constructors

@@ -34,19 +34,17 @@ are then finalized as numba does by default (slower to compile, the same code).
 
 from __future__ import annotations
 
-import contextlib
-import threading
-
 import llvmlite.binding as ll
 from numba.core import codegen, compiler, compiler_machinery, cpu, typed_passes
 from numba.core.environment import lookup_environment
 
 from coopsim.compiled.toolchain import resolution
 from coopsim.compiled.toolchain.numba_range import supported_numba
+from coopsim.compiled.toolchain.scope import ThreadScope
 
 KIND = "coopsim-ir"          # the cache's name for a lazy library's bitcode
 _ENV_PREFIX = "_ZN08NumbaEnv"  # numba's mangled name of a function's environment global
-_MAKING = threading.local()    # .depth: > 0 while a lazy library's executable is made on this thread
+_MAKING_LAZY = ThreadScope()   # active while a lazy library's executable is made on this thread
 
 
 def is_lazy(library) -> bool:
@@ -65,21 +63,6 @@ def links_lazy(library) -> bool:
             seen.add(id(linked))
             todo.extend(getattr(linked, "_linking_libraries", ()))
     return False
-
-
-@contextlib.contextmanager
-def _making_lazy():
-    """Mark, on this thread, that a lazy library's executable is being made."""
-    depth = getattr(_MAKING, "depth", 0)
-    _MAKING.depth = depth + 1
-    try:
-        yield
-    finally:
-        _MAKING.depth = depth
-
-
-def _making() -> bool:
-    return getattr(_MAKING, "depth", 0) > 0
 
 
 @compiler_machinery.register_pass(mutates_CFG=False, analysis_only=True)
@@ -185,7 +168,7 @@ def install() -> bool:
 
     def _get_executable(self, library, fndesc, env):
         if is_lazy(library):
-            with _making_lazy():
+            with _MAKING_LAZY():
                 return get_executable(self, library, fndesc, env)   # a null function pointer
         cfunc = get_executable(self, library, fndesc, env)
         if links_lazy(library):
@@ -194,12 +177,12 @@ def install() -> bool:
 
     def _rebuild(cls, target_context, libdata, *rest):
         if isinstance(libdata, tuple) and len(libdata) == 3 and libdata[1] == KIND:
-            with _making_lazy():
+            with _MAKING_LAZY():
                 return rebuild(cls, target_context, libdata, *rest)
         return rebuild(cls, target_context, libdata, *rest)
 
     def _set_env(self, env_name, env):    # numba writes through a null address for a missing name
-        if not _making() or self._engine.get_global_value_address(env_name):
+        if not _MAKING_LAZY.active or self._engine.get_global_value_address(env_name):
             set_env(self, env_name, env)
 
     _get_executable._coopsim = True

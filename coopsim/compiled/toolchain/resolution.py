@@ -24,33 +24,20 @@ and the table is neither read nor filled. It installs nothing on a numba outside
 
 from __future__ import annotations
 
-import contextlib
-import threading
-
 from numba.core import targetconfig
 from numba.core.types import functions
 
 from coopsim.compiled.toolchain.numba_range import supported_numba
+from coopsim.compiled.toolchain.scope import ThreadScope
 
 _MEMO: dict = {}
 _FLAGS: dict = {}     # id(flags) → (flags, a hashable summary of their values)
-_SCOPE = threading.local()    # .depth: the coopsim compiles in progress on this thread
-
-
-@contextlib.contextmanager
-def coopsim_compile():
-    """The scope of a coopsim function's compile, on this thread (nested compiles count)."""
-    depth = getattr(_SCOPE, "depth", 0)
-    _SCOPE.depth = depth + 1
-    try:
-        yield
-    finally:
-        _SCOPE.depth = depth
+coopsim_compile = ThreadScope()   # `with coopsim_compile():` the scope of a coopsim function's compile
 
 
 def in_coopsim_compile() -> bool:
     """Whether a coopsim function is being compiled on this thread."""
-    return getattr(_SCOPE, "depth", 0) > 0
+    return coopsim_compile.active
 
 
 class CoopsimCompile:
@@ -84,7 +71,7 @@ def install() -> bool:
     get_call_type = base.get_call_type
 
     def remembered(self, context, args, kws):
-        if not getattr(_SCOPE, "depth", 0):    # not compiling a coopsim function: numba's own
+        if not coopsim_compile.active:    # not compiling a coopsim function: numba's own
             return get_call_type(self, context, args, kws)
         key = (self, context, tuple(args), tuple(kws.items()) if kws else (),
                _flags_key(targetconfig.ConfigStack.top_or_none()))
