@@ -125,3 +125,22 @@ def test_no_import_circles(graph):
         if v not in index:
             visit(v)
     assert not circles, "import circles:\n" + "\n".join(" ↔ ".join(c) for c in circles)
+
+
+def test_the_public_face_names_real_objects_and_imports_nothing_heavy():
+    """`coopsim.NAME` is the object of the module the face names, and `import coopsim` alone loads none
+    of numba, MuJoCo, SciPy or matplotlib (a fresh process: each name is imported on first use)."""
+    import subprocess
+    import sys
+
+    import coopsim
+
+    for name, module in coopsim._PUBLIC.items():
+        assert getattr(coopsim, name) is getattr(__import__(module, fromlist=[name]), name), name
+    assert set(coopsim._PUBLIC) <= set(dir(coopsim)) and set(coopsim.__all__) == {"__version__", *coopsim._PUBLIC}
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        coopsim.nothing
+    code = ("import sys, coopsim; print(sorted(m for m in ('numba', 'mujoco', 'scipy', 'matplotlib', 'numpy') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
