@@ -1,4 +1,4 @@
-"""Controllers in the loop (`coopsim.control.controller`, scenario `control:`): the numbers of issue #12.
+"""Controllers in the loop (`coopsim.control.controller`, scenario `control:`).
 
 Independent references: the set-point itself (an input), the eq. 36 motor lines written out here, the
 plain-NumPy reference engine (for the 'stages' engine), MuJoCo's own integration of the same controller

@@ -1,5 +1,5 @@
 """Controllers inside the compiled time loop (`coopsim.compiled.control`), joint-space feedback on each
-arm's grasp error, and the 'bounded' distribution's fallback (issue #12, what the first stop left open).
+arm's grasp error, and the 'bounded' distribution's fallback.
 
 Independent references: the Python controller (`coopsim.control.controller.Controller.command`, NumPy over the
 compiled inverse-dynamics terms) in the reference time loop — the 'stages' engine: the same algorithm,

@@ -1,4 +1,4 @@
-"""Fuzzing every command that reads a scenario, a torque CSV or a log (issue #9).
+"""Fuzzing every command that reads a scenario, a torque CSV or a log.
 
 A catalogue of mutation generators over the bundled scenarios (wrong types, booleans and quoted numbers
 where numbers belong, missing and unknown keys, non-finite and extreme values, inconsistent sizes,
@@ -936,7 +936,7 @@ def test_fuzz_every_reader(tmp_path, capfd):
 
 
 # ------------------------------------------------------------------------------------------------
-# targeted tests: each finding of issue #9 (the fuzz run of 908 mutated scenarios)
+# targeted tests: each finding of the fuzz run of 908 mutated scenarios
 # ------------------------------------------------------------------------------------------------
 
 PAPER = DATA["paper_planar_2x3"]

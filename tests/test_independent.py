@@ -1,4 +1,4 @@
-"""Independent scenario check (issue #8): every bundled scenario read by coopsim and, separately, by
+"""Independent scenario check: every bundled scenario read by coopsim and, separately, by
 `independent.pinocchio_scene` (PyYAML and the README's conventions only, built in Pinocchio, never
 importing coopsim), compared quantity by quantity.
 

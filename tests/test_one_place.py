@@ -1,5 +1,5 @@
-"""One place per idea (issue #8): the registry of redundancy resolutions that the CLI, the plots and the
-capacity read; the one joint-label helper (1-based, issue #10); the one rigid-point acceleration, box
+"""One place per idea: the registry of redundancy resolutions that the CLI, the plots and the
+capacity read; the one joint-label helper (1-based); the one rigid-point acceleration, box
 inertia and reach check — each checked against numbers derived here, and each reader shown to use it."""
 
 from __future__ import annotations

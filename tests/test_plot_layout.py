@@ -1,6 +1,6 @@
 """Every figure of a 7-joint-per-arm scene, drawn as the commands save it, keeps its legends off the
 plotted lines — checked with matplotlib's own geometry: each legend's window extent against the display
-coordinates of every drawn point of every Line2D (issue 10). The scene (tests/data/planar_7r_pair.yaml:
+coordinates of every drawn point of every Line2D. The scene (tests/data/planar_7r_pair.yaml:
 two planar 7R arms, 14 joints) runs for 0.2 s in-process; the logs go through MCAP and back as the
 commands' do."""
 

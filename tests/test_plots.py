@@ -71,7 +71,7 @@ def test_a_twin_identical_to_the_native_model_is_plotted(logs, tmp_path):
 
 
 def test_every_figure_names_its_scenario_and_settings(logs):
-    """Titles carry the scenario's name and the integrator settings the log records (issue 10)."""
+    """Titles carry the scenario's name and the integrator settings the log records."""
     from coopsim.plots import run as plots
     from coopsim.core.joints import COORDINATE
 
@@ -108,7 +108,7 @@ def _panel(fig, title):
 
 
 def test_object_orientation_panel_against_the_heading_by_hand(logs):
-    """The orientation column of the object figure (issue 10): the paper's bar turns about z only, so the
+    """The orientation column of the object figure: the paper's bar turns about z only, so the
     rotation vector from t = 0 is [0, 0, ψ(t) − ψ(0)] with ψ = 2 atan2(q_z, q_w) of the logged
     quaternion [w, x, y, z]; the difference panel is the angle between the two models' orientations,
     here |ψ_native − ψ_mujoco|."""

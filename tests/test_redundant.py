@@ -1,4 +1,4 @@
-"""Redundant arms in prescribed object motion (issue #11 scope 4, `coopsim.inverse.trajectory.redundant_motion`):
+"""Redundant arms in prescribed object motion (`coopsim.inverse.trajectory.redundant_motion`):
 least joint-velocity norm plus a null-space pull toward a rest posture, exact on the grasps, consistent
 rates and accelerations (inverse dynamics replays them), and joint limits checked along trajectories.
 

@@ -1,4 +1,4 @@
-"""Arms from robot files (issue #11, `coopsim/io/robots.py`).
+"""Arms from robot files (`coopsim/io/robots.py`).
 
 Independent checks: each arm read from a URDF is compared with the same chain built by Pinocchio's own
 URDF parser (`independent.pinocchio_urdf`: buildModelFromUrdf, every joint off the chain locked by

@@ -1,4 +1,4 @@
-"""Scenario numbers that must not be silently changed (issue #8): whole-number fields refuse a fraction
+"""Scenario numbers that must not be silently changed: whole-number fields refuse a fraction
 instead of truncating it, and joint rates are not read as angles."""
 
 import numpy as np

@@ -1,7 +1,7 @@
 """Both engines are translation-invariant: a scene moved 100 km from the world origin gives the same
 mass matrices, bias forces, Jacobians, constraint terms, accelerations and grasp/internal wrenches (all
 expressed at points that move with the scene) as the scene at home, and integrates to the same
-trajectory (issue #8: lever arms from positions relative to the arm bases, not world positions). The
+trajectory (lever arms from positions relative to the arm bases, not world positions). The
 inverse side too: the closed-chain IK of a prescribed object motion, the inverse torques, grasp and
 internal wrenches, grasp-line frames and the load capacities of every resolution.
 

@@ -667,7 +667,7 @@ def startup_times(scenario: str | Path, attempts: int = 2) -> dict:
 
 
 COMMANDS = {"run": (["run"], 5.0), "inverse --replay": (["inverse", "--replay"], 3.0),
-            "capacity": (["capacity"], 3.0)}   # issue #7's wall-time targets (s), paper scene, warm cache
+            "capacity": (["capacity"], 3.0)}   # wall-time targets (s), paper scene, warm cache
 
 
 def command_times(scenario: str | Path, repeats: int = 2, commands=COMMANDS) -> dict:

@@ -395,7 +395,7 @@ class Controller:
                             f"evaluations (control.fallback)", fallbacks=count)]
 
     def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`, about 10 µs)."""
+        """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`)."""
         from coopsim.compiled import api
         from coopsim.compiled.control import evaluate
 

@@ -1,4 +1,4 @@
-"""Stage 8 — object stress: what an internal wrench does to the object (issue #4, paper sec. 3.2).
+"""Stage 8 — object stress: what an internal wrench does to the object (paper sec. 3.2).
 
 Two views, both at every sample:
   * the internal wrench of one arm (at the centre of mass C, world axes; either definition, see

@@ -1,6 +1,6 @@
 """Stage 6 — trajectories to invert: joint motions (θ, θ̇, θ̈) of the closed chain.
 
-Two sources (issue #4, paper sec. 3.2):
+Two sources (paper sec. 3.2):
   * the joint trajectory of a forward run (the paper's choice): θ, θ̇ are the integrator's values and
     θ̈ the closed-chain forward dynamics at the samples, so all three are exact at the samples;
   * a prescribed object motion: pose waypoints of the object's centre of mass C with a smooth time

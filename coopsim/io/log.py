@@ -364,8 +364,8 @@ def read_mcap(path: str | Path) -> LogData:
     """Read a log written by :func:`write_mcap`: series topics as arrays (bit-identical), other JSON
     topics as decoded messages, metadata records and schema names. A file that is not a whole, intact
     MCAP log of JSON messages raises UnreadableLogError naming the file: the whole file is read in
-    order, checking the magic at both ends, every record's length, the data section's CRC (logs since
-    issue #9 carry one), each chunk's, the summary's, and that nothing follows the end."""
+    order, checking the magic at both ends, every record's length, the data section's CRC (where the
+    log carries one), each chunk's, the summary's, and that nothing follows the end."""
     path = Path(path)
     try:
         data = path.read_bytes()

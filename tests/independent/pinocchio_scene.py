@@ -1,4 +1,4 @@
-"""A coopsim scenario file built in Pinocchio from the YAML text alone (issue #8).
+"""A coopsim scenario file built in Pinocchio from the YAML text alone.
 
 Nothing here imports coopsim: the file is read with PyYAML and turned into Pinocchio models by the
 conventions of README.md ("Model and conventions", "Scenario files"), so that the tests can check

@@ -1,4 +1,4 @@
-"""Scenario arms that name a robot file, built in Pinocchio from the URDF itself (issue #11).
+"""Scenario arms that name a robot file, built in Pinocchio from the URDF itself.
 
 `RobotScene` is `PinocchioScene` (the scene from the YAML text, the README's conventions) whose arms
 given as `robot:` or `file:` are read by Pinocchio's own URDF parser (`pinocchio.buildModelFromUrdf`),

@@ -2,9 +2,9 @@
 
 `kernel`: an internal compiled function, callable from compiled code only. Skipping numba's
 CPython and C wrappers, which must box and unbox every field of the model and workspace tuples,
-cuts compile time by about two thirds; compiling it to LLVM IR only, linked into the entries that
-call it (`linking`), and remembering how each operation's call type resolves (`resolution`), halve
-what is left; code loaded from the cache skips numba's compiler registries (`loading`). Kernels let
+shortens the compile; so do compiling it to LLVM IR only, linked into the entries that call it
+(`linking`), and remembering how each operation's call type resolves (`resolution`); code loaded
+from the cache skips numba's compiler registries (`loading`). Kernels let
 LLVM contract a·b + c into fused multiply-adds (one rounding instead of two: results differ from the
 NumPy reference in the last bits only).
 `entry`: a compiled function called from Python (batch evaluations, the time loop, sampling); it

@@ -13,8 +13,8 @@ closed-chain kernel's ~40 kernels nested four deep, it was about half of the fir
   - in numba's on-disk cache it is stored as that module's bitcode (kind "coopsim-ir"), not as
     object code, and loaded back lazy, so another process can link it without compiling it again.
 An entry (`jit.entry`) is finalized as before: its module, with every kernel it calls linked in, is
-optimized at -O3 once and becomes machine code. The code that runs is what it was; compiling the
-paper scene's time loop and closed-chain kernel took 45.8 s before and 25.2 s after, one process.
+optimized at -O3 once and becomes machine code. The code that runs is the same as numba's default
+makes; only the work of compiling it changes.
 
 numba has no public hook for this, so `install()` wraps seven methods of its code library, code
 generator, CPU context and compile result. They act on coopsim's functions only; for any other

@@ -2,7 +2,7 @@
 
 Before it loads a function from its on-disk cache, numba refreshes its target context: it imports and
 installs every typing and lowering registry (numba's NumPy, math, random, typed containers…; the
-linear-algebra one imports SciPy's), about 0.34 s of a command's start on the 2-core machine. Loading
+linear-algebra one imports SciPy's), a noticeable part of a command's start. Loading
 needs none of it: the cached object code is linked against numba's runtime (NRT) and its C helpers,
 and nothing is typed or lowered. A compilation refreshes the contexts itself (numba's CompilerBase
 does, before typing), so what a later compile needs is still loaded then.

@@ -4,8 +4,8 @@ signature is worked out once per process.
 To type `a * b` on two float64, or `A[i, j]`, numba's `BaseFunction.get_call_type` tries every
 template registered for the operator, in order, catching the failures, until one accepts the
 argument types; lowering asks again for each call it lowers. The kernels hold thousands of such calls
-over a few hundred distinct (function, argument types) pairs, and the repeats were about a sixth of
-the first compile (4.2 of 26 s on the paper scene's time loop; 0.7 s once remembered).
+over a few hundred distinct (function, argument types) pairs, so most resolutions repeat one made
+before.
 
 `install()` wraps `get_call_type` with a table keyed by the function type, typing context, argument
 types, keyword types and the compilation flags in force (an overload compiles its implementation per
