@@ -12,7 +12,7 @@ from coopsim.inverse.problem import inverse_problem
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
 from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory
-from conftest import SCENARIOS
+from helpers import SCENARIOS
 
 BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.yaml"))
 PAYLOAD = np.array([0.2, 0.0, 0.0])      # on the paper bar's axis, at arm 2's grasp (object frame, m)

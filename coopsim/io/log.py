@@ -300,7 +300,7 @@ def log_data(streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str
     built in memory (what the commands draw their figures from while the file is written): series as
     float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them (`messages` False: left
     out, e.g. the thousands of /tf transforms no figure draws). Checked as `write_mcap` checks them;
-    tests/test_log.py compares it with the file read back."""
+    tests/io/test_log.py compares it with the file read back."""
     topics, schemas, decoded = {}, {}, {}
     for st in streams:
         if isinstance(st, Series):

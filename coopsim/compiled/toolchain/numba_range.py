@@ -2,7 +2,7 @@
 follow, and the test of the running numba against them.
 
 The range is the one the suite exercises and `pyproject.toml` declares (`numba>=0.68,<0.69`):
-`tests/test_compiled_linking.py` checks the three agree. On any other numba the wrappers install
+`tests/compiled/test_compiled_linking.py` checks the three agree. On any other numba the wrappers install
 nothing and numba compiles coopsim as it does by default (a slower first compile, the same code).
 """
 
