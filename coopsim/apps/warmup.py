@@ -30,18 +30,36 @@ import subprocess
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "paper_planar_2x3.yaml"
+def _box(length: float) -> dict:
+    return {"joint": {"axis": [0, 0, 1]}, "box": {"length": length, "cross_section": [0.04, 0.04], "density": 7850}}
+
+
+def _arm(name: str, x: float, angles_deg: list, torque: list) -> dict:
+    return {"name": name, "base": {"position": [x, 0.0, 0.0]}, "links": [_box(0.6), _box(0.6), _box(0.05)],
+            "initial": {"angles_deg": angles_deg}, "torque": {"constant": torque},
+            "motors": {"stall_torque": [0.55, 0.96, 0.96], "no_load_speed": [5.85, 3.0, 3.0]}}
+
+
+# The scene the warm-up compiles on, built here so that an installed package warms up too: the paper's
+# two planar 3R arms and steel bar (scenarios/paper_planar_2x3.yaml). Kernels are compiled for the
+# types of their arguments, which any scene shares.
+SCENE = {"name": "warm_up", "gravity": [0.0, 0.0, -9.81], "duration": 0.05,
+         "arms": [_arm("arm1", 0.0, [90.0, 303.56, 326.44], [0.5, -0.02, 0.0]),
+                  _arm("arm2", 1.5, [90.0, 56.44, 33.56], [-0.1, 0.0, 0.0])],
+         "object": {"box": {"size": [0.4, 0.06, 0.1], "density": 7850},
+                    "grasps": [{"arm": "arm1", "position": [-0.2, 0.0, 0.0]},
+                               {"arm": "arm2", "position": [0.2, 0.0, 0.0], "rpy_deg": [0, 0, 180]}]},
+         "integrator": {"method": "dop853", "rtol": 1e-12, "atol": 1e-13, "output_dt": 0.01}}
 WAIT_S = 120.0      # the longest wait for a kernel another process compiles
 
 
 def _model():
-    from coopsim.io.scenario import load_scenario
+    from coopsim.io.scenario import model_from_dict
 
-    return load_scenario(SCENARIO)
+    return model_from_dict(SCENE, where="warm-up scene")
 
 
 def _state(model):
@@ -176,12 +194,9 @@ CHILDREN = {"chain_free": chain_free_child, "control": control_child}
 
 def warm_up(control: bool = False) -> None:
     """Compile what every command uses, on two processes, and with `control` the extras and the
-    controllers too, on a third (a no-op for what is cached already). Needs the source checkout's
-    scenarios/ folder; does nothing without it."""
+    controllers too, on a third (a no-op for what is cached already)."""
     from coopsim.compiled.api import compile_pending, compiled
 
-    if not SCENARIO.exists():
-        return
     if not compile_pending():
         if control:
             warm_up_group("extras")
@@ -218,7 +233,7 @@ def warm_up_group(group: str) -> None:
 
     if group == "base":
         warm_up()
-    elif SCENARIO.exists() and compile_pending(group):
+    elif compile_pending(group):
         warm_up()
         GROUPS[group](_model())
 
