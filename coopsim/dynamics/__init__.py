@@ -6,6 +6,7 @@
     closed_chain.py  stage 4: the grasp wrenches eliminated, θ̈(θ, θ̇, τ) (eqs. 14–27)
     manifold.py      stage 5: consistent initial state, projection, Baumgarte stabilization
     integrate.py     DOP853 / DOPRI5 / RK4, landing on every output time
+    scene.py         the scene's geometry: grasp poses, the plane of motion, the constraint rows S
 
 `coopsim.compiled` runs the same stages compiled; the tests hold the two together.
 """

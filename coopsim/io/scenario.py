@@ -26,10 +26,10 @@ import numpy as np
 
 from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
-from coopsim.dynamics.kinematics import arm_pose, reach_check
 from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 from coopsim.io.yaml_rules import read_text, load_yaml
+from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
 
 
 _REQUIRED = object()
@@ -831,68 +831,9 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     root.done()
     _check_work(where, duration, duration_field, integrator, mujoco_settings, inverse)
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)
-    grasp_pos, grasp_rot = _resolve_grasps(arms, q0, order, grasp, pose, where)
+    grasp_pos, grasp_rot = grasp_poses(arms, q0, order, grasp, pose, where)
     obj = ObjectModel(mass, inertia, box, grasp_pos, grasp_rot, carrier=order[0])
-    planar_basis = _plane(arms, q0) if integrator.constraint_rows == "auto" else None
-    return Model(name, tuple(arms), obj, gravity, planar_basis, _rows(planar_basis), q0, qd0, duration,
+    planar_basis = plane_of_motion(arms, q0) if integrator.constraint_rows == "auto" else None
+    return Model(name, tuple(arms), obj, gravity, planar_basis, row_selector(planar_basis), q0, qd0, duration,
                  tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse,
                  joint_range=np.concatenate(ranges), control=control)
-
-
-def _arm_poses(arms: list[ArmModel], q: np.ndarray):
-    ends = np.cumsum([0] + [a.n for a in arms])
-    return [arm_pose(a, q[s:e]) for a, s, e in zip(arms, ends[:-1], ends[1:])]
-
-
-def _resolve_grasps(arms, q0, order, grasp, pose, where):
-    """Grasp poses (EE frame in the object frame), rows by arm index: as given, checked for reach,
-    or derived from the initial configuration (object pose from `object.pose`, else at the centroid
-    of the end-effectors with the first arm's end-effector orientation)."""
-    poses = _arm_poses(arms, q0)
-    r = len(arms)
-    if grasp is None:
-        if pose is None:
-            pose = (np.mean([p.p_ee for p in poses], axis=0), poses[0].R_ee)
-        p_C, R_o = pose
-        # p_EE − p_C as (base − p_C) + p_EE relative to the base: no world position in the difference
-        gp = np.array([R_o.T @ ((p.origin - p_C) + p.p_ee_rel) for p in poses])
-        gr = np.array([R_o.T @ p.R_ee for p in poses])
-        return gp, gr
-    gp = np.array([grasp[m][0] for m in range(r)])
-    gr = np.array([grasp[m][1] for m in range(r)])
-    c = order[0]
-    R_o = poses[c].R_ee @ gr[c].T
-    for m in order[1:]:
-        # grasp point m relative to arm m's base: (o_c − o_m) + p_EE,c (relative to o_c) + R_o (g_m − g_c)
-        dist, reach, ok = reach_check(arms[m], (poses[c].origin - poses[m].origin) + poses[c].p_ee_rel
-                                      + R_o @ (gp[m] - gp[c]))
-        if not ok:
-            raise ScenarioError(f"{where}: {grasp[m][2]}: arm {arms[m].name!r} cannot reach its grasp: "
-                                f"the grasp point is {dist:.4g} m from its first joint, its reach is {reach:.4g} m")
-    return gp, gr
-
-
-def _plane(arms: list[ArmModel], q0: np.ndarray) -> np.ndarray | None:
-    """Rows (e1, e2, n) of the plane of motion if every revolute joint axis is parallel to one n and
-    every prismatic one perpendicular to it, else None (and None without a revolute joint).
-    Rotations about parallel axes and slides keep every axis's direction, so checking one configuration
-    suffices."""
-    z = np.vstack([p.z for p in _arm_poses(arms, q0)])
-    rev = np.concatenate([a.joint_type for a in arms]) == REVOLUTE
-    if not rev.any():
-        return None
-    nrm = z[rev][0]
-    if np.max(np.linalg.norm(np.cross(z[rev], nrm), axis=1)) > 1e-12 or np.any(np.abs(z[~rev] @ nrm) > 1e-12):
-        return None
-    e2 = np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e2 /= np.linalg.norm(e2)
-    return np.array([np.cross(e2, nrm), e2, nrm])
-
-
-def _rows(plane: np.ndarray | None) -> np.ndarray:
-    """Constraint-row selector S (k, 6): planar [e1ᵀ 0; e2ᵀ 0; 0 nᵀ], spatial I₆."""
-    if plane is None:
-        return np.eye(6)
-    S = np.zeros((3, 6))
-    S[0, :3], S[1, :3], S[2, 3:] = plane[0], plane[1], plane[2]
-    return S

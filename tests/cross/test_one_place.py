@@ -15,7 +15,7 @@ from coopsim.inverse.solve import default_bounds, distribute, resolution_for
 from coopsim.inverse import resolutions
 from coopsim.io import scenario
 from coopsim.inverse import trajectory
-from coopsim.dynamics import kinematics
+from coopsim.dynamics import kinematics, scene
 from coopsim.cli import build_parser
 from coopsim.twin.compare import compare
 from coopsim.report.inverse_report import _capacity_entry, capacity_study, inverse_study
@@ -219,4 +219,4 @@ def test_one_reach_check_with_one_slack():
     assert inside.reach == pytest.approx(1.25, rel=1e-15)
     assert outside.dist == pytest.approx(1.25 * (1 + 1.1e-9), rel=1e-15)
     assert kinematics.REACH_SLACK == 1e-9
-    assert scenario.reach_check is kinematics.reach_check and trajectory.reach_check is kinematics.reach_check
+    assert scene.reach_check is kinematics.reach_check and trajectory.reach_check is kinematics.reach_check
