@@ -456,8 +456,15 @@ def _controller_model(model: Model, mass_scale: float) -> Model:
 
 
 def closed_loop(model: Model) -> Model:
-    """The model with its `control:` section in the loop: torques a TorqueFeedback of its Controller
-    (the model itself when it has no controller or already feeds back)."""
+    """The model with its `control:` section in the loop, ready for `coopsim.forward.simulate`.
+
+    Args:
+        model: a Model, with or without a `control:` section.
+
+    Returns:
+        The model with torques a TorqueFeedback of its Controller (the scenario's torque tables are
+        added to the command); the model itself when it has no controller or already feeds back.
+    """
     if model.control is None or isinstance(model.torques, TorqueFeedback):
         return model
     return replace(model, torques=TorqueFeedback(Controller(model)))

@@ -184,14 +184,30 @@ ENGINES = ("compiled", "reference", "stages")
 
 def simulate(model: Model, duration: float | None = None, settings: IntegratorSettings | None = None,
              progress=None, engine: str = "compiled", fixed_step: float | None = None) -> SimResult:
-    """Integrate the closed chain from its consistent initial state over `duration` s (default the
-    scenario's) with the scenario's integrator settings (or `settings`); `progress(fraction)` is
-    called as the run advances. engine: 'compiled', 'reference' or 'stages' (module docstring); a
-    scenario's controller runs on the compiled engine unless it needs Python ('bounded', then on
-    'stages'); other torques given as a Python function run on 'reference' ('stages' for feedback).
-    fixed_step (s, compiled engine): run the method (DOP853 or DOPRI5 too) at fixed steps of at most
-    this size, landing on every output time — for torques tabulated at exactly those steps' stage times
-    (`coopsim.compiled.integrate.stage_times`)."""
+    """Integrate the closed chain (eqs. 14–27) from its consistent initial state, driven by the model's
+    torque source, and sample every reported quantity on the output grid.
+
+    Args:
+        model: the Model; its `torques` are the source (tables, a TorqueFunction, or a TorqueFeedback
+            such as a closed loop, `coopsim.control.controller.closed_loop`).
+        duration: s, in place of the model's.
+        settings: integrator settings in place of the model's.
+        progress: called with the fraction done (0..1) as the run advances.
+        engine: 'compiled', 'reference' or 'stages' (module docstring). An in-the-loop controller runs
+            on the compiled engine unless it needs Python (then 'stages'); other Python torque
+            functions run on 'reference' ('stages' for feedback).
+        fixed_step: s, compiled engine: the method (DOP853 or DOPRI5 too) at fixed steps of at most
+            this size, landing on every output time, for torques tabulated at exactly those steps'
+            stage times (`coopsim.compiled.integrate.stage_times`).
+
+    Returns:
+        SimResult: N output samples (t (N,) s, q, qd, qdd (N, n), torques, object motion, grasp and
+        internal wrenches, constraint residuals, condition numbers, warnings), world axes, SI units.
+
+    Raises:
+        CoopsimError: the model has a `control:` section that is not in the loop.
+        SimulationError: the run failed; the message gives the time, the configuration and the reason.
+    """
     if settings is not None:
         model = replace(model, integrator=settings)
     if duration is not None:

@@ -138,9 +138,19 @@ class InverseResult:
 
 def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.ndarray | None = None,
                     terms=None) -> InverseProblem:
-    """Evaluate the terms of eqs. 28–32 at every sample of `traj`: the per-sample kinematics and arm
-    dynamics from the compiled kernel (`coopsim.compiled.api.inverse_terms`, batched over threads, or
-    `terms` when the caller has them), assembled here with array operations."""
+    """The terms of eqs. 28–32 at every sample of a joint trajectory.
+
+    Args:
+        model: the Model.
+        traj: the JointTrajectory (N samples).
+        payload_position: (3,) m, object frame: a point payload's position, for the capacity's
+            payload axis; None: none.
+        terms: the compiled per-sample kinematics and arm dynamics when the caller has them (else
+            `coopsim.compiled.api.inverse_terms`, batched over threads).
+
+    Returns:
+        InverseProblem: per sample τ_arms, Jᵀ, A, y and what the resolutions need (world axes, SI).
+    """
     from coopsim.compiled import api
 
     S, g = model.rows, model.gravity

@@ -18,8 +18,18 @@ from coopsim.inverse.problem import InverseProblem, InverseResult, Resolution, S
 def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                    force_bound: float = np.inf, moment_bound: float = np.inf,
                    bound_definition: str = "nonsqueezing") -> Resolution:
-    """The resolution `method` (a name in `coopsim.inverse.resolutions.RESOLUTIONS`) with the scenario's weights,
-    passive flags and virtual masses."""
+    """A redundancy resolution ready to run, with the scenario's data.
+
+    Args:
+        model: the Model (its energy weights, passive joints and non-squeezing virtual masses).
+        method: a name in `coopsim.inverse.resolutions.RESOLUTIONS`.
+        weights: (n,) energy weights Q in place of the scenario's (minimum energy, eq. 33).
+        force_bound, moment_bound: N and N·m, the 'bounded' resolution's internal-wrench bounds.
+        bound_definition: the internal wrench the bounds apply to, 'nonsqueezing' or 'paper'.
+
+    Returns:
+        Resolution.
+    """
     resolution_method(method)
     obj = model.object
     masses, _ = virtual_masses(obj.grasp_pos, obj.mass, model.inverse.nonsqueezing_masses)
@@ -52,8 +62,16 @@ def result_of(prob: InverseProblem, method: str, f: np.ndarray, res: Resolution,
 
 
 def resolve(prob: InverseProblem, res: Resolution) -> InverseResult:
-    """Inverse dynamics of `prob` resolved by `res` (output per sample: τ, F_e, internal wrenches, cost;
-    nan at the samples listed in `failures`)."""
+    """The inverse dynamics of a problem resolved by one resolution.
+
+    Args:
+        prob: the InverseProblem (N samples).
+        res: the Resolution.
+
+    Returns:
+        InverseResult: per sample τ (N, n) N·m, grasp wrenches F_e (N, r, 6), the internal wrench
+        (N, r, 6) by both definitions, the cost ½ τᵀQτ; nan at the samples listed in its `failures`.
+    """
     failures: list[SampleFailure] = []
     f = distribute(prob, prob.y, res, failures)
     return result_of(prob, res.method, f, res, failures)

@@ -189,11 +189,24 @@ def arm_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, ac
 
 def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: float = 1e-9) -> JointTrajectory:
     """Closed-chain inverse kinematics of a prescribed object motion, sampled every motion.output_dt
-    from the first to the last waypoint. Each arm is solved by continuation: Newton from the previous
-    sample's angles advanced by θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch
-    chosen at the start is kept. Raises TrajectoryError naming the time and arm when a target is out
-    of reach, an arm's Jacobian is singular, det(S J) changes sign between samples (a singularity is
-    crossed), or a target leaves the plane of motion of a planar scene."""
+    from the first to the last waypoint.
+
+    Each arm is solved by continuation: Newton from the previous sample's angles advanced by
+    θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch chosen at the start is kept.
+
+    Args:
+        model: the Model whose arms carry the object.
+        motion: the object's waypoints and time law (scenario `inverse.object_motion`).
+        plane_tol: m or rad, how far a target may leave the plane of motion of a planar scene.
+
+    Returns:
+        JointTrajectory: t (N,) s and q, qd, qdd (N, n) rad (or m), stacked arm by arm.
+
+    Raises:
+        TrajectoryError: naming the time and arm when a target is out of reach, an arm's Jacobian is
+            singular, det(S J) changes sign between samples (a singularity is crossed), or a target
+            leaves the plane of motion.
+    """
     from coopsim.forward.simulate import output_times
 
     S = model.rows

@@ -750,10 +750,22 @@ def require_motor_limits(model: Model, where: str) -> None:
 
 
 def load_scenario(path: str | Path, duration: float | None = None, overrides=()) -> Model:
-    """Read and validate a scenario YAML file (see scenarios/*.yaml for the format). duration: the
-    command line's --duration (s), in place of the file's; checked as the file's is, and the work
-    limits apply to it. overrides: (PATH, value) pairs set in the file's data before it is validated
-    (`coopsim.io.overrides.apply_overrides`: the command line's `--set PATH=VALUE`)."""
+    """Read and validate a scenario YAML file (README, "Scenario files"; scenarios/*.yaml).
+
+    Args:
+        path: the scenario file; relative paths inside it (torque CSVs, robot files) are read from
+            its folder.
+        duration: s, in place of the file's (the command line's --duration); checked as the file's
+            is, and the work limits apply to it.
+        overrides: (PATH, value) pairs set in the file's data before it is validated
+            (`coopsim.io.overrides.apply_overrides`: the command line's `--set PATH=VALUE`).
+
+    Returns:
+        The frozen, validated Model (SI units, radians, world axes).
+
+    Raises:
+        ScenarioError: one line "FILE: FIELD: reason" for the first field that is wrong.
+    """
     if duration is not None:
         check_duration(duration)
     path = Path(path)
@@ -786,13 +798,22 @@ def safe_name(stem: str) -> str:
 
 def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."), default_name="scenario",
                     duration: float | None = None) -> Model:
-    """Build the frozen, validated `Model` from parsed scenario data: `data` is the dict a scenario file
-    holds (`load_yaml`, or built in Python), checked field by field as a file is (ScenarioError, one
-    line "WHERE: FIELD: reason"); where: the name errors start with (the file); base_dir: the folder
-    that relative paths in the data (torque CSVs, robot files) are read from; default_name: the `name`
-    when the data has none (made a safe file stem); duration: the command line's --duration in place
-    of the data's (see `load_scenario`). With `coopsim.io.overrides.apply_overrides` it is how a script
-    varies a scenario:
+    """Build the frozen, validated `Model` from parsed scenario data, checked field by field as a file is.
+
+    Args:
+        data: the dict a scenario file holds (`coopsim.io.yaml_rules.load_yaml`, or built in Python).
+        where: the name error messages start with (the file).
+        base_dir: the folder that relative paths in the data (torque CSVs, robot files) are read from.
+        default_name: the `name` when the data has none (made a safe file stem).
+        duration: s, in place of the data's (see `load_scenario`).
+
+    Returns:
+        The frozen, validated Model.
+
+    Raises:
+        ScenarioError: one line "WHERE: FIELD: reason".
+
+    With `coopsim.io.overrides.apply_overrides` it is how a script varies a scenario:
 
         data = load_yaml(Path("scenarios/paper_planar_2x3.yaml"))
         for rho in (2700.0, 7850.0):

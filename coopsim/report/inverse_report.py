@@ -78,9 +78,21 @@ class InverseStudy:
 def inverse_study(model: Model, methods=METHODS, duration: float | None = None, with_replay: bool = False,
                   bounds: tuple[float | None, float | None] = (None, None), curve: bool = True,
                   progress: Progress | None = None) -> InverseStudy:
-    """Run the inverse dynamics of the scenario with every method in `methods` (`solve_study`), then
-    the checks asked for (`add_checks`); `progress` hears the stages forward (or ik), inverse, replay
-    and curve."""
+    """The scenario's inverse-dynamics study, as `coopsim inverse` runs it.
+
+    Args:
+        model: the Model; its trajectory is the object motion's IK or a forward run.
+        methods: the resolutions to run (names in `coopsim.inverse.resolutions.METHODS`).
+        duration: s, in place of the model's (a forward-run trajectory).
+        with_replay: feed each resolution's torques back through the forward model.
+        bounds: (N, N·m) the 'bounded' resolution's internal-wrench bounds; None: the defaults.
+        curve: also the energy–stress trade-off curve.
+        progress: hears the stages forward (or ik), inverse, replay and curve.
+
+    Returns:
+        InverseStudy: the trajectory, each resolution's result, internal-wrench components and object
+        stress, the torque limits, replays and the curve where asked.
+    """
     return add_checks(solve_study(model, methods, duration, bounds, progress), with_replay, curve, progress)
 
 
@@ -286,9 +298,23 @@ class CapacityStudy:
 def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
                    optimise: bool = True, check: bool = False, methods=LINEAR_METHODS,
                    progress: Progress | None = None) -> CapacityStudy:
-    """DLCC of every linear resolution (`coopsim.inverse.resolutions.LINEAR_METHODS`) along the scenario's trajectory
-    (object scaled at constant geometry; with a payload position also as a point payload), the LP bound,
-    the optimised weights; `progress` hears the stages forward (or ik), capacity, lp and weights."""
+    """The dynamic load carrying capacity (eq. 36 motor lines) along the scenario's trajectory, as
+    `coopsim capacity` runs it.
+
+    Args:
+        model: the Model (its motors' stall torques and no-load speeds).
+        duration: s, in place of the model's (a forward-run trajectory).
+        payload_position: (3,) m, object frame: also the capacity for a point payload there.
+        with_lp: also the LP bound (the best distribution at every sample).
+        optimise: also the minimum-energy weights that carry the most.
+        check: also the brute-force check of each capacity.
+        methods: the linear resolutions (`coopsim.inverse.resolutions.LINEAR_METHODS`).
+        progress: hears the stages forward (or ik), capacity, lp and weights.
+
+    Returns:
+        CapacityStudy: per (resolution, mode) the Capacity (kg, the saturating motor, time and side)
+        and the torques at it; the LP bound per mode, the optimised weights and the checks where asked.
+    """
     traj, _ = trajectory_of(model, duration, progress)
     payload = payload_position if payload_position is not None else model.inverse.payload_position
     prob = inverse_problem(model, traj, payload)

@@ -33,8 +33,20 @@ class CrossValidation:
 
 def cross_validate(model: Model, duration: float | None = None, twin_model: Model | None = None,
                    progress: Callable[[str, float], None] | None = None) -> CrossValidation:
-    """Run both models over `duration` (default the scenario's) and compare them. `twin_model`
-    replaces the model the twin is built from (same joints), e.g. to prove the harness can fail."""
+    """Run the native model and its MuJoCo twin on the same torques (a `control:` section in the loop
+    of each) and compare them against the scenario's thresholds.
+
+    Args:
+        model: the scenario's Model.
+        duration: s, in place of the model's.
+        twin_model: the model the twin is built from in place of `model` (same joints), e.g. to prove
+            the harness can fail.
+        progress: called with (stage, fraction done), stage "native" or "mujoco".
+
+    Returns:
+        CrossValidation: both runs on the native output grid, their Comparison, and with a controller
+        its records on both sides and the twin's open-loop replay of the native torques.
+    """
     if duration is not None:
         model = replace(model, duration=duration)
     from coopsim.control.controller import closed_loop
