@@ -21,10 +21,10 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     schur.py       the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
                    three arms or more
     manifold.py    loop-closure residual Φ, projection of positions and rates
-    tableaux.py    DOP853 and Dormand–Prince coefficients, dense output included
     control.py     controllers in the loop: joint PD, object-space computed torque, the linear
                    distributions of the inverse dynamics, squeeze, grasp feedback, saturation
-    integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop, torque tables, stabilization
+    integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop (tableaux: coopsim.core.tableaux),
+                   torque tables, stabilization
     sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py          one arm's inverse kinematics and rates
     api.py         the Python entry points (batches on threads, parameter sets) and error reporting

@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled import tableaux
+from coopsim.core import tableaux
 from coopsim.compiled.chain import OK, RANK_DEFICIENT, chain_forward
 from coopsim.compiled.control import feedback
 from coopsim.compiled.toolchain.jit import entry, kernel
@@ -78,9 +78,9 @@ def tableau(method: str) -> Tableau:
         E5[:7], Pd[:] = tableaux.DOPRI5_E, tableaux.DOPRI5_P
         return Tableau(DOPRI5, 6, A, C, B, E5, E3, D, Pd, 4)
     if method == "rk4":
-        A[1, 0], A[2, 1], A[3, 2] = 0.5, 0.5, 1.0
-        C[:4] = [0.0, 0.5, 0.5, 1.0]
-        B[:4] = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
+        A[:4, :4] = tableaux.RK4_A
+        C[:4] = tableaux.RK4_C
+        B[:4] = tableaux.RK4_B
         return Tableau(RK4, 4, A, C, B, E5, E3, D, Pd, 0)
     raise ValueError(f"unknown method {method!r}; expected dop853, dopri5 or rk4")
 

@@ -6,4 +6,5 @@
     errors.py   CoopsimError and the errors and warnings every layer raises
     results.py  sampled motions and projections shared by the engines and both sides
     labels.py   the names of arms and joints in messages and figures
+    tableaux.py the integrators' Butcher tableaux and dense-output coefficients (one copy for both engines)
 """

@@ -111,7 +111,8 @@ from scipy.integrate._ivp import dop853_coefficients as _d853  # noqa: E402
 from scipy.integrate._ivp.rk import DOP853 as _SciDOP853, RK45 as _SciRK45  # noqa: E402
 
 from coopsim.dynamics import integrate as _ref# noqa: E402
-from coopsim.compiled import integrate as _cint, tableaux as _ctab  # noqa: E402
+from coopsim.compiled import integrate as _cint
+from coopsim.core import tableaux as _ctab# noqa: E402
 
 TABLEAU_TOL = 1e-15  # absolute; every coefficient is O(1..500), measured differences are exactly 0
 
@@ -152,7 +153,7 @@ def test_reference_dop853_tableau_is_scipys():
 
 
 def test_compiled_tableau_arrays_are_scipys_including_dense_output():
-    """coopsim.compiled.tableaux, as printed there: DOP853's full 16-stage A and C (stages 13–16 are
+    """coopsim.core.tableaux, as printed there: DOP853's full 16-stage A and C (stages 13–16 are
     the dense-output stages), B, E3, E5 and the dense-output matrix D (4, 16); DOPRI5's A, B, C, E and
     Shampine's dense-output polynomial P (7, 4)."""
     _same("compiled DOP853_A (16x16)", _ctab.DOP853_A, _d853.A)

@@ -1,10 +1,12 @@
-"""Butcher tableaux and dense-output coefficients of the compiled integrators, as arrays.
+"""Butcher tableaux and dense-output coefficients of the integrators, as arrays: the one copy the
+reference integrator (`coopsim.dynamics.integrate`) and the compiled time loop
+(`coopsim.compiled.integrate`) both read.
 
 DOP853 (Prince & Dormand 1981; Hairer's DOP853 with its 7th-order dense output, stages 13–16) and
 Dormand–Prince 5(4) (with Shampine's 4th-order dense output), with the coefficients of SciPy's
 `scipy/integrate/_ivp/dop853_coefficients.py` and `RK45.P` (BSD-3-Clause, Copyright (c) SciPy
-Developers; themselves from Hairer's Fortran code), printed at full precision. The reference
-`coopsim.dynamics.integrate` holds the same step tableaux; a test checks that they agree.
+Developers; themselves from Hairer's Fortran code), printed at full precision; and the classical
+RK4 (Hairer et al., Sec. II.1, Table 1.2 right). The tests check them against SciPy's.
 """
 
 import numpy as np
@@ -131,3 +133,8 @@ DOPRI5_P = np.array([[ 1.                , -2.8535800653862835,  3.0717434641059
  [ 0.                ,  2.5548038301849423, -6.399112377351017 ,  3.5219323679207912],
  [ 0.                , -1.3744241142186024,  3.272657752246729 , -1.7672812570757455],
  [ 0.                ,  1.3824689317781436, -3.764937863556287 ,  2.382468931778144 ]])
+
+# Classical RK4
+RK4_A = np.array([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+RK4_C = np.array([0.0, 0.5, 0.5, 1.0])
+RK4_B = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
