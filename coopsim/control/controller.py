@@ -34,7 +34,7 @@ from functools import cached_property
 
 import numpy as np
 
-from coopsim.core.model import Model, TorqueFeedback, torque_at
+from coopsim.core.model import Model, TorqueFeedback, torque_at, torque_limits
 from coopsim.core.errors import CoopsimError
 
 LAWS = ("joint_pd", "computed_torque")
@@ -76,9 +76,7 @@ class Command:
 
 
 def saturate(motors, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.inverse.capacity.torque_limits`)."""
-    from coopsim.inverse.capacity import torque_limits
-
+    """τ clipped to the motor lines of eq. 36, τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) (`coopsim.core.model.torque_limits`)."""
     lo, hi = torque_limits(motors, qd)
     return np.minimum(np.maximum(tau, lo), hi)
 
@@ -352,10 +350,9 @@ class Controller:
         else:
             fields.update(_packed_motion(self.plant.inverse.object_motion))
         res = self.resolution
-        ts, ws = m.motors.stall_torque, m.motors.no_load_speed
-        slope = np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
         return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights,
-                              vmass=res.masses, vinertia=res.inertias, stall=ts, slope=slope, **fields)
+                              vmass=res.masses, vinertia=res.inertias, stall=m.motors.stall_torque,
+                              slope=m.motors.line_slope, **fields)
 
     @cached_property
     def compiled_loop(self) -> tuple:

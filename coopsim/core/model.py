@@ -179,7 +179,7 @@ class ControlSettings:
     τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m) with grasp_kp (2,) [N/m, N·m/rad] and grasp_kd (2,) [N·s/m,
     N·m·s/rad] (zero: none; e_m is zero on the native model up to its loop-closure tolerance).
     mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =
-    none). saturate: clip τ to the motor lines of eq. 36 (`coopsim.inverse.capacity.torque_limits`).
+    none). saturate: clip τ to the motor lines of eq. 36 (`torque_limits`).
     fallback (distribution 'bounded' only, its bounds inverse.internal_force_bound and
     internal_moment_bound, none: unbounded): where its QP has no solution, the resolution used instead
     ('nonsqueezing', 'paper', 'min_energy': a `distribution_fallback` RunWarning counts them) or
@@ -212,6 +212,28 @@ class Motors:
     no_load_speed: np.ndarray
     energy_weight: np.ndarray
     passive: np.ndarray
+
+    @property
+    def line_slope(self) -> np.ndarray:
+        """τ_s/ω_s (n,) N·m·s/rad (N·s/m on a prismatic joint), the motor lines' slope of eq. 36; 0
+        where the line is flat (infinite no-load speed) or there is no limit (infinite stall torque)."""
+        ts, ws = self.stall_torque, self.no_load_speed
+        return np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
+
+
+def torque_limits(motors: Motors, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The motor lines of eq. 36 at joint rates: τ_min = −τ_s − (τ_s/ω_s) θ̇, τ_max = τ_s − (τ_s/ω_s) θ̇.
+
+    Args:
+        motors: the Motors (stall torque τ_s, no-load speed ω_s per joint).
+        qd: joint rates (..., n) rad/s (m/s on a prismatic joint).
+
+    Returns:
+        (τ_min, τ_max), each shaped like qd, N·m (N): infinite stall torque gives no limit, infinite
+        no-load speed a flat line.
+    """
+    drop = np.nan_to_num(motors.line_slope * qd)
+    return -motors.stall_torque - drop, motors.stall_torque - drop
 
 
 @dataclass(frozen=True)

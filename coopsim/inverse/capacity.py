@@ -30,7 +30,7 @@ import numpy as np
 from coopsim.inverse.solve import distribute, energy, nan_peak, resolve
 from coopsim.inverse.problem import InverseProblem, Resolution, torques_of
 from coopsim.inverse.distributions import MinEnergySetup, grasp_line_frames, internal_bound_components, internal_operator, min_energy_setup, min_energy_solve
-from coopsim.core.model import Model, Motors
+from coopsim.core.model import Model, Motors, torque_limits
 from coopsim.inverse.qp import LPBatch, QPError, solve_lps
 from coopsim.inverse.resolutions import LINEAR_METHODS, resolution_method
 
@@ -55,15 +55,6 @@ class Capacity:
     side: str | None
     note: str = ""
     per_sample: np.ndarray | None = field(default=None, compare=False, repr=False)
-
-
-def torque_limits(motors: Motors, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(τ_min, τ_max) (N, n) N·m of eq. 36 at joint rates qd (N, n): ∓τ_s − (τ_s/ω_s) θ̇ (infinite
-    stall torque: no limit; infinite no-load speed: a flat line)."""
-    ts, ws = motors.stall_torque, motors.no_load_speed
-    slope = np.where(np.isfinite(ts) & np.isfinite(ws), ts / np.where(np.isfinite(ws), ws, 1.0), 0.0)
-    drop = np.nan_to_num(slope * qd)
-    return -ts - drop, ts - drop
 
 
 def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from coopsim.inverse.replay import replay
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.io.log import Series, nonfinite_name
-from coopsim.core.model import Model
+from coopsim.core.model import Model, torque_limits
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
 from coopsim.inverse.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
@@ -127,7 +127,7 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
             stress[k] = section_loads(model.object.mass, model.object.box, model.object.grasp_pos, prob.R_o,
                                       prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows)
     return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
-                        cap.torque_limits(model.motors, traj.qd), {}, [], (f_b, m_b))
+                        torque_limits(model.motors, traj.qd), {}, [], (f_b, m_b))
 
 
 def add_checks(study: InverseStudy, with_replay: bool = False, curve: bool = True,
@@ -348,7 +348,7 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
         optimised = (w, c, a + c.mass * b)
         _report(progress, "weights", 1.0)
     return CapacityStudy(model, traj, prob, modes, caps, tau_at, lp, optimised, energies, checks,
-                         cap.torque_limits(model.motors, traj.qd), payload)
+                         torque_limits(model.motors, traj.qd), payload)
 
 
 def _capacity_entry(model: Model, c: cap.Capacity) -> dict:

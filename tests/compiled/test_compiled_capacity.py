@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from coopsim.core.model import torque_limits
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.distributions import min_energy_setup
 from coopsim.inverse.problem import InverseRankWarning, torques_of
@@ -22,7 +23,7 @@ def _setup(name: str, mode: str = "scaled", duration: float | None = None):
     m, P = model(name), problem(name, duration)
     y0, y1 = cap.mass_line(P, mode)
     setup = min_energy_setup(P, np.stack([y0, y0 + y1]), m.motors.passive)
-    lo, hi = cap.torque_limits(m.motors, P.qd)
+    lo, hi = torque_limits(m.motors, P.qd)
     return m, P, setup, lo, hi
 
 

@@ -11,7 +11,7 @@ from coopsim.inverse.distributions import nonsqueezing_metric
 from coopsim.inverse.problem import inverse_problem, torques_of
 from coopsim.inverse.solve import default_bounds, distribute, resolution_for, resolve
 from coopsim.inverse import solve
-from coopsim.core.model import Motors
+from coopsim.core.model import Motors, torque_limits
 from coopsim.inverse.qp import QPError
 from helpers import MujocoReference, mujoco_kkt_acceleration
 from inverse_cases import BUNDLED, PAYLOAD, problem, run
@@ -24,7 +24,7 @@ def test_motor_lines_of_eq_36():
     """τ_s = 0.55 N·m, ω_s = 5.85 rad/s at θ̇ = 1.17 rad/s: τ_max = 0.55 − 0.11 = 0.44, τ_min = −0.66;
     an unlimited motor (inf) gives ∓inf."""
     m = Motors(np.array([0.55, np.inf]), np.array([5.85, np.inf]), np.ones(2), np.zeros(2, bool))
-    lo, hi = cap.torque_limits(m, np.array([[1.17, 3.0]]))
+    lo, hi = torque_limits(m, np.array([[1.17, 3.0]]))
     assert hi[0, 0] == pytest.approx(0.44, rel=1e-14) and lo[0, 0] == pytest.approx(-0.66, rel=1e-14)
     assert hi[0, 1] == np.inf and lo[0, 1] == -np.inf
 
@@ -49,7 +49,7 @@ def _violation(model, traj, method, res_nominal, mode, mass):
     P2 = inverse_problem(m2, traj)
     R = replace(res_nominal, method=method)
     tau = resolve(P2, R).tau
-    lo, hi = cap.torque_limits(model.motors, traj.qd)
+    lo, hi = torque_limits(model.motors, traj.qd)
     excess = np.maximum(tau - hi, lo - tau)
     i, j = np.unravel_index(int(np.argmax(excess)), excess.shape)
     return excess[i, j], i, j
