@@ -474,7 +474,7 @@ def min_energy_distribution(C, k):
 def squeeze_wrenches(P, W, C, force):
     """C.f += the squeeze: each grasp pushes `force` N towards C along its grasp line (ρ_m = −s_m),
     F_m = S [−force ρ_m/|ρ_m|; 0], projected on the null space of A: F − Aᵀ(AAᵀ)⁻¹A F
-    (`coopsim.control.controller.squeeze_wrenches`). Returns False when A Aᵀ is singular."""
+    (`coopsim.control.laws.squeeze_wrenches`). Returns False when A Aᵀ is singular."""
     S = P.rows
     k = S.shape[0]
     r = len(P.dof) - 1
@@ -630,7 +630,7 @@ def computed_torque(P, W, C, t, q, qd, u):
 
 @kernel
 def grasp_feedback(P, W, C, qd, u):
-    """u += J_mᵀ Sᵀ S (Kp e_m + Kd ė_m) for every arm m (`coopsim.control.controller.grasp_errors`): e_m = [p_t − p_EE;
+    """u += J_mᵀ Sᵀ S (Kp e_m + Kd ė_m) for every arm m (`coopsim.control.laws.grasp_errors`): e_m = [p_t − p_EE;
     log(R_t R_EEᵀ)] the pose error of its end effector against where its grasp puts it on the object
     (p_t = p_C + R_o g_m, R_t = R_o G_m), ė_m = [v_C + ω × R_o g_m; ω] − J_m θ̇_m the twist error; the
     errors are kept in C.gerr. Gains gkp, gkd (2,) [linear, angular]; W holds the terms of (θ, θ̇)."""

@@ -175,7 +175,7 @@ class ControlSettings:
     a = a_r + Kd (v_r − v) + Kp e (object_kp, object_kd (2,): [linear, angular], 1/s² and 1/s), the
     closed-chain inverse dynamics of that acceleration distributed by `distribution`, plus a squeeze
     force (N, along each grasp line towards the centre of mass, in the null space of the grasp matrix),
-    plus joint-space feedback on each arm's grasp error e_m (`coopsim.control.controller.grasp_errors`),
+    plus joint-space feedback on each arm's grasp error e_m (`coopsim.control.laws.grasp_errors`),
     τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m) with grasp_kp (2,) [N/m, N·m/rad] and grasp_kd (2,) [N·s/m,
     N·m·s/rad] (zero: none; e_m is zero on the native model up to its loop-closure tolerance).
     mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =

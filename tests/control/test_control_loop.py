@@ -107,7 +107,7 @@ def test_the_compiled_closed_loop_is_the_stages_engine_to_round_off(hold, carry)
 # ------------------------------------------------------------------------------------------------
 
 def test_the_grasp_error_is_the_loop_closure_residual_and_its_rate_its_derivative(carry):
-    """e_m (`coopsim.control.controller.grasp_errors`) in the scene's rows is minus the plain-NumPy loop-closure
+    """e_m (`coopsim.control.laws.grasp_errors`) in the scene's rows is minus the plain-NumPy loop-closure
     residual Φ_m (`coopsim.dynamics.closed_chain.position_residual`) at a state off the manifold (≤ 1e-12; the
     carrier's is zero), and ė_m = [v_C + ω × R_o g_m; ω] − J_m θ̇_m is the derivative of e_m along θ̇ by
     central differences (h = 1e-6) at a consistent state (≤ 1e-8 m/s, rad/s, with rates of 1 rad/s;
