@@ -334,12 +334,12 @@ def point_log(sweep: Sweep, rows: list[dict]):
     ns = time_ns(t)
     messages = tuple({"timestamp": stamp(int(k))} | {fields[c]: _json_value(r.get(c)) for c in names}
                      for k, r in zip(ns, rows))
-    schema = {"type": "object", "title": "coopsim.apps.sweep.Point",
+    schema = {"type": "object", "title": "coopsim.sweep.Point",
               "description": "one sweep point: its axis values, error (null if none) and study columns",
               "properties": {"timestamp": {"type": "object"}} | {fields[c]: {} for c in names}}
     meta = {"sweep": {"name": sweep.name, "file": sweep.file, "scenario": sweep.scenario, "digest": sweep.digest,
                       "study": sweep.study.kind, "columns": json.dumps(fields)}}
-    return [JsonTopic("/sweep/point", "coopsim.apps.sweep.Point", schema, t, messages)], meta
+    return [JsonTopic("/sweep/point", "coopsim.sweep.Point", schema, t, messages)], meta
 
 
 def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = True) -> list[Path]:

@@ -1,7 +1,7 @@
 """Minimum-energy load capacity for one weight vector, compiled: the objective that
 `coopsim.inverse.capacity.optimise_weights` evaluates hundreds of times (paper eqs. 33–36).
 
-From the weight-independent setup of the minimum-energy problem (`coopsim.inverse.solve.MinEnergySetup`: the
+From the weight-independent setup of the minimum-energy problem (`coopsim.inverse.distributions.MinEnergySetup`: the
 torques u of a particular solution and D = Jᵀ Z over the null space of the constraints, for the net
 object wrenches of zero payload and of one unit of payload), per sample i
 
@@ -10,7 +10,7 @@ object wrenches of zero payload and of one unit of payload), per sample i
 then τ(μ) = a + μ b with a = τ₀, b = τ₁ − τ₀, and the mass interval of lo ≤ τ(μ) ≤ hi over the active
 joints — `coopsim.inverse.capacity.mass_limits` and `mass_interval`, sample by sample. Where C lost rank or H
 is not certified well-conditioned — λ_min/λ_max ≥ 1/(trace(H)·trace(H⁻¹)) > rank_tol, the forward
-model's rank rule with a bound within a factor d² of the eigenvalues (`coopsim.inverse.solve._spd_solve`
+model's rank rule with a bound within a factor d² of the eigenvalues (`coopsim.inverse.distributions._spd_solve`
 decides by eigenvalues where its bound is not enough) — the result is marked uncertain and the caller
 takes the NumPy path, which handles rank loss.
 """

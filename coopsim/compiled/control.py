@@ -16,7 +16,7 @@ eq. 36 when `saturate` is set, exactly as `coopsim.control.controller.Controller
 Inverse dynamics (`coopsim.inverse.solve`): τ = τ_arms + Jᵀ f with A f = y, distributed by the paper's W⁺
 (f_m = S W(−s_m) Sᵀ y / r), the non-squeezing inverse (f = M*Aᵀ(A M*Aᵀ)⁻¹ y) or weighted minimum
 energy (the KKT system [JᵀQJ Aᵀ; A 0][f; λ] = [−JᵀQτ_arms; y] by Gaussian elimination with partial
-pivoting: the same unique minimiser as the null-space form of `coopsim.inverse.solve.min_energy_solve`, for
+pivoting: the same unique minimiser as the null-space form of `coopsim.inverse.distributions.min_energy_solve`, for
 actuated arms whose equations keep their rank). The QP of 'bounded' is not compiled.
 
 The controller evaluates its own model (`Pc`, `Wc`: the scene with the controller's object mass); every

@@ -1,7 +1,7 @@
 """Compiled evaluation of many states: θ̈ (batches, run on threads from `api`, one workspace each: the
 entries release the GIL), every reported quantity of a trajectory at its output samples (as the
 reference `coopsim.forward.simulate._sample`), and the per-sample terms of the inverse dynamics (as
-`coopsim.inverse.solve.inverse_problem`'s loop). Two entries only: each entry compiles the chain again.
+`coopsim.inverse.problem.inverse_problem`'s loop). Two entries only: each entry compiles the chain again.
 
 Grasp wrenches (eqs. 4–6, 11): F_e^m = Sᵀ F_m for the arms m ≠ c, and the carrier's from the object's
 Newton–Euler equation W_c F_e^c = M_o v̇_o + b_o − Σ_{m≠c} W_m F_e^m restricted to the rows S, with

@@ -217,7 +217,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     start = time.perf_counter()
     if model.control is not None and not isinstance(model.torques, TorqueFeedback):
         raise CoopsimError(f"{model.name}: the scenario's control: section is not in the loop: close it first "
-                           f"(coopsim.control.closed_loop(model))")
+                           f"(coopsim.closed_loop(model))")
     ctrl = loop_controller(model)
     if isinstance(model.torques, TorqueFeedback) and engine == "compiled":
         engine = "compiled" if ctrl is not None and ctrl.compiled_reason is None else "stages"

@@ -44,8 +44,8 @@ def _bounded(prob, y, res):
 
 class ResolutionMethod(NamedTuple):
     """One redundancy resolution: name; distribute(prob, y, res) → (f, failures) — its pure function:
-    grasp wrenches f (N, rk) for the net object wrenches y (N, k) of an `coopsim.inverse.solve.InverseProblem`
-    with the settings of a `coopsim.inverse.solve.Resolution`, and the samples it could not solve
+    grasp wrenches f (N, rk) for the net object wrenches y (N, k) of an `coopsim.inverse.problem.InverseProblem`
+    with the settings of a `coopsim.inverse.problem.Resolution`, and the samples it could not solve
     (SampleFailure tuple, nan in f); label (plot legends); color (matplotlib); linear: the distribution is
     linear in the net object wrench (fixed weights and virtual bodies), so the capacity has a closed form;
     nonlinear_why: why it has none (the capacity's refusal); help: its words in `coopsim inverse --help`."""

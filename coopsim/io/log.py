@@ -53,9 +53,11 @@ from coopsim.core.model import Model
 from coopsim.core.errors import CoopsimError
 from coopsim.core.spatial import rot_to_quat, rots_to_quats
 
-LIBRARY = "coopsim.io.log"
+# The log format's own names (written into every log, and SERIES_COMMENT read back to find a series):
+# identifiers of the format, not module paths, so they stay as the first logs wrote them.
+LIBRARY = "coopsim.log"
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"
-SERIES_COMMENT = "coopsim.io.log series v1: one message per sample; t is the sample time in s (float64)"
+SERIES_COMMENT = "coopsim.log series v1: one message per sample; t is the sample time in s (float64)"
 _RESERVED = ("timestamp", "t")
 _NONFINITE = {"NaN": float("nan"), "Infinity": float("inf"), "-Infinity": float("-inf")}
 _LEAF = {"f": "number", "i": "integer", "u": "integer", "b": "boolean"}

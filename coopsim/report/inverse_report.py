@@ -447,21 +447,21 @@ def inverse_series(study: InverseStudy) -> list:
 
     t = study.traj.t
     lo, hi = study.limits
-    out = [Series("/inverse/trajectory", "coopsim.inverse.solve.Trajectory", t,
+    out = [Series("/inverse/trajectory", "coopsim.inverse.Trajectory", t,
                   {"q": study.traj.q, "qd": study.traj.qd, "qdd": study.traj.qdd, "tau_min": lo, "tau_max": hi})]
     for k, r in study.results.items():
-        out.append(Series(f"/inverse/{k}/torque", "coopsim.inverse.solve.Torque", t,
+        out.append(Series(f"/inverse/{k}/torque", "coopsim.inverse.Torque", t,
                           {"tau": r.tau, "cost": r.cost, "torque_norm": np.linalg.norm(r.tau, axis=1)}))
-        out.append(Series(f"/inverse/{k}/grasp_wrench", "coopsim.inverse.solve.GraspWrench", t, {"wrench": r.grasp_wrench}))
+        out.append(Series(f"/inverse/{k}/grasp_wrench", "coopsim.inverse.GraspWrench", t, {"wrench": r.grasp_wrench}))
         fields = {}
         for d in DEFINITIONS:
             fields[d] = getattr(r, f"internal_{d}")
             for part, v in study.components[k][d].items():
                 fields[f"{d}_{part}"] = v
-        out.append(Series(f"/inverse/{k}/internal", "coopsim.inverse.solve.Internal", t, fields))
+        out.append(Series(f"/inverse/{k}/internal", "coopsim.inverse.Internal", t, fields))
         if k in study.stress:
             s: SectionLoads = study.stress[k]
-            out.append(Series(f"/inverse/{k}/stress", "coopsim.inverse.solve.Stress", t,
+            out.append(Series(f"/inverse/{k}/stress", "coopsim.inverse.Stress", t,
                               {"peak_normal": s.peak_normal, "peak_shear": s.peak_shear,
                                "max_axial": np.max(np.abs(s.axial), axis=1), "max_bending": np.max(s.bending, axis=1)}))
     return out
@@ -474,15 +474,15 @@ def capacity_series(study: CapacityStudy) -> list:
 
     t = study.traj.t
     lo, hi = study.limits
-    out = [Series("/capacity/limits", "coopsim.inverse.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
+    out = [Series("/capacity/limits", "coopsim.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
     for (k, mode), c in study.caps.items():
-        out.append(Series(f"/capacity/{k}/{mode}", "coopsim.inverse.capacity.AtCapacity", t,
+        out.append(Series(f"/capacity/{k}/{mode}", "coopsim.capacity.AtCapacity", t,
                           {"tau": study.tau_at[k, mode], "per_sample_mass": c.per_sample}))
     for mode, c in study.lp.items():
-        out.append(Series(f"/capacity/lp/{mode}", "coopsim.inverse.capacity.LP", t, {"per_sample_mass": c.per_sample}))
+        out.append(Series(f"/capacity/lp/{mode}", "coopsim.capacity.LP", t, {"per_sample_mass": c.per_sample}))
     if study.optimised is not None:
         w, c, tau = study.optimised
-        out.append(Series("/capacity/optimised/scaled", "coopsim.inverse.capacity.AtCapacity", t,
+        out.append(Series("/capacity/optimised/scaled", "coopsim.capacity.AtCapacity", t,
                           {"tau": tau, "per_sample_mass": c.per_sample}))
     return out
 

@@ -212,7 +212,7 @@ def _object_errors(model, res):
 def test_computed_torque_with_a_perfect_model_is_the_inverse_dynamics_feedforward(carry):
     """Perfect model, zero initial error: the bar follows the prescribed motion to ≤ 1e-8 m and rad
     (measured 4.6e-16 m, 8.9e-16 rad), and the torques are the minimum-energy inverse-dynamics torques
-    of the closed-chain IK trajectory (`coopsim.inverse.solve.stage_torques` at its knots) to ≤ 1e-8 N·m
+    of the closed-chain IK trajectory (`coopsim.inverse.replay.stage_torques` at its knots) to ≤ 1e-8 N·m
     (measured 7e-13 N·m); with a squeeze of 2 N the bar moves the same to ≤ 1e-9 m (measured 4.4e-16 m)
     and the internal force changes by exactly the command along each grasp line (≤ 1e-6 N)."""
     from coopsim.inverse.replay import stage_torques

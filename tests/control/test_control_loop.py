@@ -175,7 +175,7 @@ def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_mod
 
 @pytest.fixture
 def failing_qp(monkeypatch):
-    """`coopsim.inverse.solve.solve_qps` reporting no solution at the calls whose numbers are in the returned
+    """`coopsim.inverse.qp.solve_qps` reporting no solution at the calls whose numbers are in the returned
     set (1-based; the real solver runs, its answer is dropped there). With actuated arms the bounded QP
     always has one (zero internal wrench is feasible), so the failure is injected."""
     from coopsim.inverse import distributions
