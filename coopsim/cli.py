@@ -43,7 +43,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold). Returns (log path, plot paths)."""
     from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
-    from coopsim.io.log import log_data, write_mcap
+    from coopsim.io.mcap_codec import log_data, write_mcap
     from coopsim.plots.render import render_while
 
     def work():

@@ -126,7 +126,7 @@ def _log_scenario_path(log_path: Path, file: str) -> Path | None:
 
 
 def _read_log(log_path: Path):
-    from coopsim.io.log import read_mcap
+    from coopsim.io.mcap_codec import read_mcap
 
     try:
         return read_mcap(log_path)

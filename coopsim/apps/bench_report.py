@@ -56,7 +56,7 @@ def scaling_csv_text(report: dict) -> str:
 def json_safe(obj):
     """A copy strict JSON can carry: non-finite floats become "NaN", "Infinity", "-Infinity" (as in
     coopsim.io.log), numpy scalars plain Python ones."""
-    from coopsim.io.log import nonfinite_name
+    from coopsim.io.mcap_codec import nonfinite_name
 
     if isinstance(obj, dict):
         return {str(k): json_safe(v) for k, v in obj.items()}

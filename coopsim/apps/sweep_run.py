@@ -318,7 +318,7 @@ def summary(sweep: Sweep, run: SweepRun, files: list[str]) -> dict:
 
 
 def _json_value(v: Any) -> Any:
-    from coopsim.io.log import nonfinite_name
+    from coopsim.io.mcap_codec import nonfinite_name
 
     return nonfinite_name(v) if isinstance(v, float) and not math.isfinite(v) else v
 
@@ -326,7 +326,7 @@ def _json_value(v: Any) -> Any:
 def point_log(sweep: Sweep, rows: list[dict]):
     """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
     (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
-    from coopsim.io.log import JsonTopic, stamp, time_ns
+    from coopsim.io.mcap_codec import JsonTopic, stamp, time_ns
 
     names = columns_of(rows)
     fields = {c: field_name(c) for c in names}
@@ -348,7 +348,7 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
 
     from coopsim.io.atomic import previous_set, staged_folder
     from coopsim.report.inverse_report import json_safe
-    from coopsim.io.log import write_mcap
+    from coopsim.io.mcap_codec import write_mcap
     from coopsim.plots.sweep import sweep_figures
 
     out = Path(out)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from coopsim.io.log import LogData
+from coopsim.io.mcap_codec import LogData
 from coopsim.plots.figure import NATIVE, TWIN, arm_groups, finish_log_axis, log_plot, run_title
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from coopsim.core.labels import arm_label, metadata_arms
-from coopsim.io.log import LogData
+from coopsim.io.mcap_codec import LogData
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

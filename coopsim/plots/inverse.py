@@ -19,7 +19,7 @@ import numpy as np
 
 from coopsim.core.joints import EFFORT, units_of
 from coopsim.core.labels import metadata_arms, metadata_joint_labels, metadata_joint_types
-from coopsim.io.log import LogData
+from coopsim.io.mcap_codec import LogData
 from coopsim.plots.figure import legend_beside, legend_width, panel_grid, run_title
 from coopsim.plots.render import FigureWorkers, render_figures
 from coopsim.inverse.resolutions import RESOLUTIONS

@@ -1,6 +1,6 @@
 """Comparison plots of a run log (native model vs MuJoCo twin), PNG via matplotlib's Agg canvas.
 
-Every function takes a :class:`coopsim.io.log.LogData` (from :func:`coopsim.io.log.read_mcap`), so a fresh
+Every function takes a :class:`coopsim.io.mcap_codec.LogData` (from :func:`coopsim.io.mcap_codec.read_mcap`), so a fresh
 run and a stored log are plotted by the same code. Topics used: /native/joint_state, /native/object,
 /native/constraint and, when present, their /mujoco counterparts (without them only the native model
 is drawn). Arms and joint names come from the log's "model" metadata record when it is there.
@@ -21,7 +21,7 @@ import numpy as np
 
 from coopsim.core.joints import COORDINATE, RATE, units_of
 from coopsim.core.labels import metadata_joint_labels, metadata_joint_types
-from coopsim.io.log import LogData
+from coopsim.io.mcap_codec import LogData
 from coopsim.plots.figure import (NATIVE, TWIN, arm_groups, finish_log_axis, legend_beside, legend_width,
                                   log_plot, panel_grid, run_title)
 from coopsim.plots.render import FigureWorkers, render_figures

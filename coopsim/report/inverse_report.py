@@ -21,7 +21,7 @@ from coopsim.inverse.distributions import distribution_of_torques, grasp_line_fr
 from coopsim.inverse.replay import replay
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
-from coopsim.io.log import Series, nonfinite_name
+from coopsim.io.mcap_codec import Series, nonfinite_name
 from coopsim.core.model import Model, torque_limits
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads

@@ -78,7 +78,7 @@ def test_grid_points_and_rows_equal_the_single_run_commands(tmp_path, monkeypatc
 def test_a_failing_point_records_its_error_and_the_sweep_goes_on(tmp_path):
     """Density −1 fails at two points of six; the others run. Outputs: the Parquet table, sweep.json, the
     MCAP's messages (the table's numbers), and a heat map of the capacity (blank where a point failed)."""
-    from coopsim.io.log import read_mcap
+    from coopsim.io.mcap_codec import read_mcap
 
     spec = GRID | {"axes": [{"path": "object.box.density", "values": [2700, -1, 7850]},
                             {"path": "arms[0].torque.constant[0]", "name": "tau1", "values": [0.3, 0.5]}],

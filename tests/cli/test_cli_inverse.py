@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from coopsim.io.log import read_mcap
+from coopsim.io.mcap_codec import read_mcap
 from helpers import run_cli
 
 

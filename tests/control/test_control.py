@@ -13,7 +13,7 @@ import yaml
 from coopsim.control.controller import Controller, record
 from coopsim.twin.compare import compare
 from coopsim.twin.harness import control_series, cross_validate
-from coopsim.io.log import log_data
+from coopsim.io.mcap_codec import log_data
 from coopsim.report.summary import control_summary
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.core.model import TorqueFeedback

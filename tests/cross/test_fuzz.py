@@ -723,7 +723,7 @@ def valid_log() -> bytes:
 def _other_log(missing_field: bool) -> bytes:
     import tempfile
 
-    from coopsim.io.log import Series, write_mcap
+    from coopsim.io.mcap_codec import Series, write_mcap
 
     t = np.array([0.0, 0.1])
     if missing_field:
@@ -1090,7 +1090,8 @@ def test_every_damaged_byte_of_a_log_is_detected(tmp_path):
     from mcap.records import DataEnd
     from mcap.stream_reader import StreamReader
 
-    from coopsim.io.log import UnreadableLogError, read_run_log
+    from coopsim.io.log import read_run_log
+    from coopsim.io.mcap_codec import UnreadableLogError
 
     good = valid_log()
     path = tmp_path / "x.mcap"
@@ -1113,12 +1114,12 @@ def test_logs_without_a_data_crc_still_read(tmp_path, monkeypatch):
     """Logs written before the data-section CRC (a zero CRC: not checked) read as before."""
     import functools
 
-    import coopsim.io.log as L
+    from coopsim.io import mcap_codec as C
 
-    series = [L.Series("/a", "coopsim.A", np.array([0.0, 1.0]), {"x": np.array([[1.0, 2.0], [3.0, np.nan]])})]
-    new = L.read_mcap(L.write_mcap(tmp_path / "new.mcap", series, {"m": {"k": "v"}}))
-    monkeypatch.setattr(L, "Writer", functools.partial(L.Writer, enable_data_crcs=False))
-    old = L.read_mcap(L.write_mcap(tmp_path / "old.mcap", series, {"m": {"k": "v"}}))
+    series = [C.Series("/a", "coopsim.A", np.array([0.0, 1.0]), {"x": np.array([[1.0, 2.0], [3.0, np.nan]])})]
+    new = C.read_mcap(C.write_mcap(tmp_path / "new.mcap", series, {"m": {"k": "v"}}))
+    monkeypatch.setattr(C, "Writer", functools.partial(C.Writer, enable_data_crcs=False))
+    old = C.read_mcap(C.write_mcap(tmp_path / "old.mcap", series, {"m": {"k": "v"}}))
     assert old.metadata == new.metadata == {"m": {"k": "v"}}
     assert np.array_equal(old.topics["/a"]["x"], new.topics["/a"]["x"], equal_nan=True)
 

@@ -21,7 +21,8 @@ import pytest
 from coopsim import cli
 from coopsim.core.errors import ConstraintError, ScenarioError, SimulationError
 from coopsim.twin.harness import cross_validate
-from coopsim.io.log import read_mcap, write_run_log
+from coopsim.io.log import write_run_log
+from coopsim.io.mcap_codec import read_mcap
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.io.yaml_rules import load_yaml

@@ -20,7 +20,8 @@ from coopsim.cli import build_parser
 from coopsim.twin.compare import compare
 from coopsim.report.inverse_report import _capacity_entry, capacity_study, inverse_study
 from coopsim.core.labels import joint_labels, metadata_joint_labels
-from coopsim.io.log import LogData, run_metadata
+from coopsim.io.log import run_metadata
+from coopsim.io.mcap_codec import LogData
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS, RESOLUTIONS, resolution_method
 from coopsim.core.spatial import axis_angle_to_rot, box_inertia, rigid_acceleration
 from inverse_cases import model, problem

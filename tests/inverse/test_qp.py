@@ -244,7 +244,7 @@ def test_cli_inverse_reports_infeasible_samples_and_writes_outputs(workdir):
     assert b["energy"] == "NaN" and np.isfinite(b["max_torque_norm_Nm"])
     assert b["replay"]["max_angle_error_rad"] == "NaN" and b["replay"]["failed_stage_times"]
     assert "SampleFailureWarning" in out.stderr and "no solution at" in out.stderr
-    from coopsim.io.log import read_mcap
+    from coopsim.io.mcap_codec import read_mcap
 
     tau = read_mcap(workdir / "res" / "inverse.mcap").topics["/inverse/bounded/torque"]["tau"]
     assert np.sum(np.all(np.isnan(tau), axis=1)) == len(b["failed_samples"])

@@ -11,6 +11,8 @@ import pytest
 from mcap.reader import make_reader
 
 from coopsim.io import log as L
+from coopsim.io import mcap_codec as C
+from coopsim.io import foxglove as F
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.forward.simulate import simulate
@@ -34,7 +36,7 @@ def logged(run, tmp_path_factory):
     model, res, tw = run
     path = tmp_path_factory.mktemp("log") / "run.mcap"
     L.write_run_log(path, model, res, tw, metadata_extra={"scenario_file": SCENARIO_FILE, "note": "test"})
-    return path, L.read_mcap(path)
+    return path, C.read_mcap(path)
 
 
 # -- a JSON-Schema subset validator (type, properties, required, items, lengths, bounds, oneOf const) --
@@ -101,10 +103,10 @@ def test_rewrite_gives_byte_identical_file(run, logged, tmp_path):
 def test_generic_series_edge_cases_round_trip(tmp_path):
     t = np.array([0.0, 0.1, 0.30000000000000004])
     f = np.array([[np.nan, np.inf], [-np.inf, -0.0], [5e-324, 1.7976931348623157e308]])
-    s = L.Series("/x", "test.X", t, {"f": f, "i": np.array([-3, 0, 2**60]), "b": np.array([True, False, True]),
+    s = C.Series("/x", "test.X", t, {"f": f, "i": np.array([-3, 0, 2**60]), "b": np.array([True, False, True]),
                                       "cube": np.arange(24.0).reshape(3, 2, 2, 2) / 7})
-    empty = L.Series("/empty", "test.E", np.zeros(0), {"v": np.zeros((0, 3))})
-    data = L.read_mcap(L.write_mcap(tmp_path / "x.mcap", [s, empty], {"rec": {"k": "v"}}))
+    empty = C.Series("/empty", "test.E", np.zeros(0), {"v": np.zeros((0, 3))})
+    data = C.read_mcap(C.write_mcap(tmp_path / "x.mcap", [s, empty], {"rec": {"k": "v"}}))
     got = data.topics["/x"]
     assert np.array_equal(got["f"], f, equal_nan=True) and np.signbit(got["f"][1, 1])
     assert got["i"].dtype == np.int64 and np.array_equal(got["i"], s.fields["i"])
@@ -117,7 +119,7 @@ def test_generic_series_edge_cases_round_trip(tmp_path):
     assert first["cube"][1] == {"row": [{"row": [4 / 7, 5 / 7]}, {"row": [6 / 7, 1.0]}]}
 
 
-def _assert_same_log(a: L.LogData, b: L.LogData) -> None:
+def _assert_same_log(a: C.LogData, b: C.LogData) -> None:
     assert a.metadata == b.metadata and a.schemas == b.schemas and a.messages == b.messages
     assert list(a.topics) == list(b.topics)
     for topic, fields in a.topics.items():
@@ -134,21 +136,21 @@ def test_log_data_in_memory_equals_the_file_read_back(run, logged):
     model, res, tw = run
     path, data = logged
     streams, meta = L.run_log(model, res, tw, metadata_extra={"scenario_file": SCENARIO_FILE, "note": "test"})
-    _assert_same_log(L.log_data(streams, meta), data)
-    bare = L.log_data(streams, meta, messages=False)          # what the commands draw from: no /tf, /scene
+    _assert_same_log(C.log_data(streams, meta), data)
+    bare = C.log_data(streams, meta, messages=False)          # what the commands draw from: no /tf, /scene
     assert bare.messages == {} and bare.schemas == data.schemas
     _assert_same_log(dataclasses.replace(bare, messages=data.messages), data)
 
 
 def test_log_data_of_edge_cases_equals_the_file_read_back(tmp_path):
     t = np.array([0.0, 0.5])
-    s = L.Series("/x", "test.X", t, {"f": np.array([[np.nan, -0.0], [np.inf, 1e-310]]),
+    s = C.Series("/x", "test.X", t, {"f": np.array([[np.nan, -0.0], [np.inf, 1e-310]]),
                                       "f32": np.array([0.1, -2.5], dtype=np.float32),
                                       "i": np.array([[1, -2]], dtype=np.int16).repeat(2, 0),
                                       "u": np.array([7, 255], dtype=np.uint8), "b": np.array([True, False])})
-    j = L.JsonTopic("/j", "test.J", {"type": "object"}, t, ({"a": (1, 2.5)}, {"a": [None, "é"]}))
-    _assert_same_log(L.log_data([s, j], {"r": {"k": "v"}}),
-                     L.read_mcap(L.write_mcap(tmp_path / "e.mcap", [s, j], {"r": {"k": "v"}})))
+    j = F.JsonTopic("/j", "test.J", {"type": "object"}, t, ({"a": (1, 2.5)}, {"a": [None, "é"]}))
+    _assert_same_log(C.log_data([s, j], {"r": {"k": "v"}}),
+                     C.read_mcap(C.write_mcap(tmp_path / "e.mcap", [s, j], {"r": {"k": "v"}})))
 
 
 def test_series_messages_are_the_json_encoders_bytes():
@@ -174,13 +176,13 @@ def test_series_messages_are_the_json_encoders_bytes():
                "w": [{"row": r} for r in fields["w"][i].tolist()], "k": int(fields["k"][i]), "ok": bool(i % 2 == 0),
                "h": fields["h"][i].astype(float).tolist()}
         expected.append(json.dumps(msg, separators=(",", ":"), ensure_ascii=False).encode())
-    assert L._series_messages(L.Series("/m", "test.M", t, fields)) == expected
+    assert C._series_messages(C.Series("/m", "test.M", t, fields)) == expected
 
 
 def test_messages_are_ordered_by_time_then_series(tmp_path):
-    a = L.Series("/a", "test.S", np.array([0.0, 0.2]), {"v": np.array([1.0, 2.0])})
-    b = L.Series("/b", "test.S", np.array([0.0, 0.1, 0.2]), {"v": np.array([3.0, 4.0, 5.0])})
-    L.write_mcap(tmp_path / "o.mcap", [a, b])
+    a = C.Series("/a", "test.S", np.array([0.0, 0.2]), {"v": np.array([1.0, 2.0])})
+    b = C.Series("/b", "test.S", np.array([0.0, 0.1, 0.2]), {"v": np.array([3.0, 4.0, 5.0])})
+    C.write_mcap(tmp_path / "o.mcap", [a, b])
     with open(tmp_path / "o.mcap", "rb") as fh:
         order = [(c.topic, m.log_time, m.publish_time) for _, c, m in make_reader(fh).iter_messages(log_time_order=False)]
     assert order == [("/a", 0, 0), ("/b", 0, 0), ("/b", 100_000_000, 100_000_000), ("/a", 200_000_000, 200_000_000),
@@ -189,7 +191,7 @@ def test_messages_are_ordered_by_time_then_series(tmp_path):
 
 def test_series_schema_describes_fixed_shapes(run):
     _, res, _ = run
-    schema = L.series_schema(L.simulation_series(res)[2])
+    schema = C.series_schema(L.simulation_series(res)[2])
     assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
     w = schema["properties"]["wrench"]
     assert (w["minItems"], w["maxItems"]) == (2, 2)
@@ -198,12 +200,12 @@ def test_series_schema_describes_fixed_shapes(run):
 
 
 def test_inconsistent_schema_names_are_refused(tmp_path):
-    a = L.Series("/a", "test.S", np.zeros(1), {"v": np.zeros(1)})
-    b = L.Series("/b", "test.S", np.zeros(1), {"v": np.zeros((1, 2))})
-    with pytest.raises(L.LogError, match="/b: schema 'test.S' differs"):
-        L.write_mcap(tmp_path / "s.mcap", [a, b])
-    with pytest.raises(L.LogError, match="/a: field name 't' is reserved"):
-        L.write_mcap(tmp_path / "s.mcap", [L.Series("/a", "test.T", np.zeros(1), {"t": np.zeros(1)})])
+    a = C.Series("/a", "test.S", np.zeros(1), {"v": np.zeros(1)})
+    b = C.Series("/b", "test.S", np.zeros(1), {"v": np.zeros((1, 2))})
+    with pytest.raises(C.LogError, match="/b: schema 'test.S' differs"):
+        C.write_mcap(tmp_path / "s.mcap", [a, b])
+    with pytest.raises(C.LogError, match="/a: field name 't' is reserved"):
+        C.write_mcap(tmp_path / "s.mcap", [C.Series("/a", "test.T", np.zeros(1), {"t": np.zeros(1)})])
     assert list(tmp_path.iterdir()) == []
 
 
@@ -238,7 +240,7 @@ def test_frames_place_links_where_both_models_put_them(run, logged):
     k = len(res.t) - 1
     frames = {f["child_frame_id"]: f for f in data.messages["/tf"][k]["transforms"]}
     native = [p for pose in arm_poses(model, res.q[k]) for p in zip(pose.p, pose.R)]
-    names = L.link_frame_names(model, "native")
+    names = F.link_frame_names(model, "native")
     for j, (name, (p, R)) in enumerate(zip(names, native)):
         nat, muj = frames[name], frames[name.replace("native/", "mujoco/", 1)]
         xyz = lambda d: np.array([d["x"], d["y"], d["z"]])  # noqa: E731
@@ -438,8 +440,8 @@ def test_failure_while_writing_leaves_no_file(run, tmp_path, monkeypatch):
             raise OSError("disk full (simulated)")
         return original(self, *args, **kwargs)
 
-    original = L.Writer.add_message
-    monkeypatch.setattr(L.Writer, "add_message", failing)
+    original = C.Writer.add_message
+    monkeypatch.setattr(C.Writer, "add_message", failing)
     target = tmp_path / "run.mcap"
     with pytest.raises(OSError, match="simulated"):
         L.write_run_log(target, model, res, None)
@@ -453,11 +455,11 @@ def test_failure_while_writing_leaves_no_file(run, tmp_path, monkeypatch):
 
 
 def test_malformed_series_leaves_no_file(tmp_path):
-    bad = L.Series("/bad", "test.B", np.array([0.0, 0.1]), {"v": np.zeros((3, 2))})
-    with pytest.raises(L.LogError, match=r"/bad: field 'v' has shape \(3, 2\), expected \(2, \.\.\.\)"):
-        L.write_mcap(tmp_path / "bad.mcap", [bad])
-    with pytest.raises(L.LogError, match="/bad: t must be finite"):
-        L.write_mcap(tmp_path / "bad.mcap", [L.Series("/bad", "test.B", np.array([np.nan]), {"v": np.zeros(1)})])
+    bad = C.Series("/bad", "test.B", np.array([0.0, 0.1]), {"v": np.zeros((3, 2))})
+    with pytest.raises(C.LogError, match=r"/bad: field 'v' has shape \(3, 2\), expected \(2, \.\.\.\)"):
+        C.write_mcap(tmp_path / "bad.mcap", [bad])
+    with pytest.raises(C.LogError, match="/bad: t must be finite"):
+        C.write_mcap(tmp_path / "bad.mcap", [C.Series("/bad", "test.B", np.array([np.nan]), {"v": np.zeros(1)})])
     assert list(tmp_path.iterdir()) == []
 
 
@@ -478,7 +480,7 @@ def test_a_log_written_before_the_package_was_reorganised_reads_as_a_fresh_one(t
     new = L.read_run_log(tmp_path / "out" / "paper_planar_2x3.mcap")
     assert old.schemas == new.schemas and set(old.metadata) == set(new.metadata)
     with open(V1_LOG, "rb") as f:
-        assert make_reader(f).get_header().library == L.LIBRARY
+        assert make_reader(f).get_header().library == C.LIBRARY
     for topic in ("/native/joint_state", "/mujoco/joint_state"):
         a, b = old.topics[topic], new.topics[topic]
         assert isinstance(a["angle"], np.ndarray) and np.array_equal(a["t"], b["t"])

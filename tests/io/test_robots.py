@@ -28,7 +28,7 @@ import yaml
 from coopsim.io import robots
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.twin.harness import cross_validate
-from coopsim.io.log import link_frame_names, native_link_poses, scene_update
+from coopsim.io.foxglove import link_frame_names, native_link_poses, scene_update
 from coopsim.twin.mjcf import build_spec, qpos_address
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.io.robots import ROBOTS, read_chain, robot_file, robots_folder

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coopsim.io.log import read_mcap, run_metadata, write_mcap, write_run_log
+from coopsim.io.log import run_metadata, write_run_log
+from coopsim.io.mcap_codec import read_mcap, write_mcap
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate

@@ -8,7 +8,8 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from coopsim.io.log import read_mcap, write_run_log
+from coopsim.io.log import write_run_log
+from coopsim.io.mcap_codec import read_mcap
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.plots.run import FILES, comparison_plots
 from coopsim.forward.simulate import simulate
@@ -89,7 +90,8 @@ def test_every_figure_names_its_scenario_and_settings(logs):
 def test_inverse_torque_figure_names_the_motor_lines_in_its_legend(tmp_path):
     """The grey motor lines of Fig. 6 are in the legend (once), with every resolution."""
     from coopsim.report.inverse_report import inverse_series, solve_study
-    from coopsim.io.log import log_data, run_metadata
+    from coopsim.io.log import run_metadata
+    from coopsim.io.mcap_codec import log_data
     from coopsim.plots.inverse import MOTOR_LINES, inverse_torques_figure
     from coopsim.io.scenario import load_scenario
     from helpers import SCENARIOS
