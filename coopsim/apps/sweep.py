@@ -40,7 +40,8 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError, ScenarioError
 from coopsim.io.overrides import apply_overrides, parse_path
-from coopsim.io.scenario import _Section, model_from_dict
+from coopsim.io.fields import Section
+from coopsim.io.scenario import model_from_dict
 from coopsim.io.yaml_rules import load_yaml
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
@@ -138,7 +139,7 @@ def load_sweep(path: str | Path, overrides=()) -> Sweep:
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: sweep file not found")
-    root = _Section(load_yaml(path), "", str(path))
+    root = Section(load_yaml(path), "", str(path))
     name = root.string("name", default=path.stem)
     description = root.string("description", default="")
     scenario = path.parent / root.string("scenario")
@@ -161,7 +162,7 @@ def load_sweep(path: str | Path, overrides=()) -> Sweep:
     return replace(sweep, digest=digest)
 
 
-def _fixed(root: _Section) -> list[tuple[str, Any]]:
+def _fixed(root: Section) -> list[tuple[str, Any]]:
     sec = root.section("set", default=None)
     if sec is None:
         return []
@@ -174,7 +175,7 @@ def _fixed(root: _Section) -> list[tuple[str, Any]]:
     return [(str(k), v) for k, v in sec.data.items()]
 
 
-def _axes(root: _Section, design: str) -> tuple[Axis, ...]:
+def _axes(root: Section, design: str) -> tuple[Axis, ...]:
     axes = []
     for sec in root.items("axes", min_len=1):
         p = sec.string("path")
@@ -208,7 +209,7 @@ def _axes(root: _Section, design: str) -> tuple[Axis, ...]:
     return tuple(axes)
 
 
-def _design_points(root: _Section, design: str, axes: tuple[Axis, ...]) -> np.ndarray:
+def _design_points(root: Section, design: str, axes: tuple[Axis, ...]) -> np.ndarray:
     """(P, len(axes)) values: the grid's combinations (the first axis slowest), or `samples` points of a
     scrambled Sobol or Halton sequence (scipy.stats.qmc, seeded) scaled to the axes' ranges."""
     if design == "grid":
@@ -235,7 +236,7 @@ def _design_points(root: _Section, design: str, axes: tuple[Axis, ...]) -> np.nd
     return qmc.scale(unit, lo, hi)
 
 
-def _study(sec: _Section) -> Study:
+def _study(sec: Section) -> Study:
     kind = sec.string("kind", choices=KINDS)
     duration = sec.number("duration", default=None, positive=True)
     options: dict[str, Any] = {}
@@ -263,14 +264,14 @@ def _study(sec: _Section) -> Study:
     return Study(kind, duration, tuple(options.items()), columns)
 
 
-def _patterns(sec: _Section, key: str, default) -> list[str]:
+def _patterns(sec: Section, key: str, default) -> list[str]:
     v = sec.raw(key, list(default))
     if not isinstance(v, list) or any(not isinstance(x, str) for x in v):
         sec.fail(key, f"expected a list of column names or patterns (* matches any text), got {v!r}")
     return v
 
 
-def _check_base(sweep: Sweep, root: _Section) -> None:
+def _check_base(sweep: Sweep, root: Section) -> None:
     """The base scenario with the fixed overrides and each axis's first value must make a model (each
     point's own values are checked when it runs: a bad one is that row's error)."""
     from coopsim.io.scenario import require_motor_limits

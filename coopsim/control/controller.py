@@ -40,17 +40,9 @@ from coopsim.control.laws import grasp_errors, grasp_torques, joint_acceleration
 
 
 LAWS = ("joint_pd", "computed_torque")
-
-
 COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
-
-
 FALLBACKS = COMPILED_DISTRIBUTIONS + ("error",)                     # where 'bounded' has no solution
-
-
 COMPENSATIONS = ("none", "gravity", "bias")
-
-
 REFERENCES = ("setpoint", "object_motion")
 
 

@@ -73,8 +73,6 @@ _CUBE_SCHEMA = {
 
 # The published foxglove.SceneEntity requires every primitive array; these are written empty.
 _UNUSED_PRIMITIVES = ("arrows", "spheres", "cylinders", "lines", "triangles", "texts", "models")
-
-
 SCENE_UPDATE_SCHEMA: dict = {
     "title": "foxglove.SceneUpdate",
     "description": "An update to the entities displayed in a 3D scene",
@@ -134,8 +132,6 @@ SCENE_UPDATE_SCHEMA: dict = {
 
 
 NATIVE_COLOR = {"r": 0.2, "g": 0.45, "b": 0.85, "a": 0.9}
-
-
 MUJOCO_COLOR = {"r": 0.95, "g": 0.55, "b": 0.1, "a": 0.5}
 
 

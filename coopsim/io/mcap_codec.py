@@ -47,23 +47,11 @@ from coopsim.core.errors import CoopsimError
 # The log format's own names (written into every log, and SERIES_COMMENT read back to find a series):
 # identifiers of the format, not module paths, so they stay as the first logs wrote them.
 LIBRARY = "coopsim.log"
-
-
 JSON_SCHEMA_DRAFT = "https://json-schema.org/draft/2020-12/schema"
-
-
 SERIES_COMMENT = "coopsim.log series v1: one message per sample; t is the sample time in s (float64)"
-
-
 _RESERVED = ("timestamp", "t")
-
-
 _NONFINITE = {"NaN": float("nan"), "Infinity": float("inf"), "-Infinity": float("-inf")}
-
-
 _LEAF = {"f": "number", "i": "integer", "u": "integer", "b": "boolean"}
-
-
 _DTYPE = {"number": np.float64, "integer": np.int64, "boolean": np.bool_}
 
 

@@ -7,11 +7,11 @@ Angles are in radians unless the key ends in `_deg`; every other quantity is SI.
 and the `_deg` forms of joint coordinates (`angles_deg`, `rates_deg`, `initial_guess_deg`) are refused
 where a prismatic joint would read them.
 
-Files are read defensively (README, "Scenario files"; `coopsim.io.yaml_rules`): UTF-8 text of at most MAX_FILE_BYTES; YAML
+Files are read defensively (README, "Scenario files"): UTF-8 text of at most MAX_FILE_BYTES; YAML
 without duplicate keys, nested at most MAX_DEPTH levels and at most MAX_NODES values with every alias
-expanded; numbers are real numbers (not booleans or quoted text), finite and at most MAX_MAGNITUDE in
-size; `name` is a safe file stem; a run may ask for at most MAX_OUTPUT_SAMPLES output samples and
-MAX_STEPS fixed steps (rk4, max_step, MuJoCo).
+expanded (`coopsim.io.yaml_rules`); numbers are real numbers (not booleans or quoted text), finite and
+at most MAX_MAGNITUDE in size (`coopsim.io.fields`); `name` is a safe file stem; a run may ask for at
+most MAX_OUTPUT_SAMPLES output samples and MAX_STEPS fixed steps (rk4, max_step, MuJoCo).
 """
 
 from __future__ import annotations
@@ -30,12 +30,7 @@ from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, Contr
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 from coopsim.io.yaml_rules import read_text, load_yaml
 from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
-
-
-_REQUIRED = object()
-
-
-MAX_MAGNITUDE = 1e9             # |x| of any number in a scenario or a torque CSV
+from coopsim.io.fields import MAX_MAGNITUDE, REQUIRED, Section, show_value
 
 
 MAX_OUTPUT_SAMPLES = 200_000    # duration / integrator.output_dt (and an object motion's samples)
@@ -53,181 +48,7 @@ MAX_NAME = 100                  # characters of `name`
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
 
 
-def _show(v, limit: int = 60) -> str:
-    """repr(v), cut to about `limit` characters (a value in an error line may be a whole list)."""
-    if isinstance(v, (list, dict)) and len(v) > limit:   # never build the repr of a huge value
-        v = v[:limit] if isinstance(v, list) else dict(list(v.items())[:limit])
-    text = repr(v)
-    return text if len(text) <= limit else text[:limit - 1] + "…"
-
-
-_ALL_NUMBERS = object()
-
-
-def _first_non_number(v):
-    """The first leaf of v (a number or nested lists) that is not a real number (a bool, a string,
-    None, a mapping, a date, ...); _ALL_NUMBERS when there is none."""
-    stack = [v]
-    while stack:
-        x = stack.pop()
-        if isinstance(x, list):
-            stack.extend(reversed(x))
-        elif isinstance(x, bool) or not isinstance(x, (int, float)):
-            return x
-    return _ALL_NUMBERS
-
-
-def _first_big_int(v):
-    """The first int in v (nested lists of numbers) larger than MAX_MAGNITUDE in size, else None."""
-    stack = [v]
-    while stack:
-        x = stack.pop()
-        if isinstance(x, list):
-            stack.extend(reversed(x))
-        elif isinstance(x, int) and abs(x) > MAX_MAGNITUDE:
-            return x
-    return None
-
-
-class _Section:
-    """A mapping being read: typed getters that record which keys were used, `done()` rejects the rest."""
-
-    def __init__(self, data, path: str, where: str):
-        if not isinstance(data, dict):
-            raise ScenarioError(f"{where}: {path or 'scenario'}: expected a mapping, got {type(data).__name__}")
-        self.data, self.path, self.where, self.used = data, path, where, set()
-
-    def field(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def fail(self, key: str, reason: str):
-        raise ScenarioError(f"{self.where}: {self.field(key)}: {reason}")
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str, default=_REQUIRED):
-        self.used.add(key)
-        if key not in self.data or self.data[key] is None:
-            if default is _REQUIRED:
-                self.fail(key, "missing required field")
-            return default
-        return self.data[key]
-
-    def number(self, key, default=_REQUIRED, positive=False, nonneg=False) -> float | None:
-        """A real number (an int or a float: not a boolean, not quoted text), finite and at most
-        MAX_MAGNITUDE in size."""
-        v = self.raw(key, default)
-        if v is None and default is None:   # optional key, absent
-            return None
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(key, f"expected a number, got {_show(v)}")
-        if isinstance(v, int) and abs(v) > MAX_MAGNITUDE:   # before float(): 10**400 overflows it
-            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {_show(v, 24)}")
-        v = float(v)
-        if not np.isfinite(v):
-            self.fail(key, f"must be finite, got {v}")
-        if abs(v) > MAX_MAGNITUDE:
-            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {v:g}")
-        if positive and not v > 0:
-            self.fail(key, f"must be positive, got {v}")
-        if nonneg and v < 0:
-            self.fail(key, f"must be non-negative, got {v}")
-        return v
-
-    def whole(self, key, default=_REQUIRED, positive=False, nonneg=False, maximum=None) -> int | None:
-        """A whole number: an integer, or a float without a fractional part (10.0); 10.5 is refused,
-        never truncated; at most `maximum` when given."""
-        v = self.number(key, default, positive=positive, nonneg=nonneg)
-        if v is None:
-            return None
-        if not v.is_integer():
-            self.fail(key, f"must be a whole number, got {self.data.get(key, v)!r}")
-        if maximum is not None and v > maximum:
-            self.fail(key, f"must be at most {maximum:,}, got {v:g}")
-        return int(v)
-
-    def string(self, key, choices=None, default=_REQUIRED) -> str:
-        v = self.raw(key, default)
-        if not isinstance(v, str):
-            self.fail(key, f"expected a string, got {_show(v)}")
-        if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {', '.join(choices)}; got {_show(v)}")
-        return v
-
-    def array(self, key, shape=None, default=_REQUIRED, positive=False, nonneg=False, allow_inf=False) -> np.ndarray:
-        """Numbers (nested lists) of `shape` (None: any length); every value a real number as in
-        `number` (allow_inf: +-inf allowed, e.g. "no limit")."""
-        v = self.raw(key, default)
-        if self.data.get(key) is not None:   # from the file (defaults are trusted)
-            bad = _first_non_number(v)
-            if bad is not _ALL_NUMBERS:
-                self.fail(key, f"expected numbers, got {_show(bad)}" + ("" if bad is v else f" in {_show(v)}"))
-            big = _first_big_int(v)
-            if big is not None:   # before float(): 10**400 overflows it
-                self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {_show(big, 24)}")
-        try:
-            a = np.array(v, dtype=float)
-        except (TypeError, ValueError):
-            want = "×".join("n" if s is None else str(s) for s in shape) if shape is not None else "n"
-            self.fail(key, f"expected shape {want}, got rows of different lengths")
-        if a.dtype == object or (shape is not None and (a.ndim != len(shape) or any(
-                s is not None and s != d for s, d in zip(shape, a.shape)))):
-            want = "×".join("n" if s is None else str(s) for s in shape)
-            self.fail(key, f"expected shape {want}, got {list(a.shape)}")
-        if np.any(np.isnan(a)) or (not allow_inf and not np.all(np.isfinite(a))):
-            self.fail(key, "must be finite")
-        finite = np.abs(a[np.isfinite(a)])
-        if finite.size and finite.max() > MAX_MAGNITUDE:
-            self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {finite.max():g}")
-        if positive and not np.all(a > 0):
-            self.fail(key, f"must be positive, got {a.tolist()}")
-        if nonneg and not np.all(a >= 0):
-            self.fail(key, f"must be non-negative, got {a.tolist()}")
-        return a
-
-    def rad_or_deg(self, key, shape, default=_REQUIRED) -> np.ndarray:
-        """Values under `key` (rad, or rad/s) or `key_deg` (deg, deg/s), in radians; both at once are
-        rejected."""
-        deg = f"{key}_deg"
-        if self.has(key) and self.has(deg):
-            self.fail(key, f"give either {key} (rad) or {deg} (deg), not both")
-        if self.has(deg):
-            return np.deg2rad(self.array(deg, shape))
-        return self.array(key, shape, default=default)
-
-    def angles(self, key, shape, default=_REQUIRED, is_angle=None) -> np.ndarray:
-        """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
-        degrees (|x| > 2π), are rejected (`rad_or_deg` for quantities that are not angles, such as
-        rates, which may exceed a turn). is_angle (bool, shape): which values are angles (the others,
-        prismatic joints' coordinates in m, are not checked); default all."""
-        deg = f"{key}_deg"
-        a = self.rad_or_deg(key, shape, default)
-        big = np.abs(a) > 2 * np.pi + 1e-9
-        if is_angle is not None:
-            big &= is_angle
-        if not self.has(deg) and np.any(big):
-            self.fail(key, f"{np.max(np.abs(a[big])):g} rad is more than a turn: degrees? use {deg}")
-        return a
-
-    def section(self, key, default=_REQUIRED) -> "_Section | None":
-        v = self.raw(key, default)
-        return None if v is None else _Section(v, self.field(key), self.where)
-
-    def items(self, key, min_len=0) -> list["_Section"]:
-        v = self.raw(key)
-        if not isinstance(v, list) or len(v) < min_len:
-            self.fail(key, f"expected a list of at least {min_len} entries")
-        return [_Section(x, f"{self.field(key)}[{i}]", self.where) for i, x in enumerate(v)]
-
-    def done(self):
-        extra = sorted(set(self.data) - self.used, key=str)   # keys need not be strings (7:, null:)
-        if extra:
-            self.fail(_show(extra[0]) if not isinstance(extra[0], str) else extra[0],
-                      f"unknown field (known here: {', '.join(sorted(self.used))})")
-
-
-def _rotation(sec: _Section, key_prefix: str = "") -> np.ndarray:
+def _rotation(sec: Section, key_prefix: str = "") -> np.ndarray:
     """Rotation from `rpy`/`rpy_deg` (R = Rz Ry Rx) or `quat` [w, x, y, z]; identity if absent."""
     rpy, quat = f"{key_prefix}rpy", f"{key_prefix}quat"
     if sec.has(quat) and (sec.has(rpy) or sec.has(rpy + "_deg")):
@@ -240,7 +61,7 @@ def _rotation(sec: _Section, key_prefix: str = "") -> np.ndarray:
     return rpy_to_rot(sec.angles(rpy, (3,), default=[0.0, 0.0, 0.0]))
 
 
-def _unit(sec: _Section, key: str, default) -> np.ndarray:
+def _unit(sec: Section, key: str, default) -> np.ndarray:
     a = sec.array(key, (3,), default=default)
     norm = np.linalg.norm(a)
     if norm < 1e-9:
@@ -248,7 +69,7 @@ def _unit(sec: _Section, key: str, default) -> np.ndarray:
     return a / norm
 
 
-def _inertia_tensor(sec: _Section, key: str) -> np.ndarray:
+def _inertia_tensor(sec: Section, key: str) -> np.ndarray:
     """3×3 symmetric matrix or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]; must be positive definite and satisfy
     the triangle inequalities of principal moments."""
     v = sec.raw(key)
@@ -267,7 +88,7 @@ def _inertia_tensor(sec: _Section, key: str) -> np.ndarray:
     return I
 
 
-def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=None):
+def _body(sec: Section, key_box="box", key_inertial="inertial", com_default=None):
     """(mass, com (3,), inertia about com (3, 3), box size (3,)) from a `box` (size along the local
     x, y, z; density kg/m³) or an `inertial` block (mass, com, inertia). A link box starts at the
     joint and extends along local +x (com_default = None: centred at the frame origin)."""
@@ -296,7 +117,7 @@ def _body(sec: _Section, key_box="box", key_inertial="inertial", com_default=Non
     return mass, com, I, np.zeros(3)
 
 
-def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
+def _arm(sec: Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
     """One arm, from its `links` or from a robot file (`robot` or `file`, `robots.py`); returns the
     model and its per-arm extras: n, joint_range (n, 2) rad (m for a prismatic joint), motor defaults
     stall (n,) and speed (n,)."""
@@ -336,7 +157,7 @@ def _arm(sec: _Section, index: int, base_dir: Path) -> tuple[ArmModel, dict]:
                  "joint_names": None}
 
 
-def _joint_range(joint: _Section, joint_type: int) -> np.ndarray:
+def _joint_range(joint: Section, joint_type: int) -> np.ndarray:
     """A hand-written joint's position limits `range` [lower, upper]: rad (`range_deg`: deg) for a
     revolute joint, m for a prismatic one (its `range_deg` refused); none by default."""
     if not (joint.has("range") or joint.has("range_deg")):
@@ -353,7 +174,7 @@ def _joint_range(joint: _Section, joint_type: int) -> np.ndarray:
     return np.array([lo, hi])
 
 
-def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> tuple[ArmModel, dict]:
+def _robot_arm(sec: Section, name: str, base_pos, base_rot, base_dir: Path) -> tuple[ArmModel, dict]:
     """An arm read from a robot file (`robots.read_chain`): `robot` (a bundled robot, `robots.ROBOTS`)
     or `file` (URDF or MJCF, relative to the scenario's folder); `chain` {base, tip, lock} (defaults
     from the bundled robot); `end_effector` in the tip link's frame (default: that frame)."""
@@ -368,12 +189,12 @@ def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> 
         else:
             key = "file"
             path, default = _relative_file(sec, "file", base_dir), None
-        chain_sec = sec.section("chain", default={} if default is not None else _REQUIRED)
-        base_link = chain_sec.string("base", default=_REQUIRED if default is None else default.base)
-        tip_link = chain_sec.string("tip", default=_REQUIRED if default is None else default.tip)
+        chain_sec = sec.section("chain", default={} if default is not None else REQUIRED)
+        base_link = chain_sec.string("base", default=REQUIRED if default is None else default.base)
+        tip_link = chain_sec.string("tip", default=REQUIRED if default is None else default.tip)
         lock = chain_sec.raw("lock", default=[] if default is None else list(default.lock))
         if not isinstance(lock, list) or not all(isinstance(x, str) for x in lock):
-            chain_sec.fail("lock", f"expected a list of joint names, got {_show(lock)}")
+            chain_sec.fail("lock", f"expected a list of joint names, got {show_value(lock)}")
         chain_sec.done()
         chain = robots.read_chain(path, base_link, tip_link, tuple(lock))
     except robots.RobotFileError as exc:
@@ -387,8 +208,8 @@ def _robot_arm(sec: _Section, name: str, base_pos, base_rot, base_dir: Path) -> 
                  "joint_names": chain.joint_names}
 
 
-def _joint_values(sec: _Section, key: str, types: np.ndarray, labels: list[str], rates: bool = False,
-                  default=_REQUIRED) -> np.ndarray:
+def _joint_values(sec: Section, key: str, types: np.ndarray, labels: list[str], rates: bool = False,
+                  default=REQUIRED) -> np.ndarray:
     """Joint coordinates (rates: joint rates) under `key`, per joint type: rad or m (rad/s or m/s); the
     degree form `key_deg` only where no joint is prismatic (ScenarioError naming the field and the
     first prismatic joint, labels[j]); a revolute angle over a turn is refused as in `angles`."""
@@ -403,7 +224,7 @@ def _joint_values(sec: _Section, key: str, types: np.ndarray, labels: list[str],
     return sec.angles(key, (n,), default, is_angle=types == REVOLUTE)
 
 
-def _arm_state(sec: _Section, arm: ArmModel, info: dict):
+def _arm_state(sec: Section, arm: ArmModel, info: dict):
     """Initial coordinates (rad, m for a prismatic joint; within the joints' ranges) and rates of one
     arm."""
     n, types, names = info["n"], arm.joint_type, info["joint_names"]
@@ -421,7 +242,7 @@ def _arm_state(sec: _Section, arm: ArmModel, info: dict):
     return q0, qd0
 
 
-def _torque(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
+def _torque(sec: Section, n: int, where_dir: Path) -> TorqueTable:
     tq = sec.section("torque", default={"constant": [0.0] * n})
     kinds = [k for k in ("constant", "table", "csv") if tq.has(k)]
     if len(kinds) != 1:
@@ -440,7 +261,7 @@ def _torque(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     return table
 
 
-def _check_passive_torque(sec: _Section, table: TorqueTable, passive: np.ndarray) -> None:
+def _check_passive_torque(sec: Section, table: TorqueTable, passive: np.ndarray) -> None:
     """A passive joint has no motor: its torque must be zero throughout (ScenarioError naming it)."""
     loaded = passive & np.any(table.values != 0, axis=0)
     if np.any(loaded):
@@ -449,13 +270,13 @@ def _check_passive_torque(sec: _Section, table: TorqueTable, passive: np.ndarray
                            f"(up to {np.max(np.abs(table.values[:, j])):g} N·m)")
 
 
-def _checked_table(sec: _Section, key: str, times: np.ndarray, values: np.ndarray) -> TorqueTable:
+def _checked_table(sec: Section, key: str, times: np.ndarray, values: np.ndarray) -> TorqueTable:
     if len(times) < 1 or np.any(np.diff(times) <= 0):
         sec.fail(key, "times must be strictly increasing")
     return TorqueTable(times, values)
 
 
-def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
+def _csv_table(sec: Section, n: int, where_dir: Path) -> TorqueTable:
     """CSV (UTF-8) with a header row; first column time (s), then one column per joint (N·m); every
     value a finite number of at most MAX_MAGNITUDE; rows starting with # are skipped."""
     path = _relative_file(sec, "csv", where_dir)
@@ -486,7 +307,7 @@ def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
         for j, x in enumerate(r):
             v = _csv_number(x)
             if v is None:
-                bad(f"column {j + 1}: expected a number, got {_show(x)}", line)
+                bad(f"column {j + 1}: expected a number, got {show_value(x)}", line)
             if not math.isfinite(v):
                 bad(f"column {j + 1}: must be finite, got {x.strip()}", line)
             if abs(v) > MAX_MAGNITUDE:
@@ -495,11 +316,11 @@ def _csv_table(sec: _Section, n: int, where_dir: Path) -> TorqueTable:
     return _checked_table(sec, "csv", data[:, 0], data[:, 1:])
 
 
-def _relative_file(sec: _Section, key: str, base_dir: Path) -> Path:
+def _relative_file(sec: Section, key: str, base_dir: Path) -> Path:
     """The existing file named by `key`, relative to the scenario's folder."""
     rel = sec.string(key)
     if "\0" in rel:
-        sec.fail(key, f"a file name cannot hold a NUL character, got {_show(rel)}")
+        sec.fail(key, f"a file name cannot hold a NUL character, got {show_value(rel)}")
     path = (base_dir / rel).resolve()
     if not path.is_file():
         sec.fail(key, f"file not found: {path}")
@@ -513,7 +334,7 @@ def _csv_number(x: str) -> float | None:
         return None
 
 
-def _motors(sec: _Section, info: dict):
+def _motors(sec: Section, info: dict):
     """Motor lines (defaults: none for hand-written links; a robot file's effort and velocity limits),
     energy weights, passive joints of one arm."""
     n = info["n"]
@@ -528,7 +349,7 @@ def _motors(sec: _Section, info: dict):
     return stall, speed, weights, np.array(passive, dtype=bool)
 
 
-def _integrator(sec: _Section | None) -> IntegratorSettings:
+def _integrator(sec: Section | None) -> IntegratorSettings:
     if sec is None:
         return IntegratorSettings()
     d = IntegratorSettings()
@@ -557,7 +378,7 @@ def _integrator(sec: _Section | None) -> IntegratorSettings:
     return s
 
 
-def _mujoco(sec: _Section | None) -> MujocoSettings:
+def _mujoco(sec: Section | None) -> MujocoSettings:
     if sec is None:
         return MujocoSettings()
     d = MujocoSettings()
@@ -575,7 +396,7 @@ def _mujoco(sec: _Section | None) -> MujocoSettings:
     return s
 
 
-def _validation(sec: _Section | None) -> ValidationThresholds:
+def _validation(sec: Section | None) -> ValidationThresholds:
     if sec is None:
         return ValidationThresholds()
     d = ValidationThresholds()
@@ -584,7 +405,7 @@ def _validation(sec: _Section | None) -> ValidationThresholds:
     return s
 
 
-def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) -> InverseSettings:
+def _inverse(sec: Section | None, n: int, r: int, arms: list[ArmModel] = ()) -> InverseSettings:
     """The optional `inverse` section: trajectory to invert, object motion, non-squeezing virtual
     masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion); arms
     give the joint types of the stacked initial guess."""
@@ -629,14 +450,14 @@ def _inverse(sec: _Section | None, n: int, r: int, arms: list[ArmModel] = ()) ->
     return InverseSettings(trajectory, motion, masses, payload_pos, force, moment)
 
 
-def _gains(sec: _Section, key: str, n: int) -> np.ndarray:
+def _gains(sec: Section, key: str, n: int) -> np.ndarray:
     """Non-negative gains (n,): one number for every joint, or one per joint."""
     if isinstance(sec.raw(key), (int, float)) and not isinstance(sec.raw(key), bool):
         return np.full(n, sec.number(key, nonneg=True))
     return sec.array(key, (n,), nonneg=True)
 
 
-def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np.ndarray) -> ControlSettings | None:
+def _control(sec: Section | None, n: int, inverse: InverseSettings, passive: np.ndarray) -> ControlSettings | None:
     """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
     if sec is None:
         return None
@@ -654,7 +475,7 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
         opts["fallback"] = sec.string("fallback", FALLBACKS)
     saturate = sec.raw("saturate", default=False)
     if not isinstance(saturate, bool):
-        sec.fail("saturate", f"expected true or false, got {_show(saturate)}")
+        sec.fail("saturate", f"expected true or false, got {show_value(saturate)}")
     if law == "joint_pd":
         kp, kd = _gains(sec, "kp", n), _gains(sec, "kd", n)
         reference = sec.string("reference", REFERENCES, "setpoint")
@@ -680,7 +501,7 @@ def _control(sec: _Section | None, n: int, inverse: InverseSettings, passive: np
     return ControlSettings(law, kp, kd, saturate=saturate, **opts)
 
 
-def _object(sec: _Section, arms: list[ArmModel]):
+def _object(sec: Section, arms: list[ArmModel]):
     """Object inertia and grasps; grasps given explicitly or `derive` (from the initial state)."""
     mass, com, inertia, box = _body(sec)
     if np.linalg.norm(com) > 0:
@@ -819,11 +640,11 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
         for rho in (2700.0, 7850.0):
             model = model_from_dict(apply_overrides(data, [("object.box.density", rho)]), where="paper")
     """
-    root = _Section(data, "", where)
+    root = Section(data, "", where)
     name = root.string("name", default=safe_name(default_name))
     if not (_NAME.match(name) and len(name) <= MAX_NAME):
         root.fail("name", f"must be a file name of 1 to {MAX_NAME} letters, digits, '_', '-' or '.', not "
-                          f"starting with '.' (outputs are written as NAME.mcap, out/NAME/), got {_show(name)}")
+                          f"starting with '.' (outputs are written as NAME.mcap, out/NAME/), got {show_value(name)}")
     root.string("description", default="")
     gravity = root.array("gravity", (3,), default=[0.0, 0.0, -9.81])
     file_duration = root.number("duration", positive=True)

@@ -15,11 +15,7 @@ from coopsim.core.errors import ScenarioError
 
 
 MAX_FILE_BYTES = 64 << 20       # a scenario or a torque CSV
-
-
 MAX_DEPTH = 32                  # YAML nesting (the bundled scenarios use 8)
-
-
 MAX_NODES = 1_000_000           # YAML values with every alias expanded
 
 
@@ -40,8 +36,6 @@ def read_text(path: Path, fail) -> str:
 
 
 _YAML_LOADER = yaml.CSafeLoader if getattr(yaml, "__with_libyaml__", False) else yaml.SafeLoader
-
-
 _MERGE = "tag:yaml.org,2002:merge"
 
 
