@@ -72,25 +72,38 @@ class PackedModel(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    """Buffers of one evaluation (N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows).
-    Link geometry, world axes: p, R, z, c, I (N, …) joint origins, frames, axes, centres of mass,
-    inertias; p_ee (r, 3), R_ee (r, 3, 3); p_rel, c_rel (N, 3), p_ee_rel (r, 3): p, c, p_ee relative to
-    their arm's base point, accumulated from the base without its world position (every lever arm of
-    the kernels is formed from these, so that a scene far from the world origin loses nothing to
-    rounding; p, c, p_ee are those plus base_pos, for output); link motion at θ̈ = 0 with base acceleration −g:
-    w, dw, a (N, 3). Arm terms: Mb (N, nmax) mass-matrix blocks (arm m's block in rows
-    dof[m]:dof[m+1], columns 0:n_m), Lb (N, nmax) their Cholesky factors L (lower triangle, and Lᵀ
-    in the strict upper triangle), Lb_inv (N,) the reciprocals of the factors' diagonals, h (N,)
-    bias forces h = −Re (object included in the carrier's rows), h_arm (N,) without the object,
-    J (r, 6, nmax) end-effector Jacobians, Jd_qd (r, 6). Object: p_C (3,), R_o (3, 3), K_o (3, 3),
-    s (r, 3), J_o (6, nmax), Jd_o_qd (6,), v_o (6,), Y_bias (6,) M_o J̇_oθ̇ + b_o. Closed chain:
-    Lam (K, N), Lam_dot_qd (K,), X (K, N) Λ L⁻ᵀ, x0 (N,) L⁻¹(τ − h) (𝐈 = L Lᵀ), A (K, K) Λ𝐈⁻¹Λᵀ,
-    A_f (K, K) its factor, b (K,), F (K,), res (K,), perm (K,) int, yK (K,) scratch, phi (K,) loop
-    residual Φ; out: qdd (N,), tau (N,), cond (1,) and rank (1,) int. dF (K,) refinement step;
-    vec6 (6,), v3 (3,), m3 (4, 3, 3) scratch. The O(r) constraint solve (`schur`; n_c ≤ nmax the
-    carrier's joints): d_inv (K,) reciprocals of the diagonals of the k × k factors L_g (kept in A_f's
-    diagonal blocks), V (K, nmax) L_D⁻¹U, S (nmax, nmax) and S_inv (nmax,) the factor of I + VᵀV and
-    its diagonal's reciprocals, yN (nmax,) scratch."""
+    """Buffers of one evaluation: N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows.
+
+    Attributes:
+        p, R, z, c, I: (N, …) link geometry, world axes: joint origins, frames, axes, centres of mass,
+            inertias.
+        p_ee, R_ee: (r, 3), (r, 3, 3) the end-effector frames.
+        p_rel, c_rel, p_ee_rel: (N, 3), (N, 3), (r, 3): p, c, p_ee relative to their arm's base point,
+            accumulated from the base without its world position (every lever arm of the kernels is
+            formed from these, so that a scene far from the world origin loses nothing to rounding;
+            p, c, p_ee are those plus base_pos, for output).
+        w, dw, a: (N, 3) link motion at θ̈ = 0 with base acceleration −g.
+        Mb: (N, nmax) mass-matrix blocks (arm m's block in rows dof[m]:dof[m+1], columns 0:n_m).
+        Lb: (N, nmax) their Cholesky factors L (lower triangle, and Lᵀ in the strict upper one).
+        Lb_inv: (N,) the reciprocals of the factors' diagonals.
+        h, h_arm: (N,) bias forces h = −Re, with the object in the carrier's rows and without it.
+        J, Jd_qd: (r, 6, nmax), (r, 6) end-effector Jacobians and J̇θ̇.
+        p_C, R_o, K_o, s: the object's centre of mass (3,), frame (3, 3), inertia (3, 3), grasp
+            offsets (r, 3).
+        J_o, Jd_o_qd, v_o, Y_bias: (6, nmax), (6,), (6,), (6,) the object's Jacobian, J̇_oθ̇, twist,
+            and M_o J̇_oθ̇ + b_o.
+        Lam, Lam_dot_qd: (K, N), (K,) Λ and Λ̇θ̇.
+        X, x0: (K, N) Λ L⁻ᵀ and (N,) L⁻¹(τ − h) (𝐈 = L Lᵀ).
+        A, A_f: (K, K) Λ𝐈⁻¹Λᵀ and its factor.
+        b, F, res, dF: (K,) right-hand side, grasp wrenches, residual, refinement step.
+        perm: (K,) int pivots; yK: (K,) scratch; phi: (K,) the loop residual Φ.
+        qdd, tau: (N,) outputs; cond: (1,) condition number; rank: (1,) int.
+        vec6, v3, m3: (6,), (3,), (4, 3, 3) scratch.
+        d_inv, V, S, S_inv, yN: the O(r) constraint solve (`schur`; n_c ≤ nmax the carrier's joints):
+            (K,) reciprocals of the diagonals of the k × k factors L_g (kept in A_f's diagonal
+            blocks), (K, nmax) L_D⁻¹U, (nmax, nmax) and (nmax,) the factor of I + VᵀV and its
+            diagonal's reciprocals, (nmax,) scratch.
+    """
 
     p: np.ndarray
     R: np.ndarray

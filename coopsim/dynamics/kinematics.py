@@ -25,11 +25,19 @@ from coopsim.core.spatial import cross, rigid_acceleration
 
 class ArmPose(NamedTuple):
     """Configuration-dependent geometry of one arm (world axes, SI).
-    p (n, 3) joint origins (frame origins, a prismatic joint's slide included); R (n, 3, 3) link
-    frames; z (n, 3) joint axes; c (n, 3) link centres of mass; I (n, 3, 3) link inertias about c;
-    p_ee (3,), R_ee (3, 3) end-effector frame; origin (3,) the arm's base point (world); p_rel (n, 3),
-    c_rel (n, 3), p_ee_rel (3,): p, c and p_ee relative to origin, computed without it (the dynamics
-    use these: module docstring); joint_type (n,) the arm's joint types (ArmModel.joint_type)."""
+
+    Attributes:
+        p: (n, 3) m, joint origins (frame origins, a prismatic joint's slide included).
+        R: (n, 3, 3) link frames.
+        z: (n, 3) joint axes.
+        c: (n, 3) m, link centres of mass.
+        I: (n, 3, 3) kg·m², link inertias about c.
+        p_ee, R_ee: (3,) m and (3, 3), the end-effector frame.
+        origin: (3,) m, the arm's base point.
+        p_rel, c_rel, p_ee_rel: (n, 3), (n, 3), (3,) m: p, c and p_ee relative to origin, computed
+            without it (the dynamics use these: module docstring).
+        joint_type: (n,) the arm's joint types (ArmModel.joint_type).
+    """
 
     p: np.ndarray
     R: np.ndarray

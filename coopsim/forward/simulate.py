@@ -44,20 +44,35 @@ from coopsim.core.spatial import rot_to_quat
 
 @dataclass(frozen=True, eq=False)
 class SimResult(SampledMotion):
-    """Sampled trajectory (N samples, n joints stacked arm by arm, r arms), SI units, world axes.
-    t (N,) s; q, qd, qdd (N, n) rad, rad/s, rad/s²; tau (N, n) N·m;
-    object_pos (N, 3) m (centre of mass); object_quat (N, 4) [w, x, y, z]; object_twist (N, 6)
-    [v_C; ω]; object_acc (N, 6) [v̇_C; ω̇]; grasp_wrench (N, r, 6) wrench each EE applies to the
-    object at its EE point; internal_wrench (N, r, 6) at C (eq. 7, paper's W⁺; rows sum to zero);
-    residual_pos (N,) max |Φ| (m or rad); residual_vel (N,) max |Λθ̇|; cond (N,) condition number of
-    Λ𝐈⁻¹Λᵀ; initial: the projection applied to the scenario's initial state; stats: integrator counts;
-    wall_time s (not deterministic: never logged as data); events: warnings raised while integrating
-    (a rank-deficient constraint matrix); engine: the engine that ran ('compiled', 'reference' or
-    'stages'); control_counts: with a controller in the compiled loop, (stage evaluations, evaluations
-    in which the motor lines clipped a joint, clipped (evaluation, joint) pairs), else None.
+    """A forward run sampled on its output grid: N samples, n joints stacked arm by arm, r arms, SI
+    units, world axes.
 
-    Computed on first use (`coopsim.forward.diagnostics`; about 4 µs a sample): manipulability (N, r) of each
-    arm, kinetic_energy (N,) J, warnings (every `RunWarning` of the run, events included)."""
+    Attributes:
+        t: (N,) s.
+        q, qd, qdd: (N, n) rad, rad/s, rad/s² (m, m/s, m/s² on a prismatic joint).
+        tau: (N, n) N·m (N), the torques applied.
+        object_pos: (N, 3) m, the object's centre of mass C.
+        object_quat: (N, 4) the object's orientation [w, x, y, z].
+        object_twist: (N, 6) [v_C; ω] m/s, rad/s.
+        object_acc: (N, 6) [v̇_C; ω̇] m/s², rad/s².
+        grasp_wrench: (N, r, 6) [f; n] N, N·m, the wrench each end-effector applies to the object at
+            its end-effector point.
+        internal_wrench: (N, r, 6) at C (eq. 7, the paper's W⁺); rows sum to zero.
+        residual_pos: (N,) max |Φ|, m or rad (loop closure).
+        residual_vel: (N,) max |Λθ̇|.
+        cond: (N,) the condition number of Λ𝐈⁻¹Λᵀ.
+        model: the Model that ran.
+        initial: the Projection applied to the scenario's initial state.
+        stats: the integrator's counts (IntegratorStats).
+        wall_time: s; not deterministic, so never logged as data.
+        events: RunWarnings raised while integrating (a rank-deficient constraint matrix).
+        engine: the engine that ran: 'compiled', 'reference' or 'stages'.
+        control_counts: with a controller in the compiled loop, (stage evaluations, evaluations in
+            which the motor lines clipped a joint, clipped (evaluation, joint) pairs); else None.
+        manipulability: (N, r) of each arm, computed on first use (`coopsim.forward.diagnostics`).
+        kinetic_energy: (N,) J, computed on first use.
+        warnings: every RunWarning of the run, events included, computed on first use.
+    """
 
     model: Model
     object_acc: np.ndarray
