@@ -21,8 +21,6 @@ from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 
 
 ROOT = Path(__file__).resolve().parents[1]   # the repository (this file is tests/helpers.py)
-
-
 SCENARIOS = ROOT / "scenarios"
 
 

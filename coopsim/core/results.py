@@ -35,3 +35,19 @@ class Projection(NamedTuple):
     residual_before: float
     residual_after: float
     iterations: int
+
+
+def output_times(duration: float, dt: float) -> np.ndarray:
+    """The output grid of a run: 0, dt, 2dt, … up to and including `duration` (the last interval may
+    be shorter).
+
+    Args:
+        duration: s.
+        dt: s, the sample interval (integrator.output_dt).
+
+    Returns:
+        (N,) s, strictly increasing, from 0 to `duration`.
+    """
+    k = int(np.floor(duration / dt + 1e-9))
+    t = dt * np.arange(k + 1)
+    return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)

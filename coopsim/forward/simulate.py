@@ -35,10 +35,9 @@ from coopsim.forward.diagnostics import RunWarning, describe_state, run_warning
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
 from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
-from coopsim.core.results import Projection
 from coopsim.core.model import (IntegratorSettings, Model, TorqueFeedback, TorqueFunction, applied_torque, loop_controller,
                                 torque_at)
-from coopsim.core.results import SampledMotion
+from coopsim.core.results import Projection, SampledMotion, output_times
 from coopsim.core.spatial import rot_to_quat
 
 
@@ -185,13 +184,6 @@ def _projector(model: Model):
         return np.concatenate([q, project_velocities(model, q, y[n:])])
 
     return project
-
-
-def output_times(duration: float, dt: float) -> np.ndarray:
-    """0, dt, 2dt, … up to and including `duration` (the last interval may be shorter)."""
-    k = int(np.floor(duration / dt + 1e-9))
-    t = dt * np.arange(k + 1)
-    return t if duration - t[-1] <= 1e-9 * dt else np.append(t, duration)
 
 
 ENGINES = ("compiled", "reference", "stages")

@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from coopsim.core.results import output_times
 from coopsim.core.model import Model, TorqueFunction, TorqueTable
 from coopsim.inverse.trajectory import JointTrajectory, trajectory_at_times
 from coopsim.inverse.problem import InverseError, Resolution, SampleFailure, inverse_problem, torques_of
@@ -52,7 +53,7 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
     time loop meets every stage on a knot of the table."""
     from coopsim.compiled.integrate import stage_times, tableau
-    from coopsim.forward.simulate import output_times, simulate
+    from coopsim.forward.simulate import simulate
 
     tr = traj.t - traj.t[0]
     dt = float(tr[1])

@@ -25,6 +25,7 @@ import numpy as np
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.core.errors import ConstraintError, CoopsimError
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
+from coopsim.core.results import output_times
 from coopsim.core.model import ArmModel, Model, ObjectMotion
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 
@@ -207,7 +208,6 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             singular, det(S J) changes sign between samples (a singularity is crossed), or a target
             leaves the plane of motion.
     """
-    from coopsim.forward.simulate import output_times
 
     S = model.rows
     redundant = _check_joint_counts(model, S)

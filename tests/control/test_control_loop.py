@@ -144,7 +144,8 @@ def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_mod
     it decays, to at most 5 % by 0.2 s (measured 1.5 %). On the native model, whose grasps are rigid
     (e = 0 to the closure tolerance), the same gains change the trajectory by ≤ 1e-12 rad."""
     from coopsim.twin.mujoco_run import run_twin
-    from coopsim.forward.simulate import initial_state, output_times
+    from coopsim.forward.simulate import initial_state
+    from coopsim.core.results import output_times
 
     zero = tuple(TorqueTable(np.zeros(1), np.zeros((1, tab.values.shape[1]))) for tab in carry.torques)
     soft = replace(carry.mujoco, weld_solref=(0.05, 1.0), weld_solimp=(0.5, 0.5, 0.001, 0.5, 2.0))

@@ -23,7 +23,8 @@ from coopsim.twin.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, 
 from coopsim.core.model import Model, TorqueFunction, torque_at
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
-from coopsim.forward.simulate import initial_state, output_times, simulate
+from coopsim.forward.simulate import initial_state, simulate
+from coopsim.core.results import output_times
 from helpers import ROOT, SCENARIOS
 
 SCENARIO_FILES = sorted(SCENARIOS.glob("*.yaml"))
