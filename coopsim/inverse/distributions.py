@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.inverse.qp import solve_qps
-from coopsim.forward.simulate import describe_state
+from coopsim.forward.diagnostics import describe_state
 from coopsim.inverse.stress import grasp_line_axes, line_frame
 from coopsim.inverse.problem import InverseProblem, InverseRankWarning, Resolution, SampleFailure, SampleFailureWarning, failure_text
 

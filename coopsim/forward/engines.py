@@ -1,0 +1,306 @@
+"""The forward pipeline's engines behind one interface: each projects a state onto the loop-closure
+manifold, runs the time loop over the output grid, and samples every reported quantity there.
+
+    ReferenceEngine  the plain-NumPy stages (`coopsim.dynamics`) in `coopsim.dynamics.integrate`,
+                     landing on every output time; the readable reference
+    CompiledEngine   the whole time loop compiled (`coopsim.compiled.api.integrate_chain`, dense
+                     output), an in-the-loop controller evaluated inside it at every stage
+    StagesEngine     the reference time loop over the compiled stage kernels, the torques evaluated in
+                     Python at every stage
+
+The third stays because the compiled time loop cannot call Python: a torque source that is Python
+code at every stage (the 'bounded' distribution's QP, a notebook's callable) runs on the reference
+loop, and the compiled stages make that loop fast. `coopsim.forward.simulate` chooses the engine and
+enters it once; each engine's failures are worded alike (the time, the configuration, the reason).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+from coopsim.core.errors import ConstraintError, ConstraintRankWarning, SimulationError
+from coopsim.core.model import Model, applied_torque, loop_controller, torque_at
+from coopsim.core.results import Projection
+from coopsim.core.spatial import rot_to_quat
+from coopsim.dynamics.closed_chain import ChainAcceleration, ChainTerms, chain_terms, forward_dynamics, position_residual
+from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
+from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
+from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
+from coopsim.forward.diagnostics import RunWarning, describe_state, run_warning
+
+
+class Run(NamedTuple):
+    """What an engine's time loop gives back.
+
+    Attributes:
+        Y: (N, 2n) the states [θ; θ̇] at the output times.
+        stats: the integrator's counts.
+        events: RunWarnings raised while integrating (a rank-deficient constraint matrix).
+        tau: (N, n) N·m, the torques at the samples when the loop computed them (a controller in the
+            compiled loop); None: the sampler evaluates the model's torques there.
+        control_counts: the compiled controller's evaluation counters, or None.
+    """
+
+    Y: np.ndarray
+    stats: IntegratorStats
+    events: tuple
+    tau: np.ndarray | None = None
+    control_counts: tuple | None = None
+
+
+class Samples(NamedTuple):
+    """Every reported quantity at N samples, world axes, SI (`coopsim.forward.simulate.SimResult`):
+    qdd, tau (N, n); object_pos (N, 3); object_quat (N, 4); object_twist, object_acc (N, 6);
+    grasp_wrench, internal_wrench (N, r, 6); residual_pos, residual_vel, cond (N,)."""
+
+    qdd: np.ndarray
+    tau: np.ndarray
+    object_pos: np.ndarray
+    object_quat: np.ndarray
+    object_twist: np.ndarray
+    object_acc: np.ndarray
+    grasp_wrench: np.ndarray
+    internal_wrench: np.ndarray
+    residual_pos: np.ndarray
+    residual_vel: np.ndarray
+    cond: np.ndarray
+
+
+class Engine(Protocol):
+    """The interface every engine implements (module docstring)."""
+
+    name: str
+
+    def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        """(q, qd) (n,) projected onto the loop-closure manifold; ConstraintError if it cannot be."""
+
+    def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        """The time loop from `init` over the output times t_out (N,) s; SimulationError on failure."""
+
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+        """Every reported quantity at the states Y (N, 2n) (torques `tau` (N, n), or the model's)."""
+
+
+def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[ChainTerms, ChainAcceleration]:
+    """One evaluation of the reference closed-chain forward dynamics (eqs. 25–27) at (q, qd) (n,)
+    with torques tau (n,) N·m, Baumgarte stabilization included when selected."""
+    terms = chain_terms(model, q, qd)
+    stab = baumgarte_term(model, q, terms.Lam_qd) if model.integrator.stabilization == "baumgarte" else None
+    return terms, forward_dynamics(model, terms, tau, stab)
+
+
+def rank_reason(rank: int, cond: float) -> str:
+    return f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, cond {cond:.3g})"
+
+
+def rank_event(t: float, q: np.ndarray, rank: int, cond: float, stacklevel: int) -> RunWarning:
+    """The rank-deficiency warning (a ConstraintRankWarning now, a RunWarning on the result)."""
+    reason = rank_reason(rank, cond) + "; using minimum-norm grasp wrenches"
+    warnings.warn(f"at {describe_state(t, q)}: {reason}", ConstraintRankWarning, stacklevel=stacklevel + 1)
+    return run_warning("rank_deficient", t, q, reason, rank=rank, condition_number=cond)
+
+
+def _report(progress, model: Model, t: float) -> None:
+    if progress is not None:
+        progress(min(1.0, t / model.duration) if model.duration > 0 else 1.0)
+
+
+def _step_bound(model: Model) -> float:
+    s = model.integrator
+    return s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
+
+
+def _reference_loop(model: Model, init: Projection, t_out: np.ndarray, rhs, project) -> tuple[np.ndarray, IntegratorStats]:
+    """`coopsim.dynamics.integrate` over rhs and project (the latter with projection stabilization
+    only); an IntegrationError becomes a SimulationError naming the time and configuration."""
+    s, n = model.integrator, model.n_total
+    try:
+        return integrate(rhs, np.concatenate([init.q, init.qd]), t_out, method=s.method, rtol=s.rtol, atol=s.atol,
+                         step=_step_bound(model), project=project if s.stabilization == "projection" else None)
+    except IntegrationError as exc:
+        raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
+
+
+def _torques_at(model: Model, t_out: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    n = model.n_total
+    return np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
+
+
+class ReferenceEngine:
+    """The plain-NumPy stages in the reference time loop (module docstring)."""
+
+    name = "reference"
+
+    def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        return consistent_state(model, q, qd)
+
+    def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        n, events = model.n_total, []
+
+        def rhs(t, y):
+            q, qd = y[:n], y[n:]
+            _report(progress, model, t)
+            tau = applied_torque(model.torques, t, q, qd)
+            try:
+                with np.errstate(invalid="ignore", over="ignore"):
+                    _, acc = forward(model, q, qd, tau)
+            except ConstraintError as exc:
+                raise SimulationError(f"simulation failed at {describe_state(t, q)}: {exc}") from None
+            if not np.all(np.isfinite(acc.qdd)):
+                raise SimulationError(f"simulation failed at {describe_state(t, q)}: non-finite joint accelerations "
+                                      f"(torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to "
+                                      f"{np.max(np.abs(qd)):.3g} rad/s)")
+            if acc.rank < model.rows.shape[0] * (model.r - 1):
+                if model.integrator.on_rank_deficiency == "error":
+                    raise SimulationError(f"simulation failed at {describe_state(t, q)}: "
+                                          f"{rank_reason(acc.rank, acc.cond)}")
+                if not events:
+                    events.append(rank_event(t, q, acc.rank, acc.cond, stacklevel=2))
+            return np.concatenate([qd, acc.qdd])
+
+        def project(t, y):
+            try:
+                q, _ = project_positions(model, y[:n], model.integrator.projection_tol)
+            except ConstraintError as exc:
+                raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
+            return np.concatenate([q, project_velocities(model, q, y[n:])])
+
+        Y, stats = _reference_loop(model, init, t_out, rhs, project)
+        return Run(Y, stats, tuple(events))
+
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+        n, N, r = model.n_total, len(t_out), model.r
+        out = {k: np.zeros((N,) + shape) for k, shape in [
+            ("qdd", (n,)), ("tau", (n,)), ("object_pos", (3,)), ("object_quat", (4,)), ("object_twist", (6,)),
+            ("object_acc", (6,)), ("grasp_wrench", (r, 6)), ("internal_wrench", (r, 6)), ("residual_pos", ()),
+            ("residual_vel", ()), ("cond", ())]}
+        for i, (ti, y) in enumerate(zip(t_out, Y)):
+            q, qd = y[:n], y[n:]
+            tau_i = applied_torque(model.torques, ti, q, qd) if tau is None else tau[i]
+            terms, acc = forward(model, q, qd, tau_i)
+            W = [grasp_matrix(s) for s in terms.s]
+            out["qdd"][i], out["tau"][i] = acc.qdd, tau_i
+            out["object_pos"][i], out["object_quat"][i] = terms.obj.p_C, rot_to_quat(terms.obj.R_o)
+            out["object_twist"][i], out["object_acc"][i] = terms.v_o, acc.vd_o
+            out["grasp_wrench"][i], out["internal_wrench"][i] = acc.F_e, internal_wrench(W, acc.F_e)
+            out["residual_pos"][i] = np.max(np.abs(position_residual(model, q)))
+            out["residual_vel"][i] = np.max(np.abs(terms.Lam_qd))
+            out["cond"][i] = acc.cond
+        return Samples(**out)
+
+
+def _compiled_samples(model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+    from coopsim.compiled import api
+
+    return Samples(*api.sample_states(model, t_out, Y, tau)[:len(Samples._fields)])
+
+
+def _compiled_projection(model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+    from coopsim.compiled import api
+
+    return api.consistent_state(model, q, qd)
+
+
+class CompiledEngine:
+    """The whole time loop compiled (module docstring). With an in-the-loop controller the loop runs on
+    the controller's model (its torque tables, the command added at every stage), lands on every
+    output time, and the samples' torques are the controller's."""
+
+    name = "compiled"
+
+    def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        return _compiled_projection(model, q, qd)
+
+    @staticmethod
+    def _kernel_model(model: Model) -> Model:
+        ctrl = loop_controller(model)
+        return model if ctrl is None else ctrl.model
+
+    def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        from coopsim.compiled import api
+
+        s, n = model.integrator, model.n_total
+        ctrl = loop_controller(model)
+        kernel = self._kernel_model(model)
+        fixed = fixed_step if fixed_step is not None else (s.step if s.method == "rk4" else None)
+        loop = None if ctrl is None else ctrl.loop_record()
+        run = api.integrate_chain(kernel, np.concatenate([init.q, init.qd]), t_out, s.method, rtol=s.rtol,
+                                  atol=s.atol, h_max=np.inf if s.max_step is None else s.max_step, fixed_step=fixed,
+                                  progress=progress, controller=loop, land=loop is not None)
+        events = ()
+        if run.rank_warning is not None:
+            t, y, rank, cond = run.rank_warning
+            events = (rank_event(t, y[:n], rank, cond, stacklevel=3),)   # the warning names simulate's caller
+        if run.status:
+            raise SimulationError(f"simulation failed at {describe_state(run.fail_t, run.fail_y[:n])}: "
+                                  f"{self._reason(kernel, run)}")
+        stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
+                                n_projections=run.counts[3])
+        if ctrl is None:
+            return Run(run.Y, stats, events)
+        counts = ctrl.loop_counts()        # the loop's own evaluations, before the samples' torques add theirs
+        return Run(run.Y, stats, events, ctrl.loop_torques(t_out, run.Y[:, :n], run.Y[:, n:]), counts)
+
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+        return _compiled_samples(self._kernel_model(model), t_out, Y, tau)
+
+    @staticmethod
+    def _reason(model: Model, run) -> str:
+        """The one-line reason of a compiled run's failure (as the reference engine words it)."""
+        from coopsim.compiled import api
+
+        reason = api.REASONS.get(run.status, f"failure code {run.status}")
+        n = model.n_total
+        if run.status == api.chain.RANK_DEFICIENT:
+            W = api.compiled(model).W
+            reason += f" (rank {int(W.rank[0])}, cond {float(W.cond[0]):.3g})"
+        if run.status == api.chain.NON_FINITE:
+            tau = torque_at(model.torques, run.fail_t)
+            reason += (f" (torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to "
+                       f"{np.max(np.abs(run.fail_y[n:])):.3g} rad/s)")
+        return reason
+
+
+class StagesEngine:
+    """The reference time loop over the compiled stage kernels (module docstring): the compiled
+    closed-chain evaluation and projection at every stage, the torques evaluated in Python there."""
+
+    name = "stages"
+
+    def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        return _compiled_projection(model, q, qd)
+
+    def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        from coopsim.compiled import api
+
+        n, events = model.n_total, []
+
+        def rhs(t, y):
+            q, qd = y[:n], y[n:]
+            _report(progress, model, t)
+            ev = api.forward(model, q, qd, applied_torque(model.torques, t, q, qd))
+            if ev.status == api.chain.RANK_DEFICIENT and model.integrator.on_rank_deficiency != "error":
+                if not events:
+                    events.append(rank_event(t, q, ev.rank, float(api.compiled(model).W.cond[0]), stacklevel=2))
+            elif ev.status:
+                raise SimulationError(f"simulation failed at {describe_state(t, q)}: {api.REASONS[ev.status]}")
+            return np.concatenate([qd, ev.qdd])
+
+        def project(t, y):
+            try:
+                p = api.consistent_state(model, y[:n], y[n:])
+            except ConstraintError as exc:
+                raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
+            return np.concatenate([p.q, p.qd])
+
+        Y, stats = _reference_loop(model, init, t_out, rhs, project)
+        return Run(Y, stats, tuple(events))
+
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+        return _compiled_samples(model, t_out, Y, _torques_at(model, t_out, Y) if tau is None else tau)
+
+
+ENGINES: dict[str, Engine] = {e.name: e for e in (CompiledEngine(), ReferenceEngine(), StagesEngine())}
