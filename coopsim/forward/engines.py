@@ -51,22 +51,10 @@ class Run(NamedTuple):
     control_counts: tuple | None = None
 
 
-class Samples(NamedTuple):
-    """Every reported quantity at N samples, world axes, SI (`coopsim.forward.simulate.SimResult`):
-    qdd, tau (N, n); object_pos (N, 3); object_quat (N, 4); object_twist, object_acc (N, 6);
-    grasp_wrench, internal_wrench (N, r, 6); residual_pos, residual_vel, cond (N,)."""
-
-    qdd: np.ndarray
-    tau: np.ndarray
-    object_pos: np.ndarray
-    object_quat: np.ndarray
-    object_twist: np.ndarray
-    object_acc: np.ndarray
-    grasp_wrench: np.ndarray
-    internal_wrench: np.ndarray
-    residual_pos: np.ndarray
-    residual_vel: np.ndarray
-    cond: np.ndarray
+# What an engine's `sample` gives: every reported quantity at the N samples, keyed by its SimResult field
+# (`coopsim.forward.simulate.SimResult` documents shapes and units).
+SAMPLED = ("qdd", "tau", "object_pos", "object_quat", "object_twist", "object_acc", "grasp_wrench",
+           "internal_wrench", "residual_pos", "residual_vel", "cond")
 
 
 class Engine(Protocol):
@@ -80,8 +68,8 @@ class Engine(Protocol):
     def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
         """The time loop from `init` over the output times t_out (N,) s; SimulationError on failure."""
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
-        """Every reported quantity at the states Y (N, 2n) (torques `tau` (N, n), or the model's)."""
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
+        """Every reported quantity (SAMPLED) at the states Y (N, 2n) (torques `tau` (N, n), or the model's)."""
 
 
 def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[ChainTerms, ChainAcceleration]:
@@ -171,7 +159,7 @@ class ReferenceEngine:
         Y, stats = _reference_loop(model, init, t_out, rhs, project)
         return Run(Y, stats, tuple(events))
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         n, N, r = model.n_total, len(t_out), model.r
         out = {k: np.zeros((N,) + shape) for k, shape in [
             ("qdd", (n,)), ("tau", (n,)), ("object_pos", (3,)), ("object_quat", (4,)), ("object_twist", (6,)),
@@ -189,13 +177,14 @@ class ReferenceEngine:
             out["residual_pos"][i] = np.max(np.abs(position_residual(model, q)))
             out["residual_vel"][i] = np.max(np.abs(terms.Lam_qd))
             out["cond"][i] = acc.cond
-        return Samples(**out)
+        return out
 
 
-def _compiled_samples(model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+def _compiled_samples(model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
     from coopsim.compiled import api
 
-    return Samples(*api.sample_states(model, t_out, Y, tau)[:len(Samples._fields)])
+    smp = api.sample_states(model, t_out, Y, tau)
+    return {k: getattr(smp, k) for k in SAMPLED}
 
 
 def _compiled_projection(model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
@@ -244,7 +233,7 @@ class CompiledEngine:
         counts = ctrl.loop_counts()        # the loop's own evaluations, before the samples' torques add theirs
         return Run(run.Y, stats, events, ctrl.loop_torques(t_out, run.Y[:, :n], run.Y[:, n:]), counts)
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         return _compiled_samples(self._kernel_model(model), t_out, Y, tau)
 
     @staticmethod
@@ -299,7 +288,7 @@ class StagesEngine:
         Y, stats = _reference_loop(model, init, t_out, rhs, project)
         return Run(Y, stats, tuple(events))
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> Samples:
+    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         return _compiled_samples(model, t_out, Y, _torques_at(model, t_out, Y) if tau is None else tau)
 
 

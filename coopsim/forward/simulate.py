@@ -33,7 +33,7 @@ from coopsim.core.results import Projection, SampledMotion, output_times
 from coopsim.dynamics.integrate import IntegratorStats
 from coopsim.forward import diagnostics
 from coopsim.forward.diagnostics import RunWarning, describe_state
-from coopsim.forward.engines import ENGINES, Engine, Run, Samples, forward  # noqa: F401 (forward: the reference evaluation)
+from coopsim.forward.engines import ENGINES, Engine, Run, forward  # noqa: F401 (forward: the reference evaluation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,14 +186,14 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     return res
 
 
-def _result(model: Model, eng: Engine, t_out: np.ndarray, run: Run, smp: Samples, init: Projection,
+def _result(model: Model, eng: Engine, t_out: np.ndarray, run: Run, smp: dict, init: Projection,
             start: float) -> SimResult:
     """The SimResult of an engine's run and samples; the in-the-loop controller's warnings added."""
     n, ctrl = model.n_total, loop_controller(model)
     events = run.events + (() if ctrl is None else tuple(ctrl.run_warnings()))
     return SimResult(model=model, t=t_out, q=run.Y[:, :n], qd=run.Y[:, n:], initial=init, stats=run.stats,
                      wall_time=time.perf_counter() - start, events=events, engine=eng.name,
-                     control_counts=run.control_counts, **smp._asdict())
+                     control_counts=run.control_counts, **smp)
 
 
 def _check_conditioning(res: SimResult) -> None:
