@@ -36,7 +36,12 @@ import numpy as np
 
 from coopsim.core.model import Model, TorqueFeedback, torque_at
 from coopsim.core.errors import CoopsimError
-from coopsim.control.laws import grasp_errors, grasp_torques, joint_accelerations, object_acceleration, pd_torque, pose_error, saturate, squeeze_wrenches
+from coopsim.control.laws import (grasp_errors, grasp_torques, joint_accelerations, object_acceleration, pd_torque,
+                                  pose_error, saturate, squeeze_wrenches)
+
+# The inverse side and the compiled engine's modules are imported in the methods that use them: every run
+# imports this module for `closed_loop`, most runs have no controller, and loading them here would add
+# to every command's start.
 
 
 LAWS = ("joint_pd", "computed_torque")
