@@ -112,6 +112,20 @@ def _reference_loop(model: Model, init: Projection, t_out: np.ndarray, rhs, proj
         raise SimulationError(f"simulation failed at {describe_state(exc.t, exc.y[:n])}: {exc.reason}") from None
 
 
+def _projection_step(n: int, onto_manifold):
+    """The reference loop's projection after each step, y = [θ; θ̇] (2n,) → its projection by
+    onto_manifold(q, qd) -> (q, qd); a ConstraintError becomes a SimulationError naming the time and
+    configuration."""
+    def project(t, y):
+        try:
+            q, qd = onto_manifold(y[:n], y[n:])
+        except ConstraintError as exc:
+            raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
+        return np.concatenate([q, qd])
+
+    return project
+
+
 def _torques_at(model: Model, t_out: np.ndarray, Y: np.ndarray) -> np.ndarray:
     n = model.n_total
     return np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
@@ -149,14 +163,11 @@ class ReferenceEngine:
                     events.append(rank_event(t, q, acc.rank, acc.cond, stacklevel=2))
             return np.concatenate([qd, acc.qdd])
 
-        def project(t, y):
-            try:
-                q, _ = project_positions(model, y[:n], model.integrator.projection_tol)
-            except ConstraintError as exc:
-                raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
-            return np.concatenate([q, project_velocities(model, q, y[n:])])
+        def onto_manifold(q, qd):
+            q, _ = project_positions(model, q, model.integrator.projection_tol)
+            return q, project_velocities(model, q, qd)
 
-        Y, stats = _reference_loop(model, init, t_out, rhs, project)
+        Y, stats = _reference_loop(model, init, t_out, rhs, _projection_step(n, onto_manifold))
         return Run(Y, stats, tuple(events))
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
@@ -278,14 +289,11 @@ class StagesEngine:
                 raise SimulationError(f"simulation failed at {describe_state(t, q)}: {api.REASONS[ev.status]}")
             return np.concatenate([qd, ev.qdd])
 
-        def project(t, y):
-            try:
-                p = api.consistent_state(model, y[:n], y[n:])
-            except ConstraintError as exc:
-                raise SimulationError(f"simulation failed at {describe_state(t, y[:n])}: projection: {exc}") from None
-            return np.concatenate([p.q, p.qd])
+        def onto_manifold(q, qd):
+            p = api.consistent_state(model, q, qd)
+            return p.q, p.qd
 
-        Y, stats = _reference_loop(model, init, t_out, rhs, project)
+        Y, stats = _reference_loop(model, init, t_out, rhs, _projection_step(n, onto_manifold))
         return Run(Y, stats, tuple(events))
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
