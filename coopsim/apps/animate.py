@@ -39,6 +39,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from dataclasses import dataclass
@@ -46,9 +47,15 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
+from PIL import Image, ImageDraw, ImageFont
 
-from coopsim.core.model import Model
 from coopsim.core.errors import CoopsimError
+from coopsim.core.model import Model
+from coopsim.io.log import file_sha256
+from coopsim.io.mcap_codec import read_mcap
+from coopsim.io.scenario import load_scenario
+from coopsim.twin.harness import cross_validate
+from coopsim.twin.mjcf import launch_viewer, mjcf_text
 
 
 class RenderUnavailable(CoopsimError):
@@ -126,8 +133,6 @@ def _log_scenario_path(log_path: Path, file: str) -> Path | None:
 
 
 def _read_log(log_path: Path):
-    from coopsim.io.mcap_codec import read_mcap
-
     try:
         return read_mcap(log_path)
     except Exception as exc:            # mcap's own errors, a JSON or schema mismatch, ...
@@ -139,9 +144,6 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
     the joint angles but not the model's geometry: that comes from the scenario file named in its
     metadata (found relative to the current folder or a folder above the log, and checked against the
     recorded sha256), or from `scenario` when given. `log`: the file already read (`LogData`)."""
-    from coopsim.io.log import file_sha256
-    from coopsim.io.scenario import load_scenario
-
     log_path = Path(log_path)
     if log is None:
         if not log_path.is_file():
@@ -187,8 +189,6 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
 def motion_from_run(model: Model, duration: float | None = None, progress=None) -> Motion:
     """Run the native model and the twin (`harness.cross_validate`, as `coopsim run` does, nothing
     written) and take both models' angles."""
-    from coopsim.twin.harness import cross_validate
-
     cv = cross_validate(model, duration=duration, progress=progress)
     return Motion(model, cv.native.t, cv.native.q, cv.twin.q, "run")
 
@@ -202,8 +202,6 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
     """(path, LogData) of the scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when
     it was written from this very file (same sha256), holds both models and covers `duration` (default:
     the scenario's); else None."""
-    from coopsim.io.log import file_sha256
-
     log_path = default_log_path(model)
     if not log_path.is_file():
         return None
@@ -223,8 +221,6 @@ def scenario_motion(path: str | Path, duration: float | None = None, progress=No
     """The scenario's :func:`reusable_log` when there is one (never with `overrides`, the `--set`
     pairs of `coopsim.io.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
     models (`before_run()` is called first, e.g. to announce it)."""
-    from coopsim.io.scenario import load_scenario
-
     model = load_scenario(path, overrides=overrides)
     found = None if overrides else reusable_log(path, model, duration)
     if found is not None:
@@ -412,8 +408,6 @@ def _camera(m: mujoco.MjModel, points: np.ndarray, width: int, height: int) -> m
 
 
 def _font(size: int):
-    from PIL import ImageFont
-
     try:
         return ImageFont.load_default(size=size)
     except (TypeError, ImportError, OSError):      # Pillow without FreeType: the fixed bitmap font
@@ -425,8 +419,6 @@ class _Overlay:
     difference of the two models (bottom right, when it fits)."""
 
     def __init__(self, width: int, height: int, native: bool, twin: bool):
-        from PIL import Image, ImageDraw
-
         self.width, self.height = width, height
         self.size = max(9, round(height / 24))
         self.font, self.small = _font(self.size), _font(max(8, round(self.size * 0.8)))
@@ -448,8 +440,6 @@ class _Overlay:
         self.legend_y = height - self.legend.height
 
     def draw(self, image, t: float, dq: float | None):
-        from PIL import ImageDraw
-
         image.paste(self.legend, (0, self.legend_y), self.legend)
         draw = ImageDraw.Draw(image)
         stamp = f"t = {t:5.2f} s"
@@ -474,8 +464,6 @@ def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: i
     difference and a legend (`text`); floor=False leaves the floor out (plain background). The camera
     frames both models at every one of `times`, whichever are drawn. Poses are set with mj_kinematics;
     nothing is simulated."""
-    from PIL import Image
-
     q_native, q_twin = motion.at(np.asarray(times, float))
     native = native and q_native is not None
     twin = twin and q_twin is not None
@@ -567,8 +555,6 @@ def check_output(path: str | Path) -> str:
 
 
 def _write_gif(frames: list[np.ndarray], path: Path, fps: float) -> None:
-    from PIL import Image
-
     images = [Image.fromarray(f) for f in frames]
     # one palette for every frame (from the first, middle and last): no flicker, and frames compress as
     # differences from the previous one
@@ -676,11 +662,6 @@ def view(source: str | Path, label: str | None = None, overrides=()) -> None:
     """MuJoCo's interactive viewer (`mjcf.launch_viewer`) at the consistent initial state: on an MJCF file
     (`models/NAME.xml`, started at its keyframe) or on a scenario (its twin written as `coopsim mjcf`
     would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when the window is closed. Without a display: CoopsimError."""
-    import tempfile
-
-    from coopsim.twin.mjcf import launch_viewer, mjcf_text
-    from coopsim.io.scenario import load_scenario
-
     source = Path(source)
     if not source.is_file():
         raise CoopsimError(f"{source}: file not found")

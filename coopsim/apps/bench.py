@@ -23,22 +23,29 @@ its load: compare within one report only.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import json
 import math
 import os
+import platform
 import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field, replace
+from importlib import metadata
 from pathlib import Path
 from typing import Callable
 
+import mujoco
 import numpy as np
 
-from coopsim.core.model import IntegratorSettings, Model
+from coopsim.compiled import api
 from coopsim.core.errors import CoopsimError
+from coopsim.core.model import IntegratorSettings, Model
+from coopsim.forward.simulate import simulate
+from coopsim.io.scenario import load_scenario, model_from_dict
 
 OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14
@@ -230,8 +237,6 @@ class Reference:
 def reference(model: Model) -> Reference:
     """Native DOP853 at REFERENCE_RTOL / REFERENCE_ATOL, and again CHECK_FACTOR looser, over
     model.duration on the OUTPUT_DT grid."""
-    from coopsim.forward.simulate import simulate
-
     tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL))
     check = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL * CHECK_FACTOR,
                                                        REFERENCE_ATOL * CHECK_FACTOR))
@@ -240,8 +245,6 @@ def reference(model: Model) -> Reference:
 
 def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], object]:
     """The compiled time loop alone (as `simulate` runs it) from the reference's consistent state."""
-    from coopsim.compiled import api
-
     m = replace(model, integrator=s)
     y0 = np.concatenate([ref.initial.q, ref.initial.qd])
     fixed = s.step if s.method == "rk4" else None
@@ -251,8 +254,6 @@ def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], objec
 
 def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> RunRow:
     """Time `simulate(model, settings=s)` and its time loop alone; error against ref (SimResult)."""
-    from coopsim.forward.simulate import simulate
-
     adaptive = s.method != "rk4"
     setting = f"rtol {s.rtol:.0e}, atol {s.atol:.0e}" if adaptive else f"step {s.step:g} s"
     label = f"{s.rtol:.0e}" if adaptive else f"{1e3 * s.step:g}ms"
@@ -283,16 +284,12 @@ class _MujocoWarnings:
     """Collect MuJoCo's warnings (instability resets) instead of letting it write MUJOCO_LOG.TXT."""
 
     def __enter__(self):
-        import mujoco
-
         self.messages: list[str] = []
         self._prev = mujoco.get_mju_user_warning()
         mujoco.set_mju_user_warning(self.messages.append)
         return self
 
     def __exit__(self, *exc):
-        import mujoco
-
         mujoco.set_mju_user_warning(self._prev)
         return False
 
@@ -372,8 +369,6 @@ def native_eval_us(model: Model, Y: np.ndarray, TAU: np.ndarray, repeats: int = 
     (S, 2n), TAU (S, n), one thread) and 'python' (api.forward, one call from Python at Y[0], loops
     of `calls`), each the minimum over at least `repeats` timings, more (up to 10) while under
     EVAL_BUDGET_S; 'bad_states': evaluations with a non-zero status."""
-    from coopsim.compiled import api
-
     n = model.n_total
     kw = dict(repeats=repeats, budget_s=EVAL_BUDGET_S, max_repeats=10)
     out, wall = best_time(lambda: api.evaluate_states(model, Y, TAU, n_threads=1), **kw)
@@ -546,8 +541,6 @@ def _synthetic_arm(m: int, r: int, n: int) -> dict:
 
 def synthetic_model(r: int, n: int) -> Model:
     """The frozen Model of `synthetic_scene(r, n)`."""
-    from coopsim.io.scenario import model_from_dict
-
     return model_from_dict(synthetic_scene(r, n), where=f"synthetic_{r}x{n}")
 
 
@@ -701,9 +694,6 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     Returns {'scenarios': [bench_scenario dicts], 'scaling': scaling_study, 'startup': dict or None,
     'commands': command_times or None,
     'settings': what was run, 'environment': versions and machine}."""
-    from coopsim.io.scenario import load_scenario
-    from coopsim.forward.simulate import simulate
-
     peers = peers or load_peers()
     models = [load_scenario(p) for p in scenarios]
     simulate(models[0], duration=OUTPUT_DT)  # warm-up: load (or compile) the kernels before timing
@@ -732,9 +722,6 @@ def environment() -> dict:
     """Python, numpy, numba, mujoco, pinocchio versions (None: absent), CPU count, platform, the
     1/5/15-minute load averages now (other work on the machine inflates wall times), and the
     code's `source_state`."""
-    import platform
-    from importlib import metadata
-
     def version(dist: str):
         try:
             return metadata.version(dist)
@@ -750,8 +737,6 @@ def source_state() -> dict:
     """'git_head' (None outside a git checkout) and 'sources_sha256': the first 12 hex digits of the
     SHA-256 of the package's Python sources (coopsim/**/*.py), so a report names the code it timed,
     uncommitted edits included."""
-    import hashlib
-
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for p in sorted(root.rglob("*.py")):

@@ -10,7 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
-from coopsim.apps.bench import ATOL_RATIO, EVAL_RATIO_SCENES, EVAL_RATIO_TARGET, OUTPUT_DT, REFERENCE_ATOL, REFERENCE_RTOL
+from coopsim.apps.bench import (
+    ATOL_RATIO,
+    EVAL_RATIO_SCENES,
+    EVAL_RATIO_TARGET,
+    OUTPUT_DT,
+    REFERENCE_ATOL,
+    REFERENCE_RTOL,
+)
+from coopsim.io.atomic import write_text_atomic
+from coopsim.io.mcap_codec import nonfinite_name
+from coopsim.plots.bench import scaling_figure, work_precision_figure
 
 CSV_FIELDS = ("scenario", "family", "method", "setting", "param", "wall_s", "loop_s", "max_error_rad",
               "final_violation", "evals", "weld_factor", "pareto", "note")
@@ -56,8 +66,6 @@ def scaling_csv_text(report: dict) -> str:
 def json_safe(obj):
     """A copy strict JSON can carry: non-finite floats become "NaN", "Infinity", "-Infinity" (as in
     coopsim.io.log), numpy scalars plain Python ones."""
-    from coopsim.io.mcap_codec import nonfinite_name
-
     if isinstance(obj, dict):
         return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -270,8 +278,6 @@ def markdown_report(report: dict) -> str:
 def write_outputs(report: dict, out: str | Path) -> list[Path]:
     """Write bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and
     scaling.png into `out`, each atomically; returns the paths."""
-    from coopsim.io.atomic import write_text_atomic
-    from coopsim.plots.bench import scaling_figure, work_precision_figure
 
     out = Path(out)
     paths = [write_text_atomic(out / "bench.json", json_text(report)),

@@ -38,11 +38,17 @@ from typing import Any
 
 import numpy as np
 
+from coopsim.control.controller import closed_loop
 from coopsim.core.errors import CoopsimError, ScenarioError
-from coopsim.io.overrides import apply_overrides, parse_path
+from coopsim.forward.simulate import simulate
+from coopsim.inverse.resolutions import METHODS
 from coopsim.io.fields import Section
-from coopsim.io.scenario import model_from_dict
+from coopsim.io.overrides import apply_overrides, parse_path
+from coopsim.io.scenario import model_from_dict, require_motor_limits
 from coopsim.io.yaml_rules import load_yaml
+from coopsim.report.inverse_report import add_checks, capacity_study, capacity_summary, inverse_summary, solve_study
+from coopsim.report.summary import simulation_summary
+from coopsim.twin.harness import cross_validate
 
 KINDS = ("simulate", "validate", "inverse", "capacity")
 DESIGNS = ("grid", "sobol", "halton")
@@ -247,8 +253,6 @@ def _study(sec: Section) -> Study:
                 sec.fail(key, f"expected true or false, got {v!r}")
             options[key] = v
     if kind == "inverse":
-        from coopsim.inverse.resolutions import METHODS
-
         methods = sec.raw("methods", list(METHODS))
         if not isinstance(methods, list) or not methods or any(m not in METHODS for m in methods):
             sec.fail("methods", f"expected a list of resolutions among {', '.join(METHODS)}, got {methods!r}")
@@ -274,8 +278,6 @@ def _patterns(sec: Section, key: str, default) -> list[str]:
 def _check_base(sweep: Sweep, root: Section) -> None:
     """The base scenario with the fixed overrides and each axis's first value must make a model (each
     point's own values are checked when it runs: a bad one is that row's error)."""
-    from coopsim.io.scenario import require_motor_limits
-
     try:
         apply_overrides(sweep.base, sweep.fixed, where=f"{sweep.scenario}: set:")
         for k, a in enumerate(sweep.axes):
@@ -296,24 +298,13 @@ def study_summary(model, study: Study) -> dict:
     files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
     without its trade-off curve, `capacity_summary`."""
     if study.kind == "simulate":
-        from coopsim.control.controller import closed_loop
-        from coopsim.forward.simulate import simulate
-        from coopsim.report.summary import simulation_summary
-
         return simulation_summary(simulate(closed_loop(model), duration=study.duration))
     if study.kind == "validate":
-        from coopsim.twin.harness import cross_validate
-
         return cross_validate(model, duration=study.duration).comparison.as_dict()
     if study.kind == "inverse":
-        from coopsim.report.inverse_report import add_checks, inverse_summary, solve_study
-
         s = solve_study(model, study.option("methods"), duration=study.duration,
                         bounds=(study.option("bound_force"), study.option("bound_moment")))
         return inverse_summary(add_checks(s, study.option("replay"), curve=False))
-    from coopsim.report.inverse_report import capacity_study, capacity_summary
-    from coopsim.io.scenario import require_motor_limits
-
     require_motor_limits(model, model.name)
     return capacity_summary(capacity_study(model, duration=study.duration, with_lp=study.option("lp"),
                                            optimise=study.option("optimise")))

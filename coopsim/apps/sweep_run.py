@@ -18,19 +18,29 @@ the point index in seconds, for Foxglove's Plot panel), and the figures of `coop
 
 from __future__ import annotations
 
+import csv
+import importlib.util
+import io
 import json
+import logging
 import math
 import os
+import sys
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from coopsim.apps.sweep import Sweep, evaluate_point, matcher, one_line
 from coopsim.core.errors import CoopsimError
 from coopsim.core.labels import field_name
-from coopsim.apps.sweep import Sweep, evaluate_point, matcher, one_line
+from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
+from coopsim.io.mcap_codec import JsonTopic, nonfinite_name, stamp, time_ns, write_mcap
+from coopsim.plots.sweep import sweep_figures
+from coopsim.report.inverse_report import json_safe
 
 CHECKPOINT = "points.jsonl"
 # Dask's housekeeping on the embedded cluster, made sparse for points that take about a second: no
@@ -91,8 +101,6 @@ class Checkpoint:
     def __init__(self, path: Path, sweep: Sweep, resume: bool):
         path.parent.mkdir(parents=True, exist_ok=True)
         if not resume or not path.is_file():
-            from coopsim.io.atomic import write_text_atomic
-
             write_text_atomic(path, json.dumps({"sweep": sweep.digest, "points": len(sweep.points),
                                                 "name": sweep.name}) + "\n")
         else:
@@ -129,8 +137,6 @@ def _end_line(path: Path) -> None:
 def require_packages(dask: bool) -> None:
     """CoopsimError naming what to install when pyarrow (the results table) or, for `dask`, Dask's
     distributed scheduler is missing (the `sweep` extra)."""
-    import importlib.util
-
     missing = [m for m in ("pyarrow",) + (("distributed",) if dask else ()) if importlib.util.find_spec(m) is None]
     if missing:
         raise CoopsimError(f"coopsim sweep needs {' and '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} "
@@ -186,7 +192,6 @@ def _dask_rows(sweep: Sweep, todo: list[int], scheduler: str | None, workers: in
     if scheduler:
         yield from _on_cluster(sweep, todo, scheduler, None)
         return
-    import sys
 
     import dask
     import distributed  # noqa: F401 — its config defaults, before they are set in a context below
@@ -202,9 +207,6 @@ def _dask_rows(sweep: Sweep, todo: list[int], scheduler: str | None, workers: in
 def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: int | None) -> Iterator[dict]:
     """Rows of the points `todo` from the cluster at `scheduler`, or from a LocalCluster of `workers`
     processes × 1 thread started (and closed) here."""
-    import logging
-    import warnings
-
     from dask.distributed import Client, LocalCluster, as_completed
 
     if not todo:
@@ -272,9 +274,6 @@ def table(rows: list[dict]):
 
 def _csv_text(rows: list[dict]) -> str:
     """The rows as CSV: header, then one line per point; floats exact (repr), missing values empty."""
-    import csv
-    import io
-
     names = columns_of(rows)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -318,16 +317,12 @@ def summary(sweep: Sweep, run: SweepRun, files: list[str]) -> dict:
 
 
 def _json_value(v: Any) -> Any:
-    from coopsim.io.mcap_codec import nonfinite_name
-
     return nonfinite_name(v) if isinstance(v, float) and not math.isfinite(v) else v
 
 
 def point_log(sweep: Sweep, rows: list[dict]):
     """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
     (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
-    from coopsim.io.mcap_codec import JsonTopic, stamp, time_ns
-
     names = columns_of(rows)
     fields = {c: field_name(c) for c in names}
     t = np.array([float(r["point"]) for r in rows])
@@ -345,11 +340,6 @@ def point_log(sweep: Sweep, rows: list[dict]):
 def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = True) -> list[Path]:
     """Write the sweep's outputs into folder `out` as one set (module docstring); returns their paths."""
     import pyarrow.parquet as pq
-
-    from coopsim.io.atomic import previous_set, staged_folder
-    from coopsim.report.inverse_report import json_safe
-    from coopsim.io.mcap_codec import write_mcap
-    from coopsim.plots.sweep import sweep_figures
 
     out = Path(out)
     with staged_folder(out, replaces=previous_set(INDEX)) as stage:

@@ -32,6 +32,18 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from numba import types
+
+from coopsim.compiled import api, chain
+from coopsim.compiled.api import compile_pending, compiled, is_cached
+from coopsim.compiled.capacity import min_energy_mass_interval
+from coopsim.compiled.chain import chain_forward
+from coopsim.compiled.manifold import project_state
+from coopsim.compiled.structs import PACKED_T, WORKSPACE_T, _new_workspace
+from coopsim.control.controller import Controller
+from coopsim.core.model import ControlSettings
+from coopsim.io.scenario import model_from_dict
+
 
 def _box(length: float) -> dict:
     return {"joint": {"axis": [0, 0, 1]}, "box": {"length": length, "cross_section": [0.04, 0.04], "density": 7850}}
@@ -57,8 +69,6 @@ WAIT_S = 120.0      # the longest wait for a kernel another process compiles
 
 
 def _model():
-    from coopsim.io.scenario import model_from_dict
-
     return model_from_dict(SCENE, where="warm-up scene")
 
 
@@ -69,9 +79,6 @@ def _state(model):
 def _signatures() -> dict:
     """The kernels compiled by signature, as `chain_forward` calls them: the records' types, int64 arm
     indices and contiguous float64 vectors (a test checks that no caller compiles another one)."""
-    from numba import types
-
-    from coopsim.compiled import chain
 
     vec, i = types.float64[::1], types.int64
     return {chain.arm_kinematics: (i, vec), chain.arm_jacobian: (i,), chain.arm_bias: (i, vec),
@@ -87,7 +94,6 @@ def _named(names) -> dict:
 
 def compile_kernels(names) -> None:
     """The named kernels of `_signatures` (P, W first), from their types alone: no record needed."""
-    from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 
     for kernel, rest in _named(names).items():
         kernel.compile((PACKED_T, WORKSPACE_T, *rest))
@@ -102,21 +108,18 @@ CHILD_KERNELS = ("chain_solve", "arm_mass_matrix", "constraint_bias")
 
 def compile_loop(model) -> None:
     """The time loop, through a short integration of the model."""
-    from coopsim.compiled import api
 
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
 
 
 def compile_consistent(model) -> None:
     """The consistent projection."""
-    from coopsim.compiled import api
 
     api.consistent_state(model, model.q0, model.qd0)
 
 
 def compile_inverse_terms(model) -> None:
     """The inverse-dynamics terms."""
-    from coopsim.compiled import api
 
     y = _state(model)[None]
     n = model.n_total
@@ -125,8 +128,6 @@ def compile_inverse_terms(model) -> None:
 
 def compile_extras(model) -> None:
     """The entries some commands use: inverse kinematics and the capacity objective."""
-    from coopsim.compiled import api
-    from coopsim.compiled.capacity import min_energy_mass_interval
 
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
     z = np.zeros((1, 1, 1))
@@ -136,16 +137,12 @@ def compile_extras(model) -> None:
 
 def compile_evaluations(model) -> None:
     """The evaluation entry (every reported quantity)."""
-    from coopsim.compiled import api
 
     api.evaluate_states(model, _state(model)[None], np.zeros((1, model.n_total)), full=True, n_threads=1)
 
 
 def compile_control(model) -> None:
     """The controller entries and the time loop with a controller in it."""
-    from coopsim.control.controller import Controller
-    from coopsim.core.model import ControlSettings
-    from coopsim.compiled import api
 
     n = model.n_total
     y = _state(model)
@@ -158,7 +155,6 @@ def compile_control(model) -> None:
 def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
     """Until `kernel` is cached (`api.is_cached`), at most WAIT_S, and while `child` (the process
     compiling it) runs."""
-    from coopsim.compiled.api import is_cached
 
     deadline = time.monotonic() + WAIT_S
     while not is_cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
@@ -167,9 +163,6 @@ def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
 
 def chain_free_child(model) -> None:
     """The "chain_free" child's share (module docstring)."""
-    from coopsim.compiled.chain import chain_forward
-    from coopsim.compiled.manifold import project_state
-    from coopsim.compiled.structs import _new_workspace
 
     compile_kernels(CHILD_KERNELS)
     wait_for(_new_workspace)
@@ -182,7 +175,6 @@ def chain_free_child(model) -> None:
 
 def control_child(model) -> None:
     """The "control" child's share (module docstring)."""
-    from coopsim.compiled.chain import chain_forward
 
     wait_for(chain_forward)
     compile_extras(model)
@@ -195,7 +187,6 @@ CHILDREN = {"chain_free": chain_free_child, "control": control_child}
 def warm_up(control: bool = False) -> None:
     """Compile what every command uses, on two processes, and with `control` the extras and the
     controllers too, on a third (a no-op for what is cached already)."""
-    from coopsim.compiled.api import compile_pending, compiled
 
     if not compile_pending():
         if control:
@@ -229,7 +220,6 @@ GROUPS = {"extras": compile_extras, "control": compile_control}
 def warm_up_group(group: str) -> None:
     """Compile a compile group (`api._group_entries`): "base" by `warm_up`; "extras" or "control" in
     this process (a no-op when cached), what every command uses first if needed."""
-    from coopsim.compiled.api import compile_pending
 
     if group == "base":
         warm_up()

@@ -24,6 +24,7 @@ from numba.core.datamodel import default_manager, models
 from numba.core.extending import infer_getattr, intrinsic, lower_getattr_generic, lower_setattr_generic
 from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
+from numba.experimental.jitclass.base import imp_dtor
 from numba.np.arrayobj import make_array
 
 _F, _I = types.float64, types.int64
@@ -242,8 +243,6 @@ def from_record(typingctx, struct_type, record):
         return None
 
     def codegen(context, builder, sig, args):
-        from numba.experimental.jitclass.base import imp_dtor
-
         alloc_type = context.data_model_manager[inst_type.get_data_type()].get_value_type()
         size = context.get_constant(types.uintp, context.get_abi_sizeof(alloc_type))
         meminfo = context.nrt.meminfo_alloc_dtor(builder, size, imp_dtor(context, builder.module, inst_type))

@@ -29,19 +29,32 @@ The MuJoCo twin calls the controller through its control callback at every RK4 s
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, fields, replace
 from functools import cached_property
 
 import numpy as np
 
+from coopsim.control.laws import (
+    grasp_errors,
+    grasp_torques,
+    joint_accelerations,
+    object_acceleration,
+    pd_torque,
+    pose_error,
+    saturate,
+    squeeze_wrenches,
+)
+from coopsim.core.errors import ConstraintError, CoopsimError
 from coopsim.core.model import Model, TorqueFeedback, torque_at
-from coopsim.core.errors import CoopsimError
-from coopsim.control.laws import (grasp_errors, grasp_torques, joint_accelerations, object_acceleration, pd_torque,
-                                  pose_error, saturate, squeeze_wrenches)
+from coopsim.core.spatial import rot_log
+from coopsim.forward.diagnostics import describe_state, run_warning
+from coopsim.inverse.problem import SampleFailureWarning, inverse_problem, torques_of
+from coopsim.inverse.solve import distribute, resolution_for
+from coopsim.inverse.trajectory import JointTrajectory, object_motion_at, object_motion_trajectory, trajectory_at
 
-# The inverse side and the compiled engine's modules are imported in the methods that use them: every run
-# imports this module for `closed_loop`, most runs have no controller, and loading them here would add
-# to every command's start.
+# The compiled engine's modules are imported in the methods that use them (tests/cross/test_architecture.py,
+# DEFERRED): load_scenario imports this module for the control vocabulary, and most runs have no controller.
 
 
 LAWS = ("joint_pd", "computed_torque")
@@ -100,8 +113,6 @@ class Controller:
     def resolution(self):
         """The distribution's resolution (`coopsim.inverse.solve.resolution_for`); 'bounded' with the bounds of
         inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
-        from coopsim.inverse.solve import resolution_for
-
         inv = self.plant.inverse
         bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
         return resolution_for(self.plant, self.settings.distribution, force_bound=bounds[0], moment_bound=bounds[1])
@@ -115,12 +126,6 @@ class Controller:
     def _distribute(self, prob, t: float):
         """Grasp wrenches f (1, rk) of the resolution at one state (`inverse_dynamics`); where 'bounded' has
         no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
-        import warnings
-
-        from coopsim.forward.diagnostics import describe_state
-        from coopsim.inverse.solve import distribute, resolution_for
-        from coopsim.inverse.problem import SampleFailureWarning
-
         failures: list = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SampleFailureWarning)     # reported as a RunWarning instead
@@ -139,7 +144,6 @@ class Controller:
         """The set-point on the loop-closure manifold: control.setpoint (default the scenario's initial
         angles) projected as the initial state is; ControlError when that moves it by more than
         integrator.max_initial_correction."""
-        from coopsim.core.errors import ConstraintError
         from coopsim.compiled.api import consistent_state
 
         s = self.settings
@@ -156,15 +160,12 @@ class Controller:
 
     @cached_property
     def trajectory(self):
-        from coopsim.inverse.trajectory import object_motion_trajectory
-
         return object_motion_trajectory(self.model, self.model.inverse.object_motion)
 
     def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(θ_r, θ̇_r) (n,) of joint_pd at time t."""
         if self.settings.reference == "setpoint":
             return self.setpoint, np.zeros_like(self.setpoint)
-        from coopsim.inverse.trajectory import trajectory_at
 
         q, qd, _ = trajectory_at(self.trajectory, self.trajectory.t[0] + t)
         return q, qd
@@ -173,9 +174,6 @@ class Controller:
         """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
         messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
         the null space of the grasp matrix."""
-        from coopsim.inverse.problem import inverse_problem, torques_of
-        from coopsim.inverse.trajectory import JointTrajectory
-
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
         f = self._distribute(prob, t)
@@ -221,8 +219,6 @@ class Controller:
         return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
 
     def _computed_torque(self, t, q, qd):
-        from coopsim.inverse.trajectory import object_motion_at
-
         s, m = self.settings, self.plant
         state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
         W = self._kernel[2]                      # J, J̇θ̇ of every arm at (q, qd), from that evaluation
@@ -314,8 +310,6 @@ class Controller:
     def run_warnings(self) -> list:
         """A `distribution_fallback` RunWarning when the controller fell back from 'bounded' (at its
         first evaluation that did, with their count), else none."""
-        from coopsim.forward.diagnostics import run_warning
-
         if not self.fallbacks:
             return []
         t, q, reason = self.fallbacks[0]
@@ -366,8 +360,6 @@ def _packed_motion(motion) -> dict:
     """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
     and R_a φ of `coopsim.inverse.trajectory.object_motion_at`)."""
     from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
-    from coopsim.core.spatial import rot_log
-
     R = motion.rotations
     phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])
     angle = np.linalg.norm(phi, axis=1)

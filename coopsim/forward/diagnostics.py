@@ -33,7 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.core.labels import arm_label
+from coopsim.core.joints import COORDINATE, joint_units
+from coopsim.core.labels import arm_label, joint_labels
 from coopsim.core.model import Model, TorqueFunction, applied_torque
 
 STEP_CHECK_SAMPLES = 64   # states at which a fixed rk4 step is checked by step doubling
@@ -196,9 +197,6 @@ def initial_correction(model: Model, init) -> list[RunWarning]:
     worst = float(abs(init.dq[j]))
     if worst <= s.initial_correction_warning:
         return []
-    from coopsim.core.joints import COORDINATE, joint_units
-    from coopsim.core.labels import joint_labels
-
     return [run_warning(
         "initial_correction", 0.0, model.q0,
         f"arms[].initial is off the loop closure by {init.residual_before:.3g} (m or rad): closing it moved "
@@ -220,8 +218,6 @@ def joint_limit_violation(model: Model, q: np.ndarray) -> tuple[int, int] | None
 
 def joint_limit_reason(model: Model, j: int, value: float) -> str:
     """'arm 1 (left) joint 4 at -3.1 rad is outside its range [-3.07, -0.07] rad' (stacked joint j)."""
-    from coopsim.core.labels import joint_labels
-
     lo, hi = model.joint_range[j]
     return (f"{joint_labels(model)[j]} at {value:.6g} rad is outside its range "
             f"[{lo:.6g}, {hi:.6g}] rad")

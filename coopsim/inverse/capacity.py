@@ -27,12 +27,19 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from coopsim.inverse.solve import distribute, energy, nan_peak, resolve
-from coopsim.inverse.problem import InverseProblem, Resolution, torques_of
-from coopsim.inverse.distributions import MinEnergySetup, grasp_line_frames, internal_bound_components, internal_operator, min_energy_setup, min_energy_solve
 from coopsim.core.model import Model, Motors, torque_limits
+from coopsim.inverse.distributions import (
+    MinEnergySetup,
+    grasp_line_frames,
+    internal_bound_components,
+    internal_operator,
+    min_energy_setup,
+    min_energy_solve,
+)
+from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem, torques_of
 from coopsim.inverse.qp import LPBatch, QPError, solve_lps
 from coopsim.inverse.resolutions import LINEAR_METHODS, resolution_method
+from coopsim.inverse.solve import distribute, energy, nan_peak, resolve
 
 MODES = ("scaled", "payload")
 
@@ -338,8 +345,6 @@ def brute_force_check(model: Model, traj, res: Resolution, mode: str, capacity: 
     carrying a payload of) capacity·(1 ∓ rel), rerun the inverse dynamics from scratch with the same
     resolution, and measure the largest excess of a torque over its motor line (N·m; < 0: within).
     Returns {below_excess, above_excess, above_joint, above_time, ok} (ok: below < 0 < above)."""
-    from coopsim.inverse.problem import inverse_problem
-
     lo, hi = torque_limits(model.motors, traj.qd)
     out = {}
     for key, factor in (("below", 1 - rel), ("above", 1 + rel)):

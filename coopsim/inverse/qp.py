@@ -33,9 +33,13 @@ positive *semi*definite Hessian, here H = RᵀR), then polished to the exact min
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
 import threading
 from typing import NamedTuple
 
+import highspy
 import numpy as np
 
 from coopsim.core.errors import CoopsimError
@@ -373,11 +377,6 @@ def _highs():
     standard output (it would corrupt `--json` output): that is sent to the null device."""
     global _HIGHS
     if _HIGHS is None:
-        import os
-        import sys
-
-        import highspy
-
         try:
             sys.stdout.flush()
             saved = os.dup(1)
@@ -402,8 +401,6 @@ def _highs():
 
 def _flush_c_stdout() -> None:
     try:
-        import ctypes
-
         ctypes.CDLL(None).fflush(None)
     except (OSError, AttributeError, TypeError):
         pass

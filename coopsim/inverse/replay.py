@@ -8,11 +8,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from coopsim.core.results import output_times
 from coopsim.core.model import Model, TorqueFunction, TorqueTable
-from coopsim.inverse.trajectory import JointTrajectory, trajectory_at_times
+from coopsim.core.results import output_times
+from coopsim.forward.simulate import simulate
 from coopsim.inverse.problem import InverseError, Resolution, SampleFailure, inverse_problem, torques_of
 from coopsim.inverse.solve import distribute
+from coopsim.inverse.trajectory import JointTrajectory, trajectory_at_times
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,8 +54,6 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     evaluated beforehand (in one batch) at exactly its stage times and tabulated there, so the compiled
     time loop meets every stage on a knot of the table."""
     from coopsim.compiled.integrate import stage_times, tableau
-    from coopsim.forward.simulate import simulate
-
     tr = traj.t - traj.t[0]
     dt = float(tr[1])
     t_out = output_times(float(tr[-1]), dt)

@@ -22,12 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.core.errors import ConstraintError, CoopsimError
-from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
-from coopsim.core.results import output_times
 from coopsim.core.model import ArmModel, Model, ObjectMotion
+from coopsim.core.results import output_times
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
+from coopsim.dynamics.closed_chain import arm_poses, carrier_object
+from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
+from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
 
 
 class TrajectoryError(CoopsimError):
@@ -251,8 +252,6 @@ def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
 
 
 def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
-    from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
-
     hit = joint_limit_violation(model, q)
     if hit is not None:
         i, j = hit
@@ -419,7 +418,5 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
 
 def object_pose_of(model: Model, q: np.ndarray):
     """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q."""
-    from coopsim.dynamics.closed_chain import carrier_object
-
     obj = carrier_object(model, arm_poses(model, q))
     return obj.p_C, obj.R_o

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
+import json
 import os
 import re
 import shutil
@@ -130,8 +131,6 @@ def _keep_others(old: Path, new: Path, replaced: set[str]) -> None:
 def previous_set(index: str):
     """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
     list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
-    import json
-
     def names(out) -> set[str]:
         try:
             files = json.loads((Path(out) / index).read_text(encoding="utf-8"))["files"]

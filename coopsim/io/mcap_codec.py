@@ -28,17 +28,21 @@ order of the streams given, so the same input gives a byte-identical file.
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from mcap.records import Channel, DataEnd, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
-from coopsim.io.atomic import atomic_path
 from coopsim.core.errors import CoopsimError
+from coopsim.io.atomic import atomic_path
 
 # The log format's own names (written into every log, and SERIES_COMMENT read back to find a series):
 # identifiers of the format, not module paths, so they stay as the first logs wrote them.
@@ -372,12 +376,6 @@ _MAGIC = b"\x89MCAP0\r\n"
 
 def _parse_log(data: bytes) -> LogData:
     """`read_mcap` on the file's bytes; any exception means a broken file."""
-    import io
-    import zlib
-
-    from mcap.records import Channel, DataEnd, Footer, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
-
     if len(data) < 2 * len(_MAGIC) or data[:len(_MAGIC)] != _MAGIC or data[-len(_MAGIC):] != _MAGIC:
         raise LogError("no MCAP magic at its start and end: not an MCAP file, or cut short")
     # first pass, chunks left compressed: structure, the data section's CRC, the summary's, the end

@@ -41,13 +41,14 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
+from importlib import metadata
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel
 from coopsim.core.errors import CoopsimError
+from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel
 from coopsim.core.spatial import quat_to_rot
 
 MAX_ROBOT_FILE_BYTES = 64 << 20
@@ -95,8 +96,6 @@ ROBOTS: dict[str, Robot] = {
 
 def robots_folder() -> Path | None:
     """example-robot-data's `robots/` folder (its URDFs), or None when the package is not installed."""
-    from importlib import metadata
-
     try:
         dist = metadata.distribution(ROBOTS_PACKAGE)
     except metadata.PackageNotFoundError:

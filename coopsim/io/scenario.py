@@ -24,14 +24,31 @@ from pathlib import Path
 
 import numpy as np
 
+from coopsim.control.controller import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
 from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
-from coopsim.core.model import JOINT_TYPES, PRISMATIC, REVOLUTE, ArmModel, ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings, ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds
+from coopsim.core.model import (
+    JOINT_TYPES,
+    PRISMATIC,
+    REVOLUTE,
+    ArmModel,
+    ControlSettings,
+    IntegratorSettings,
+    InverseSettings,
+    Model,
+    Motors,
+    MujocoSettings,
+    ObjectModel,
+    ObjectMotion,
+    TorqueTable,
+    ValidationThresholds,
+)
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
-from coopsim.io.yaml_rules import read_text, load_yaml
 from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
+from coopsim.inverse.resolutions import METHODS
 from coopsim.io.fields import MAX_MAGNITUDE, REQUIRED, Section, show_value
-
+from coopsim.io.overrides import apply_overrides
+from coopsim.io.yaml_rules import load_yaml, read_text
 
 MAX_OUTPUT_SAMPLES = 200_000    # duration / integrator.output_dt (and an object motion's samples)
 
@@ -461,9 +478,6 @@ def _control(sec: Section | None, n: int, inverse: InverseSettings, passive: np.
     """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
     if sec is None:
         return None
-    from coopsim.control.controller import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
-    from coopsim.inverse.resolutions import METHODS
-
     law = sec.string("law", LAWS)
     if np.any(passive):
         sec.fail("law", "a controller needs every joint actuated (arms[].passive has a passive joint)")
@@ -594,8 +608,6 @@ def load_scenario(path: str | Path, duration: float | None = None, overrides=())
         raise ScenarioError(f"{path}: scenario file not found")
     data = load_yaml(path)
     if overrides:
-        from coopsim.io.overrides import apply_overrides
-
         data = apply_overrides(data, overrides, where=f"{path}: --set")
     return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem, duration=duration)
 

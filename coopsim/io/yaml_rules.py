@@ -10,9 +10,16 @@ import codecs
 from pathlib import Path
 
 import yaml
+from yaml.events import (
+    AliasEvent,
+    CollectionEndEvent,
+    MappingStartEvent,
+    ScalarEvent,
+    SequenceStartEvent,
+    StreamEndEvent,
+)
 
 from coopsim.core.errors import ScenarioError
-
 
 MAX_FILE_BYTES = 64 << 20       # a scenario or a torque CSV
 MAX_DEPTH = 32                  # YAML nesting (the bundled scenarios use 8)
@@ -90,9 +97,6 @@ class _Open:
 
 def _check_events(text: str, fail) -> None:
     """Depth, expanded size and duplicate keys of a YAML document, from its parse events."""
-    from yaml.events import (AliasEvent, CollectionEndEvent, MappingStartEvent, ScalarEvent, SequenceStartEvent,
-                             StreamEndEvent)
-
     loader = _YAML_LOADER(text)
     try:
         stack: list[_Open] = []

@@ -13,6 +13,7 @@ import numpy as np
 
 from coopsim.core.labels import arm_label, metadata_arms
 from coopsim.io.mcap_codec import LogData
+from coopsim.plots.render import MARGIN
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -41,8 +42,6 @@ def panel_grid(fig: Figure, rows: int, cols: int, size: tuple[float, float], leg
     last column; `legend` 0: none): an empty grid column, so the panels, the legends and the next
     column's labels never meet. Sets the figure size for `coopsim.plots.render.fixed_layout`'s margins and
     gaps (`suptitle`: the figure will have one)."""
-    from coopsim.plots.render import MARGIN
-
     after = set(range(cols)[-1:] if legend_after is None else legend_after) if legend > 0 else set()
     spare = max(legend + LEGEND_GAP - MARGIN["wgap"], 0.05)   # the legend starts inside the gap before its column
     widths, index = [], []

@@ -11,6 +11,7 @@ so builders are module-level functions. This module does not import matplotlib i
 
 from __future__ import annotations
 
+import io
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
@@ -67,8 +68,6 @@ def save_figure(fig: Figure, path: Path) -> Path:
 def _warm_up() -> None:
     """Worker initializer: lower the priority, import matplotlib and draw a small figure with a log
     axis and a legend into memory (what a worker would otherwise do on its first job)."""
-    import io
-
     os.nice(WORKER_NICENESS)
     from matplotlib.figure import Figure
 

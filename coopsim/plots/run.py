@@ -21,9 +21,20 @@ import numpy as np
 
 from coopsim.core.joints import COORDINATE, RATE, units_of
 from coopsim.core.labels import metadata_joint_labels, metadata_joint_types
+from coopsim.core.spatial import orientation_error, quat_to_rot, rotation_from
 from coopsim.io.mcap_codec import LogData
-from coopsim.plots.figure import (NATIVE, TWIN, arm_groups, finish_log_axis, legend_beside, legend_width,
-                                  log_plot, panel_grid, run_title)
+from coopsim.plots.control import control_jobs
+from coopsim.plots.figure import (
+    NATIVE,
+    TWIN,
+    arm_groups,
+    finish_log_axis,
+    legend_beside,
+    legend_width,
+    log_plot,
+    panel_grid,
+    run_title,
+)
 from coopsim.plots.render import FigureWorkers, render_figures
 
 if TYPE_CHECKING:
@@ -140,7 +151,6 @@ def _object_figure(log: LogData) -> Figure:
     and its centre-of-mass velocity; one legend beside the last column."""
     from matplotlib.figure import Figure
 
-    from coopsim.core.spatial import orientation_error, quat_to_rot, rotation_from
 
     nat = log.topics[NATIVE + "/object"]
     t = nat["t"]
@@ -189,8 +199,6 @@ def _constraint_figure(log: LogData) -> Figure:
 def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[tuple]:
     """The figures of `comparison_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE); a closed
     loop's log adds `coopsim.plots.control`'s tracking_error.png and internal_force.png."""
-    from coopsim.plots.control import control_jobs
-
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
     jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)), (_joint_figure, (log, "rate", "rate", RATE, labels)),

@@ -14,18 +14,20 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim.inverse import capacity as cap
-from coopsim.inverse.solve import default_bounds, energy, nan_peak, resolution_for, resolve, result_of
-from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem
-from coopsim.inverse.distributions import distribution_of_torques, grasp_line_frames, virtual_masses
-from coopsim.inverse.replay import replay
+from coopsim.control.controller import closed_loop
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
-from coopsim.io.mcap_codec import Series, nonfinite_name
 from coopsim.core.model import Model, torque_limits
+from coopsim.forward.simulate import simulate
+from coopsim.inverse import capacity as cap
+from coopsim.inverse.distributions import distribution_of_torques, grasp_line_frames, virtual_masses
+from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem
+from coopsim.inverse.replay import replay
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
+from coopsim.inverse.solve import default_bounds, energy, nan_peak, resolution_for, resolve, result_of
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
 from coopsim.inverse.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
+from coopsim.io.mcap_codec import Series, nonfinite_name
 
 DEFINITIONS = ("paper", "nonsqueezing")
 Progress = Callable[[str, float], None]   # progress(stage, fraction done), e.g. a `coopsim.apps.progress.ProgressBar`
@@ -45,9 +47,6 @@ def trajectory_of(model: Model, duration: float | None = None, progress: Progres
         traj = object_motion_trajectory(model, model.inverse.object_motion)
         _report(progress, "ik", 1.0)
         return traj, None
-    from coopsim.control.controller import closed_loop
-    from coopsim.forward.simulate import simulate
-
     res = simulate(closed_loop(model), duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res
 

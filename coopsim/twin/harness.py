@@ -10,10 +10,12 @@ from typing import Callable
 
 import numpy as np
 
-from coopsim.twin.compare import Comparison, compare
+from coopsim.control.controller import closed_loop, record
 from coopsim.core.model import Model, TorqueTable, ValidationThresholds, loop_controller
-from coopsim.twin.mujoco_run import TwinResult, run_twin
 from coopsim.forward.simulate import SimResult, simulate
+from coopsim.io.log import control_series as series
+from coopsim.twin.compare import Comparison, compare
+from coopsim.twin.mujoco_run import TwinResult, run_twin
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,7 +51,6 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
     """
     if duration is not None:
         model = replace(model, duration=duration)
-    from coopsim.control.controller import closed_loop
 
     native = simulate(closed_loop(model), progress=None if progress is None else lambda f: progress("native", f))
     twin = run_twin(twin_model or model, native.initial.q, native.initial.qd, native.t,
@@ -70,8 +71,6 @@ def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:
 
 def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> tuple | None:
     """The controllers of both runs evaluated at their samples (None without a controller)."""
-    from coopsim.control.controller import closed_loop, record
-
     ctrl = loop_controller(native.model)
     if ctrl is None:
         return None
@@ -82,8 +81,6 @@ def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> 
 def control_series(cv: CrossValidation) -> list:
     """The log channels of the controllers (`coopsim.io.log.control_series`): /native/control and
     /mujoco/control; none without a controller."""
-    from coopsim.io.log import control_series as series
-
     if cv.control is None:
         return []
     law = cv.native.model.control.law

@@ -19,12 +19,13 @@ model at `qpos0` (all angles zero: the loop open), so a run from the file starts
 from __future__ import annotations
 
 import mujoco
+import mujoco.viewer
 import numpy as np
 
 from coopsim.control.controller import closed_loop
 from coopsim.core.model import PRISMATIC, ArmModel, Model, MujocoSettings, applied_torque
 from coopsim.core.spatial import axis_angle_to_rot, rot_to_quat
-
+from coopsim.forward.simulate import initial_state
 
 _INTEGRATORS = {"RK4": mujoco.mjtIntegrator.mjINT_RK4, "Euler": mujoco.mjtIntegrator.mjINT_EULER,
                 "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
@@ -228,8 +229,6 @@ def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
 def mjcf_spec(model: Model) -> mujoco.MjSpec:
     """The spec of a file in `models/`: the twin, its keyframe at the consistent initial state of
     `coopsim run` (`simulate.initial_state`) and the scene (light, floor, camera), saved as written."""
-    from coopsim.forward.simulate import initial_state
-
     init = initial_state(model)
     spec = build_spec(model, initial=(init.q, init.qd), scene=True)
     spec.compiler.degree = False
@@ -249,8 +248,6 @@ def mjcf_text(model: Model, source: str) -> str:
 
 def launch_viewer(path: str) -> None:
     """MuJoCo's interactive viewer on an MJCF file, started (and reloaded) at its first keyframe."""
-    import mujoco.viewer
-
     def load():
         m = mujoco.MjModel.from_xml_path(str(path))
         d = mujoco.MjData(m)

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
-from coopsim.core.model import Model, TorqueFunction, applied_torque, torque_at
+from coopsim.control.controller import Controller, closed_loop
 from coopsim.core.errors import CoopsimError
+from coopsim.core.model import Model, TorqueFunction, applied_torque, torque_at
 from coopsim.core.results import SampledMotion
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,7 +44,6 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         yield
         return
 
-    from coopsim.control.controller import Controller
 
     ctrl = getattr(model.torques, "fn", None)
     if isinstance(ctrl, Controller):             # compiled where it can be (`Controller.fastest`)
@@ -74,8 +74,6 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
     model.mujoco.timestep); `progress(fraction)` is called after each sample. A `control:` section runs
     its controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4 stage."""
-    from coopsim.control.controller import closed_loop
-
     model = closed_loop(model)
     m = build_spec(model).compile()
     d = mujoco.MjData(m)

@@ -13,11 +13,16 @@ Layers, bottom up; a module imports from its own layer and the ones below only:
 and within them: the two engines never import each other; the forward pipeline imports neither the
 inverse side nor the controllers (it takes a torque source; callers build controllers first).
 Every import counts, a function's own included.
+
+Imports stand at the top of their module. A function imports for itself only what DEFERRED names, each
+for its reason, and only where the module does not load it anyway; the CLI's commands each import what
+they run (command dispatch: `coopsim --help` and a command's start load nothing another one needs).
 """
 
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -30,6 +35,25 @@ LAYERS = [("core",), ("dynamics", "compiled"), ("forward", "inverse", "control")
 NEVER = [("dynamics", "compiled", "the engines are siblings"), ("compiled", "dynamics", "the engines are siblings"),
          ("forward", "control", "simulate takes a torque source; controllers live above it"),
          ("forward", "inverse", "the inverse side replays through the forward pipeline, not the other way")]
+
+# what a function may import for itself: module prefix → why it is loaded on first use
+DEFERRED = {
+    "coopsim.compiled": "the compiled engine (numba) loads where an engine runs: load_scenario, `coopsim plot` "
+                        "and `coopsim animate LOG` never need it",
+    "scipy": "each SciPy solver loads on the path that solves with it; every run imports the inverse side",
+    "matplotlib": "figures are drawn in the figure workers (plots.render): the process that lays out the "
+                  "jobs never loads matplotlib",
+    "coopsim.inverse.distributions": "the CLI builds its argument parser from the resolutions' registry: "
+                                     "`coopsim --help` starts without NumPy",
+    "coopsim.io.robots": "robot files are read with MuJoCo, only for scenarios that name a robot:",
+    "mujoco.rendering": "OpenGL, present only where frames are rendered",
+    "glfw": "a window system, present only where a window opens",
+    "dask": "optional (coopsim[sweep])",
+    "distributed": "optional (coopsim[sweep])",
+    "pyarrow": "optional (coopsim[sweep])",
+    "pinocchio": "optional (pin, coopsim[bench])",
+}
+DISPATCH = "coopsim.cli"
 
 
 def modules() -> dict[str, Path]:
@@ -63,6 +87,113 @@ def imports(name: str, path: Path, known: dict) -> list[tuple[str, int]]:
             if target and target != "coopsim" and target != name:
                 out.append((target, node.lineno))
     return out
+
+
+def import_sites(name: str, path: Path, known: dict) -> list[tuple[str, int, bool]]:
+    """(module imported, line, inside a function) for every import in `path`, the package's and
+    others' (dotted names as written; a package module's `from pkg import sub` names the submodule)."""
+    tree = ast.parse(path.read_text(), str(path))
+    local = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+             for n in ast.walk(f)}
+    guarded = {id(n) for node in tree.body if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+               for n in ast.walk(node)}
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in guarded:
+            continue
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(up + ([base] if base else []))
+            targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in known else base for alias in node.names]
+        else:
+            continue
+        out += [(t, node.lineno, id(node) in local) for t in targets]
+    return out
+
+
+def _package_module(target: str, known: dict) -> str | None:
+    while target and target not in known:
+        target = target.rpartition(".")[0]
+    return target or None
+
+
+def loaded_on_import(name: str, sites: dict, known: dict) -> set[str]:
+    """Every module name (the package's and others') that importing `name` loads: its top-level imports,
+    its parent packages', and theirs, transitively."""
+    seen, todo = set(), [name]
+    while todo:
+        m = todo.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        parts = m.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts)) if ".".join(parts[:i]) in known]
+        for target, _, local in sites.get(m, ()):
+            if not local:
+                seen.add(target)
+                inner = _package_module(target, known)
+                if inner:
+                    todo.append(inner)
+    return seen
+
+
+def deferred_reason(target: str) -> str | None:
+    return next((why for prefix, why in DEFERRED.items() if target == prefix or target.startswith(prefix + ".")),
+                None)
+
+
+def deferred_family(target: str) -> str:
+    """What loading `target` brings with it: its DEFERRED entry, except that SciPy's subpackages load one
+    by one (scipy.optimize does not bring scipy.integrate)."""
+    prefix = next(p for p in DEFERRED if target == p or target.startswith(p + "."))
+    return ".".join(target.split(".")[:2]) if prefix == "scipy" else prefix
+
+
+def test_a_function_imports_only_what_is_deferred_and_not_loaded_already():
+    """A function-local import is of a DEFERRED module (the CLI's dispatch aside), and the module it sits
+    in does not load that module anyway at import (a deferral that defers nothing). The compiled package
+    itself imports its modules in a function: it sets numba's cache folder around their import."""
+    known = modules()
+    sites = {m: import_sites(m, p, known) for m, p in known.items()}
+    bad = []
+    for m, entries in sites.items():
+        if m == DISPATCH:
+            continue
+        loaded = None
+        for target, line, local in entries:
+            if not local:
+                continue
+            if deferred_reason(target) is None:
+                bad.append(f"{m}:{line} imports {target} in a function (move it to the top, or say in DEFERRED "
+                           f"why it must wait)")
+                continue
+            loaded = loaded_on_import(m, sites, known) if loaded is None else loaded
+            family = deferred_family(target)
+            if m != family and any(x == family or x.startswith(family + ".") for x in loaded):
+                bad.append(f"{m}:{line} defers {target}, which importing {m} loads anyway")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_deferrals_hold_in_a_fresh_process():
+    """What DEFERRED promises, in a fresh process: the CLI's parser loads no NumPy; loading a scenario
+    loads neither numba, SciPy, matplotlib nor MuJoCo; importing the run-plot module loads no matplotlib."""
+    import subprocess
+
+    code = "import sys, coopsim.cli; coopsim.cli.build_parser(); print('numpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stdout + out.stderr
+
+    code = ("import sys; from coopsim.io.scenario import load_scenario; import coopsim.plots.run; "
+            "load_scenario('scenarios/paper_planar_2x3.yaml'); "
+            "print(sorted(m for m in ('numba', 'scipy', 'matplotlib', 'mujoco', 'coopsim.compiled') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
 def area(module: str) -> str:

@@ -8,6 +8,8 @@ nothing and numba compiles coopsim as it does by default (a slower first compile
 
 from __future__ import annotations
 
+import numba
+
 NUMBA_RANGE = ((0, 68), (0, 69))   # [low, high) as (major, minor)
 
 
@@ -20,7 +22,5 @@ def supported_numba(version: str | None = None) -> bool:
     Returns:
         True if its (major, minor) lies in [NUMBA_RANGE[0], NUMBA_RANGE[1]).
     """
-    import numba
-
     parts = tuple(int(p) for p in (version or numba.__version__).split(".")[:2] if p.isdigit())
     return NUMBA_RANGE[0] <= parts < NUMBA_RANGE[1]
