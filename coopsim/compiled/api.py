@@ -40,8 +40,14 @@ REASONS = {
 
 
 class Compiled(NamedTuple):
-    """A model ready for the kernels: P (PackedModel) and W (Workspace) for Python to read, Ps and Ws
-    their StructRefs (the same arrays) for compiled code."""
+    """A model ready for the kernels: the packed arrays and the workspace, for Python and for compiled code.
+
+    Attributes:
+        P: the PackedModel (frozen model arrays), for Python to read.
+        W: the Workspace (the kernels' buffers, overwritten by each evaluation), for Python to read.
+        Ps: P's StructRef (the same arrays), for compiled code.
+        Ws: W's StructRef (the same arrays), for compiled code.
+    """
 
     P: PackedModel
     W: Workspace
@@ -60,9 +66,17 @@ def _group_entries(group: str) -> tuple:
 
 
 def is_cached(fn) -> bool:
-    """Whether the compiled function `fn` has code in numba's cache on this machine (its index file;
-    the cache folder is keyed by the compiled sources' digest, `coopsim.compiled._cache_dir`, so an
-    index there is never stale). True when the index cannot be located."""
+    """Whether the compiled function `fn` has code in numba's cache on this machine.
+
+    Looks for its index file; the cache folder is keyed by the compiled sources' digest
+    (`coopsim.compiled._cache_dir`), so an index there is never stale.
+
+    Args:
+        fn: a compiled entry (a numba dispatcher with an on-disk cache).
+
+    Returns:
+        bool: True when its index exists, or when the index cannot be located.
+    """
     try:
         return os.path.exists(fn._cache._cache_file._index_path)
     except AttributeError:
@@ -70,8 +84,16 @@ def is_cached(fn) -> bool:
 
 
 def compile_pending(group: str = "base") -> bool:
-    """True when some entry of the compile group (`_group_entries`) has no compiled code cached on this
-    machine yet (the first run after installing or editing the package compiles it), `is_cached`."""
+    """Whether some entry of the compile group has no compiled code cached on this machine yet.
+
+    The first run after installing or editing the package compiles it (`is_cached`).
+
+    Args:
+        group: "base", "extras" or "control" (`_group_entries`).
+
+    Returns:
+        bool: True when some entry of the group is not cached.
+    """
     return not all(is_cached(e) for e in _group_entries(group))
 
 
@@ -79,27 +101,47 @@ _notice: dict = {}
 
 
 def set_compile_notice(**notices) -> None:
-    """For each compile group (`_group_entries`) given, call its function once, before this process
-    first needs the group's code while it is missing from the cache (`announce_compile`; "base": when
-    it first packs a model): the command line uses them to say that a first run compiles, and to
-    compile the group on all cores. `set_compile_notice()` clears them."""
+    """Register, per compile group, a function called once before the group's missing code is first needed.
+
+    Each is called before this process first needs the group's code while it is missing from the cache
+    (`announce_compile`; "base": when it first packs a model): the command line uses them to say that a
+    first run compiles, and to compile the group on all cores. `set_compile_notice()` clears them.
+
+    Args:
+        **notices: group name ("base", "extras", "control", `_group_entries`) → a callable taking no
+            arguments.
+    """
     _notice.clear()
     _notice.update(notices)
 
 
 def announce_compile(group: str) -> None:
-    """The notice of `set_compile_notice` for the group, if set and the group's code is not cached; the
-    notice is dropped either way (after this the group's code is on disk), so repeated calls cost a
-    dictionary lookup."""
+    """Call the notice of `set_compile_notice` for the group, if set and the group's code is not cached.
+
+    The notice is dropped either way (after this the group's code is on disk), so repeated calls cost a
+    dictionary lookup.
+
+    Args:
+        group: "base", "extras" or "control".
+    """
     notice = _notice.pop(group, None)
     if notice is not None and compile_pending(group):
         notice()
 
 
 def compiled(model: Model) -> Compiled:
-    """The compiled form of `model`, built once per model object, and shared by models that differ
-    only in what packing does not read (duration, output grid, tolerances, initial state, MuJoCo and
-    inverse settings: e.g. `dataclasses.replace(model, duration=…)`)."""
+    """The compiled form of `model`, built once per model object.
+
+    Shared by models that differ only in what packing does not read (duration, output grid, tolerances,
+    initial state, MuJoCo and inverse settings: e.g. `dataclasses.replace(model, duration=…)`).
+
+    Args:
+        model: the frozen Model.
+
+    Returns:
+        Compiled: its PackedModel and Workspace, with their StructRefs (the workspace is shared by every
+        caller of this model: copy what you keep).
+    """
     hit = _CACHE.get(model)
     if hit is None:
         key = _content_key(model)
@@ -130,7 +172,14 @@ def _content_key(model: Model) -> tuple:
 
 
 def fresh_workspace(P: PackedModel) -> Struct:
-    """A new workspace StructRef for P (one per thread)."""
+    """A new workspace StructRef for P (one per thread).
+
+    Args:
+        P: the PackedModel.
+
+    Returns:
+        Struct: the StructRef of a new Workspace of P's sizes (zeros).
+    """
     return to_struct(workspace(P))
 
 
@@ -140,12 +189,26 @@ def _tableau(method: str) -> Struct:
 
 
 def n_rows(P: PackedModel) -> int:
+    """The number of loop-closure constraint rows, K = k(r − 1).
+
+    Args:
+        P: the PackedModel (k = its rows, r arms).
+
+    Returns:
+        int: K.
+    """
     return P.rows.shape[0] * (len(P.dof) - 2)
 
 
 class Evaluation(NamedTuple):
-    """One closed-chain evaluation: qdd (N,) rad/s²; F (K,) loop-closure wrenches in the rows S;
-    status (0, or a code of REASONS); rank of Λ𝐈⁻¹Λᵀ."""
+    """One closed-chain evaluation.
+
+    Attributes:
+        qdd: (N,) rad/s² (m/s² on a prismatic joint), the joint accelerations θ̈.
+        F: (K,) N, N·m, the loop-closure wrenches in the rows S.
+        status: 0, or a failure code of REASONS.
+        rank: the numerical rank of Λ𝐈⁻¹Λᵀ.
+    """
 
     qdd: np.ndarray
     F: np.ndarray
@@ -154,8 +217,19 @@ class Evaluation(NamedTuple):
 
 
 def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
-    """θ̈ of the closed chain at (q, qd) with torques tau (N,) (Baumgarte term included if selected);
-    afterwards `compiled(model).W` holds every term of that state."""
+    """θ̈ of the closed chain at (q, qd) with torques tau (Baumgarte term included if selected).
+
+    Afterwards `compiled(model).W` holds every term of that state.
+
+    Args:
+        model: the Model.
+        q: (N,) rad or m, the stacked joint coordinates θ.
+        qd: (N,) rad/s or m/s, the joint rates θ̇.
+        tau: (N,) N·m (N on a prismatic joint), the joint torques.
+
+    Returns:
+        Evaluation: θ̈, the loop-closure wrenches F (copies), the status and the rank of Λ𝐈⁻¹Λᵀ.
+    """
     P, W, Ps, Ws = compiled(model)
     out = sample.new_samples(1, len(q), len(P.dof) - 1)
     out.tau[0] = tau
@@ -164,8 +238,18 @@ def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Eva
 
 
 def chain_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> Workspace:
-    """The workspace after one evaluation at (q, qd) (zero torque): W.Mb, W.h, W.J, W.Lam, … (see
-    `Workspace`). The arrays are reused by the next call: copy what you keep."""
+    """The workspace after one evaluation at (q, qd) with zero torque: W.Mb, W.h, W.J, W.Lam, … (`Workspace`).
+
+    The arrays are reused by the next call: copy what you keep.
+
+    Args:
+        model: the Model.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+
+    Returns:
+        Workspace: `compiled(model).W` (world axes, SI; not a copy).
+    """
     forward(model, q, qd, np.zeros(len(q)))
     return compiled(model).W
 
@@ -178,15 +262,32 @@ MIN_PER_THREAD = 200   # states per thread below which a batch runs on the calli
 
 
 def threads(S: int | None = None) -> int:
-    """Threads for a batch of S states: one per core (at most 8), at least MIN_PER_THREAD states each."""
+    """Threads for a batch of S states: one per core (at most 8), at least MIN_PER_THREAD states each.
+
+    Args:
+        S: the batch's number of states; None: the thread count for a pool of any size.
+
+    Returns:
+        int: the number of threads, at least 1.
+    """
     n = max(1, min(os.cpu_count() or 1, 8))
     return n if S is None else max(1, min(n, S // MIN_PER_THREAD))
 
 
 def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = False,
                     n_threads: int | None = None) -> sample.Samples:
-    """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques TAU (S, N), split over threads (one
-    workspace each): θ̈ and status, and with `full` every reported quantity (`sample.Samples`)."""
+    """The closed chain at S states with torques TAU, split over threads (one workspace each).
+
+    Args:
+        model: the Model.
+        Y: (S, 2N) the states [θ; θ̇] (rad or m, rad/s or m/s).
+        TAU: (S, N) N·m (N on a prismatic joint), the joint torques.
+        full: with it every reported quantity, without it θ̈ and status only.
+        n_threads: threads to use (default `threads(S)`).
+
+    Returns:
+        sample.Samples: (S, …) arrays, world axes, SI: θ̈, status, and with `full` every other field.
+    """
     P, _, Ps, _ = compiled(model)
     Y = _f(Y)
     out = sample.new_samples(len(Y), int(P.dof[-1]), len(P.dof) - 1)
@@ -203,9 +304,21 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
 
 def forward_models(models: list[Model], Y: np.ndarray, TAU: np.ndarray,
                    n_threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """θ̈ (M, S, N) and status (M, S) of M models (parameter sets of one scene: same arms and grasps,
-    other masses or geometry) at the same S states Y (S, 2N), torques TAU (S, N), one model per task
-    over threads."""
+    """θ̈ and status of M models at the same S states, one model per task over threads.
+
+    The models are parameter sets of one scene (same arms and grasps, other masses or geometry), each
+    packed afresh.
+
+    Args:
+        models: the M Models (the same N joints and r arms).
+        Y: (S, 2N) the states [θ; θ̇] (rad or m, rad/s or m/s).
+        TAU: (S, N) N·m (N on a prismatic joint), the joint torques.
+        n_threads: threads to use (default `threads()`).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: θ̈ (M, S, N) rad/s² (m/s²) and status (M, S) int (0 or a code of
+        REASONS).
+    """
     Y, TAU = _f(Y), _f(TAU)
     N = TAU.shape[1]
     QDD = np.empty((len(models), len(Y), N))
@@ -234,9 +347,17 @@ def _map(fn, items, n_threads=None):
 
 
 class Run(NamedTuple):
-    """A compiled integration: Y (len(t_out), 2N) states at t_out; counts (rhs evaluations, accepted,
-    rejected, projections); status 0 or a code of REASONS, fail_t s and fail_y (2N,) where it stopped;
-    rank_warning: None or (t s, y (2N,), rank, cond) at the first loss of rank of Λ𝐈⁻¹Λᵀ."""
+    """A compiled integration.
+
+    Attributes:
+        Y: (len(t_out), 2N) the states [θ; θ̇] at t_out (rows after a failure left zero).
+        counts: (rhs evaluations, accepted steps, rejected steps, projections).
+        status: 0, or a failure code of REASONS.
+        fail_t: s, where it stopped on a failure.
+        fail_y: (2N,) the state where it stopped on a failure.
+        rank_warning: None, or (t s, y (2N,), rank, cond) at the first loss of rank of Λ𝐈⁻¹Λᵀ (cond its
+            condition number).
+    """
 
     Y: np.ndarray
     counts: tuple[int, int, int, int]
@@ -250,12 +371,32 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
                     atol: float = 1e-12, h_max: float = math.inf, h_min: float = 1e-12,
                     max_steps: int = 10_000_000, fixed_step: float | None = None, progress=None,
                     chunk_seconds: float = 0.25, controller=None, land: bool = False) -> Run:
-    """Integrate the closed chain of `model` from y0 = [θ; θ̇] (already consistent) at t_out[0], sampled
-    at t_out (strictly increasing). Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it).
-    `progress(fraction)` is called between chunks of about chunk_seconds of work; the chunking does
-    not change the result. controller: None, or (Pc, Wc, C) StructRefs of a compiled controller in the
-    loop (`coopsim.control.controller.Controller.compiled_loop`), whose command is added to the model's tables;
-    land: adaptive steps end on every output time (`integrate.run`)."""
+    """Integrate the closed chain of `model` from y0 at t_out[0], sampled at t_out.
+
+    Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it). `progress(fraction)` is called
+    between chunks of about chunk_seconds of work; the chunking does not change the result.
+
+    Args:
+        model: the Model.
+        y0: (2N,) the initial state [θ; θ̇] (rad or m, rad/s or m/s), already consistent.
+        t_out: (n,) s, the output times, strictly increasing.
+        method: "dop853", "dopri5" or "rk4".
+        rtol, atol: the adaptive steps' relative and absolute error tolerances.
+        h_max, h_min: s, the largest adaptive step, and the smallest before the run fails (step size
+            collapsed).
+        max_steps: cap on the steps (accepted ones, and with adaptive steps the rejected ones too).
+        fixed_step: s, the largest fixed step (None: adaptive).
+        progress: None, or a callable taking the fraction of the time span done (0 to 1).
+        chunk_seconds: s of work between progress calls.
+        controller: None, or the (Pc, Wc, C) StructRefs of a compiled controller in the loop
+            (`coopsim.control.controller.Controller.compiled_loop`), whose command is added to the model's
+            tables.
+        land: adaptive steps end on every output time (`integrate.run`).
+
+    Returns:
+        Run: the states at t_out, the step counts, the status and where it failed, and the first rank
+        warning.
+    """
     P, W, Ps, Ws = compiled(model)
     ctl = controller
     tab = _tableau(method)
@@ -284,15 +425,35 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
 
 
 def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | None = None) -> sample.Samples:
-    """Every reported quantity at the states Y (S, 2N), times t (S,), torques TAU (S, N) (default: the
-    model's tables at t)."""
+    """Every reported quantity at the states Y, times t, torques TAU.
+
+    Args:
+        model: the Model.
+        t: (S,) s, the sample times.
+        Y: (S, 2N) the states [θ; θ̇] (rad or m, rad/s or m/s).
+        TAU: (S, N) N·m (N on a prismatic joint); default (None): the model's torque tables at t.
+
+    Returns:
+        sample.Samples: (S, …) arrays, world axes, SI.
+    """
     P = compiled(model).P
     return evaluate_states(model, Y, tabulated_torques(P, t) if TAU is None else TAU, full=True)
 
 
 def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
                   n_threads: int | None = None) -> sample.InverseTerms:
-    """Per-sample inverse-dynamics terms (`sample.InverseTerms`) at the states (Q, QD, QDD) (S, N)."""
+    """Per-sample inverse-dynamics terms (`sample.InverseTerms`) at the states (Q, QD, QDD), over threads.
+
+    Args:
+        model: the Model.
+        Q: (S, N) rad or m, θ.
+        QD: (S, N) rad/s or m/s, θ̇.
+        QDD: (S, N) rad/s² or m/s², θ̈.
+        n_threads: threads to use (default `threads(S)`).
+
+    Returns:
+        sample.InverseTerms: (S, …) arrays, world axes, SI.
+    """
     P, _, Ps, _ = compiled(model)
     Q, QD, QDD = _f(Q), _f(QD), _f(QDD)
     nmax = int(np.max(np.diff(P.dof)))
@@ -312,9 +473,23 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,
                      max_iter: int = PROJECTION_MAX_ITER) -> Projection:
-    """(q, qd) (N,) projected onto the loop-closure manifold as `coopsim.dynamics.manifold.consistent_state`
-    does (Gauss–Newton to max |Φ| ≤ tol, default the scenario's projection_tol, then the rates),
-    compiled. Raises ConstraintError when the positions do not converge in max_iter steps."""
+    """(q, qd) projected onto the loop-closure manifold, compiled.
+
+    As `coopsim.dynamics.manifold.consistent_state` does: Gauss–Newton to max |Φ| ≤ tol, then the rates.
+
+    Args:
+        model: the Model.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+        tol: m or rad, the tolerance on max |Φ| (default None: the scenario's projection_tol).
+        max_iter: cap on the Gauss–Newton steps.
+
+    Returns:
+        Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
+
+    Raises:
+        ConstraintError: when the positions do not converge in max_iter steps.
+    """
     P, W, Ps, Ws = compiled(model)
     q, qd = _f(q), _f(qd)
     y = np.concatenate([q, qd])
@@ -328,9 +503,16 @@ def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | N
 
 
 class ArmSolution(NamedTuple):
-    """Inverse kinematics of one arm: status (ik.SOLVED | SINGULAR | NOT_CONVERGED); q, qd, qdd (N,)
-    stacked, the arm's rows filled; ratio σ_min/σ_max of S J (SINGULAR) or the residual left
-    (NOT_CONVERGED); det S J; full_error: max |pose error| over all six rows (m or rad)."""
+    """Inverse kinematics of one arm (`ik.arm_solve`).
+
+    Attributes:
+        status: ik.SOLVED, SINGULAR or NOT_CONVERGED.
+        q: (N,) rad or m, stacked: the guess with the arm's rows replaced by the last iterate.
+        qd, qdd: (N,) stacked θ̇, θ̈, the arm's rows filled when SOLVED (zeros elsewhere).
+        ratio: σ_min/σ_max of S J (SINGULAR) or the max |S e| left (NOT_CONVERGED); 0 when SOLVED.
+        det: det S J at the solution (SOLVED; 0 otherwise).
+        full_error: max |pose error| over all six rows (m or rad) at the solution (SOLVED; 0 otherwise).
+    """
 
     status: int
     q: np.ndarray
@@ -343,9 +525,25 @@ class ArmSolution(NamedTuple):
 
 def solve_arm(model: Model, m: int, p, R, twist, acc, guess: np.ndarray, tol: float = 1e-13,
               max_iter: int = 50, sing_tol: float = 1e-7) -> ArmSolution:
-    """Arm m's joint angles putting its end-effector frame at (p (3,) m, relative to the arm's base
-    position, world axes; R (3, 3) world) in the model's rows S (Newton from the stacked `guess` (N,)),
-    and its rates for the EE twist and acceleration (6,)."""
+    """Arm m's joint angles putting its end-effector frame at (p, R) in the model's rows S, and its rates.
+
+    Newton from the stacked `guess`; then θ̇ and θ̈ for the end-effector twist and acceleration.
+
+    Args:
+        model: the Model.
+        m: arm index, 0-based.
+        p: (3,) m, target position relative to the arm's base position, world axes.
+        R: (3, 3) target orientation of the end-effector frame, world axes.
+        twist: (6,) the end-effector twist [v; ω], m/s and rad/s, world axes.
+        acc: (6,) the end-effector acceleration [a; ω̇], m/s² and rad/s², world axes.
+        guess: (N,) rad or m, stacked joint coordinates; the arm's rows start the Newton iteration.
+        tol: Newton tolerance on max |S e| (m or rad).
+        max_iter: cap on the Newton iterations.
+        sing_tol: σ_min/σ_max of S J below which the solve stops as SINGULAR.
+
+    Returns:
+        ArmSolution: the status, the stacked q, qd, qdd and the solve's diagnostics.
+    """
     P, W, Ps, Ws = compiled(model)
     announce_compile("extras")
     q = _f(guess).copy()

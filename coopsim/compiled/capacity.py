@@ -36,11 +36,30 @@ def _trace_of_inverse(L, d, x):
 
 @entry
 def min_energy_mass_interval(D, u, Q, lo, hi, act, regular, rank_tol):
-    """(mass kg, lower kg, certain) of the minimum-energy torques for energy weights Q (n,) (0 on passive
-    joints): D (n, d, N), u (n, 2, N) (setup arrays, samples last), lo, hi (N, n) N·m torque limits, act
-    (n,) bool joints whose limits count, regular (N,) bool C of full row rank. mass = the smallest upper
-    limit (+inf: none), lower = max(0, the largest lower limit); certain False: some sample needs the
-    rank-deficient path (mass and lower are then meaningless)."""
+    """The payload-mass interval of the minimum-energy torques for the energy weights Q, over all samples.
+
+    Per sample the two minimum-energy torque vectors τ₀, τ₁ (for the carried mass μ = 0 and μ = 1 kg;
+    module docstring) give τ(μ) = τ₀ + μ (τ₁ − τ₀), and each active joint's limits lo ≤ τ(μ) ≤ hi an
+    interval of μ: mass is the smallest upper limit, lower the largest lower limit. It stops at the first
+    sample that needs the rank-deficient path (C not of full row rank, H not positive definite or not
+    certified well-conditioned), and returns certain False.
+
+    Args:
+        D: (n, d, N) D = Jᵀ Z per sample (n joints, d null-space directions, N samples; samples last):
+            joint torques per unit null-space coordinate (`MinEnergySetup.D`).
+        u: (n, 2, N) N·m, the torques of the particular solutions for the two net wrenches y₀ and
+            y₀ + y₁ (μ = 0 and 1 kg) (`MinEnergySetup.u`).
+        Q: (n,) energy weights, the diagonal of Q (0 on passive joints).
+        lo, hi: (N, n) N·m, lower and upper torque limits per sample.
+        act: (n,) bool, the joints whose limits count.
+        regular: (N,) bool, C of full row rank at the sample.
+        rank_tol: the forward model's rank tolerance (λ_min/λ_max), applied to H's certified bound.
+
+    Returns:
+        tuple[float, float, bool]: (mass kg, lower kg, certain): mass the smallest upper limit (+inf:
+        none), lower max(0, the largest lower limit); certain False when some sample needs the
+        rank-deficient path (mass and lower are then meaningless).
+    """
     n, d, N = D.shape
     H = np.empty((d, d))
     z = np.empty((d, 2))

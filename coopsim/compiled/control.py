@@ -47,23 +47,70 @@ CONTROL_SINGULAR = 8      # a failure code of the time loop (after integrate's a
 
 
 class PackedControl(NamedTuple):
-    """A controller for the kernels (N joints, r arms, k rows per grasp, m = rk grasp-wrench unknowns).
-    Codes: law (JOINT_PD | COMPUTED_TORQUE), compensation (COMP_*), reference (REF_*),
-    distribution (DIST_*), saturate (0/1), time_law (LAW_*).
-    Joint PD: kp, kd (N,); q_set (N,) rad; joint trajectory tr_t (M,) s, tr_q, tr_qd, tr_qdd (M, N),
-    read at tr_t[0] + t. Computed torque: okp, okd (2,) [linear, angular]; object motion om_t (w,) s,
-    om_p (w, 3) m, om_R (w, 3, 3), per segment om_axis (w−1, 3) unit rotation axis (object axes of the
-    segment start), om_angle (w−1,) rad, om_w (w−1, 3) = R_a φ; squeeze N; grasp-error gains gkp, gkd
-    (2,) [linear N/m, angular N·m/rad], [N·s/m, N·m·s/rad]. Distribution: weights (N,) diagonal of Q;
-    vmass (r,) kg and vinertia (r, 3, 3) object axes, the non-squeezing virtual bodies. Motor lines:
-    stall (N,) N·m, slope (N,) N·m·s/rad (0 for a flat or absent line).
-    Out: count (3,) int [evaluations, evaluations with a clipped joint, clipped (evaluation, joint)
-    pairs]; q_ref, qd_ref (N,); err, rate_err (6,) object pose and twist error [m; rad], [m/s; rad/s];
-    u (N,) the law's command; raw (N,) with the tables added; gerr (r, 6) each arm's grasp error
-    [m; rad] (`grasp_feedback`).
-    Scratch: zero, qdd, tau_arms, tau_c (N,); Mb (N, nmax) the arms' mass-matrix blocks (no object);
-    p_r (3,), v_r, a_r, a, acc, Y, v6 (6,), v3 (3,); A (k, m); JT (N, m);
-    f, fs (m,); y (k,); kkt (m+k, m+k), x (m+k,); MA (m, k); G (k, k); xk (k,); R3, R3b (3, 3)."""
+    """A controller for the kernels: its codes, gains and reference tables, and the arrays it writes.
+
+    N joints, r arms, k rows per grasp, m = rk grasp-wrench unknowns, nmax joints in the longest arm; world
+    axes, SI. Built by `new_control`; compiled code reads it through its StructRef (`control_struct`). The
+    "written" and scratch arrays are overwritten by the kernels, so no evaluation allocates.
+
+    Attributes:
+        law: JOINT_PD or COMPUTED_TORQUE.
+        compensation: COMP_NONE, COMP_GRAVITY or COMP_BIAS: the joint PD's τ_comp, none or the closed-chain
+            inverse dynamics at (θ, 0, 0) or (θ, θ̇, 0).
+        reference: REF_SETPOINT or REF_TRAJECTORY, the joint PD's reference.
+        distribution: DIST_PAPER, DIST_NONSQUEEZING or DIST_MIN_ENERGY, the inverse dynamics' distribution
+            of the object's wrench.
+        saturate: 1 to clip the torques to the motor lines of eq. 36, 0 not to.
+        time_law: LAW_QUINTIC or LAW_CUBIC, the object motion's time law.
+        kp, kd: (N,) joint PD gains, N·m/rad and N·m·s/rad (N/m and N·s/m on a prismatic joint).
+        q_set: (N,) rad or m, the joint set-point.
+        tr_t: (M,) s, the joint trajectory's times, read at tr_t[0] + t.
+        tr_q, tr_qd, tr_qdd: (M, N) the joint trajectory's θ (rad or m), θ̇ and θ̈ at tr_t.
+        okp, okd: (2,) object-space gains [linear, angular], 1/s² and 1/s (commanded object acceleration
+            per unit pose and twist error).
+        om_t: (w,) s, the object motion's waypoint times, read at om_t[0] + t.
+        om_p: (w, 3) m, the waypoint positions of C, world.
+        om_R: (w, 3, 3) the waypoint orientations of the object frame, world axes.
+        om_axis: (w−1, 3) per segment the unit rotation axis (object axes of the segment start).
+        om_angle: (w−1,) rad, per segment the rotation angle.
+        om_w: (w−1, 3) rad, per segment R_a φ, the segment's rotation vector in world axes.
+        squeeze: N, the computed torque's squeeze force (0: none).
+        gkp: (2,) grasp-error stiffness [linear N/m, angular N·m/rad] (`grasp_feedback`).
+        gkd: (2,) grasp-error damping [linear N·s/m, angular N·m·s/rad].
+        weights: (N,) the diagonal of the energy weight Q (minimum-energy distribution).
+        vmass: (r,) kg, the masses of the non-squeezing virtual bodies.
+        vinertia: (r, 3, 3) kg·m², the inertias of the non-squeezing virtual bodies, object axes.
+        stall: (N,) N·m, the motor lines' stall torques (inf: no line).
+        slope: (N,) N·m·s/rad, the motor lines' slopes (0 for a flat or absent line).
+        count: (3,) int, written: [evaluations, evaluations with a clipped joint, clipped (evaluation, joint)
+            pairs].
+        q_ref, qd_ref: (N,) written: the joint reference θ_r (rad or m) and θ̇_r.
+        err, rate_err: (6,) written: the object pose and twist error [m; rad], [m/s; rad/s], world axes.
+        u: (N,) written: the law's command, N·m (N on a prismatic joint).
+        raw: (N,) written: the command with the torque tables added, before saturation.
+        zero: (N,) zeros (the θ̇ = 0 and θ̈ = 0 of the compensation).
+        qdd: (N,) scratch: the computed torque's θ̈, rad/s².
+        tau_arms: (N,) scratch: the arms' own inverse dynamics I_m θ̈_m + h_m (no object).
+        tau_c: (N,) scratch: the joint PD's τ_comp.
+        Mb: (N, nmax) scratch: the arms' mass-matrix blocks without the object (`state_terms`).
+        gerr: (r, 6) written: each arm's grasp error [m; rad], world axes (`grasp_feedback`).
+        p_r: (3,) scratch: the prescribed position of C, m, world.
+        v_r, a_r: (6,) scratch: the prescribed twist [v_C; ω] and acceleration [a_C; ω̇], world axes.
+        a: (6,) scratch: the commanded object acceleration.
+        acc: (6,) scratch: the object acceleration v̇_o of the inverse dynamics.
+        Y: (6,) scratch: the object wrench M_o v̇_o + b_o at C.
+        v6, v3: (6,), (3,) scratch.
+        A: (k, m) scratch: the grasp rows [S W_m Sᵀ]_m (`grasp_rows`).
+        JT: (N, m) scratch: blockdiag((S J_m)ᵀ).
+        f, fs: (m,) scratch: the grasp wrenches in the rows S (N, N·m) and the squeeze wrenches.
+        y: (k,) scratch: S Y, the object wrench in the rows S.
+        kkt, x: (m+k, m+k), (m+k,) scratch: the minimum-energy KKT system and its solution (x[:m] also
+            `gram_solve`'s result).
+        MA: (m, k) scratch: M*Aᵀ (non-squeezing) or Aᵀ (squeeze).
+        G: (k, k) scratch: A MA, or an arm's S J_m.
+        xk: (k,) scratch.
+        R3, R3b: (3, 3) scratch.
+    """
 
     law: int
     compensation: int
@@ -205,13 +252,35 @@ def _new_control(r):
 
 
 def control_struct(C: PackedControl):
-    """The StructRef of a PackedControl (sharing its arrays)."""
+    """The StructRef of a PackedControl (sharing its arrays).
+
+    Args:
+        C: the PackedControl.
+
+    Returns:
+        Struct: a CONTROL_T StructRef holding C's arrays (no copy), for the compiled laws.
+    """
     return _new_control(C)
 
 
 def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> PackedControl:
-    """A PackedControl of `law` for N joints, r arms (nmax joints in the longest), k rows with its scratch
-    allocated; `fields` set the rest (absent ones: the first code, zero gains, two-sample tables)."""
+    """A PackedControl of `law` with its scratch allocated; `fields` set the rest.
+
+    Absent fields take the first code, zero gains, two-sample tables, unit energy weights and virtual
+    bodies, and no motor lines.
+
+    Args:
+        N: joints in all.
+        r: arms.
+        k: rows per grasp (the rows S).
+        nmax: joints in the longest arm.
+        law: JOINT_PD or COMPUTED_TORQUE.
+        **fields: PackedControl fields by name (gains, codes, tables; see its attributes), converted
+            to the field's type.
+
+    Returns:
+        PackedControl: the controller, arrays float64 / int64 and C-contiguous.
+    """
     m, z = r * k, np.zeros
     base = dict(law=law, compensation=COMP_NONE, reference=REF_SETPOINT, distribution=DIST_PAPER, saturate=0,
                 time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=np.array([0.0, 1.0]), tr_q=z((2, N)),
@@ -240,8 +309,16 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> Packed
 
 @kernel
 def gram_solve(C, k):
-    """C.x[:rk] ← MA (A MA)⁻¹ C.xk (C.MA (rk, k); C.G and C.xk overwritten). Returns False when A MA is
-    singular."""
+    """C.x[:rk] ← MA (A MA)⁻¹ C.xk.
+
+    Args:
+        C: the controller (PackedControl StructRef): reads C.A (k, rk), C.MA (rk, k) and C.xk (k,);
+            C.G and C.xk are overwritten, C.x[:rk] written.
+        k: rows per grasp.
+
+    Returns:
+        bool: False when A MA is singular (a zero pivot; C.x not written), else True.
+    """
     mk = C.A.shape[1]
     for i in range(k):
         for b in range(k):
@@ -261,7 +338,17 @@ def gram_solve(C, k):
 
 @kernel
 def rigid_point_acceleration(a_O, w, dw, r, out):
-    """out (3,) ← a_O + ω̇ × r + ω × (ω × r) (`coopsim.core.spatial.rigid_acceleration`)."""
+    """out ← a_O + ω̇ × r + ω × (ω × r), the acceleration of a point of a rigid body.
+
+    As `coopsim.core.spatial.rigid_acceleration`; all vectors in one set of axes (world).
+
+    Args:
+        a_O: (3,) m/s², the acceleration of the reference point O.
+        w: (3,) rad/s, the body's angular velocity ω.
+        dw: (3,) rad/s², its angular acceleration ω̇.
+        r: (3,) m, the point relative to O.
+        out: (3,) written: the point's acceleration, m/s² (may not alias r, w or dw).
+    """
     c0 = w[1] * r[2] - w[2] * r[1]
     c1 = w[2] * r[0] - w[0] * r[2]
     c2 = w[0] * r[1] - w[1] * r[0]
@@ -276,16 +363,36 @@ def rigid_point_acceleration(a_O, w, dw, r, out):
 
 @kernel
 def segment(ts, t):
-    """(i, t clamped): the interval [ts[i], ts[i+1]] holding t (clamped to the span), as
-    clip(searchsorted(ts, t, 'right') − 1, 0, len(ts) − 2)."""
+    """The interval [ts[i], ts[i+1]] holding t, and t clamped to the span of ts.
+
+    As clip(searchsorted(ts, t, 'right') − 1, 0, len(ts) − 2).
+
+    Args:
+        ts: (n,) s, increasing knot times, n ≥ 2.
+        t: s, the time.
+
+    Returns:
+        tuple[int, float]: (i, t clamped to [ts[0], ts[-1]]).
+    """
     t = min(max(t, ts[0]), ts[-1])
     return bisect(ts, 0, len(ts) - 1, t), t
 
 
 @kernel
 def hermite(p0, v0, a0, p1, v1, a1, u, h):
-    """(θ, θ̇) at u of the quintic Hermite polynomial through (θ, θ̇, θ̈) = (p0, v0, a0) at u = 0 and
-    (p1, v1, a1) at u = 1 over h s (`coopsim.inverse.trajectory.hermite_quintic`)."""
+    """(θ, θ̇) at u of the quintic Hermite polynomial through (p0, v0, a0) at u = 0 and (p1, v1, a1) at u = 1.
+
+    Over an interval of h s (`coopsim.inverse.trajectory.hermite_quintic`).
+
+    Args:
+        p0, v0, a0: θ (rad or m), θ̇ (per s) and θ̈ (per s²) at the start of the interval.
+        p1, v1, a1: the same at its end.
+        u: the normalised time in [0, 1].
+        h: s, the interval's length.
+
+    Returns:
+        tuple[float, float]: (θ, θ̇) at u, θ̇ per s.
+    """
     v0, a0, v1, a1 = h * v0, h * h * a0, h * v1, h * h * a1
     d = p1 - p0
     c2 = 0.5 * a0
@@ -299,8 +406,16 @@ def hermite(p0, v0, a0, p1, v1, a1, u, h):
 
 @kernel
 def joint_reference(C, t):
-    """C.q_ref, C.qd_ref at time t: the set-point at rest, or the joint trajectory's quintic Hermite
-    interpolant at tr_t[0] + t, evaluated from the nearer end of its interval."""
+    """C.q_ref, C.qd_ref ← the joint reference at time t.
+
+    The set-point at rest, or the joint trajectory's quintic Hermite interpolant at tr_t[0] + t,
+    evaluated from the nearer end of its interval.
+
+    Args:
+        C: the controller (PackedControl StructRef): reads reference, q_set or the tr_* tables; C.q_ref
+            (rad or m) and C.qd_ref (N,) written.
+        t: s, the time since the start of the run.
+    """
     if C.reference == REF_SETPOINT:
         for j in range(len(C.q_set)):
             C.q_ref[j], C.qd_ref[j] = C.q_set[j], 0.0
@@ -321,7 +436,15 @@ def joint_reference(C, t):
 
 @kernel
 def time_law(kind, u):
-    """(s, ds/du, d²s/du²) of the normalised time law (`coopsim.inverse.trajectory.time_law`)."""
+    """(s, ds/du, d²s/du²) of the normalised time law (`coopsim.inverse.trajectory.time_law`).
+
+    Args:
+        kind: LAW_QUINTIC, or LAW_CUBIC (any other code: cubic).
+        u: the normalised time in [0, 1].
+
+    Returns:
+        tuple[float, float, float]: s(u) ∈ [0, 1] and its first two derivatives in u.
+    """
     if kind == LAW_QUINTIC:
         return (10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5, 30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4,
                 60 * u - 180 * u ** 2 + 120 * u ** 3)
@@ -330,8 +453,14 @@ def time_law(kind, u):
 
 @kernel
 def object_reference(C, t, R):
-    """The prescribed object state at om_t[0] + t (`coopsim.inverse.trajectory.object_motion_at`): C.p_r (3,),
-    R (3, 3), C.v_r and C.a_r (6,) [linear; angular]."""
+    """The prescribed object state at om_t[0] + t (`coopsim.inverse.trajectory.object_motion_at`).
+
+    Args:
+        C: the controller (PackedControl StructRef): reads the om_* tables and time_law; writes C.p_r
+            (3,) m (world), C.v_r = [v_C; ω] and C.a_r = [a_C; ω̇] (6,) (world axes), C.R3b scratch.
+        t: s, the time since the start of the run.
+        R: (3, 3) written: the prescribed orientation of the object frame, world axes.
+    """
     ts = C.om_t
     i, tc = segment(ts, ts[0] + t)
     T = ts[i + 1] - ts[i]
@@ -356,7 +485,15 @@ def object_reference(C, t, R):
 
 @kernel
 def grasp_rows(P, W, C):
-    """C.A (k, rk) = [S W_m Sᵀ]_m (W_m = [[I, 0], [−[s_m×], I]]) and C.JT (N, rk) = blockdiag((S J_m)ᵀ)."""
+    """C.A ← [S W_m Sᵀ]_m (k, rk) and C.JT ← blockdiag((S J_m)ᵀ) (N, rk), with W_m = [[I, 0], [−[s_m×], I]].
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads the grasp offsets W.s and the
+            Jacobians W.J of the current state.
+        C: the controller (PackedControl StructRef): C.A and C.JT written, C.v6 scratch.
+    """
     S = P.rows
     k = S.shape[0]
     r = len(P.dof) - 1
@@ -389,7 +526,15 @@ def grasp_rows(P, W, C):
 
 @kernel
 def paper_distribution(P, W, C):
-    """C.f ← f_m = S W(−s_m) Sᵀ y / r (eqs. 8, 30)."""
+    """C.f ← the paper's distribution f_m = S W(−s_m) Sᵀ y / r (eqs. 8, 30).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads the grasp offsets W.s.
+        C: the controller (PackedControl StructRef): reads C.y (k,); C.f (rk,) written (N, N·m, in the
+            rows S), C.v6 scratch.
+    """
     S = P.rows
     k = S.shape[0]
     r = len(P.dof) - 1
@@ -411,8 +556,20 @@ def paper_distribution(P, W, C):
 
 @kernel
 def nonsqueezing_distribution(P, W, C):
-    """C.f ← M*Aᵀ (A M*Aᵀ)⁻¹ y, M* = blockdiag(S diag(m_i* I₃, R_o J_i* R_oᵀ) Sᵀ) (Erhart & Hirche).
-    Returns False when A M*Aᵀ is singular."""
+    """C.f ← the non-squeezing distribution M*Aᵀ (A M*Aᵀ)⁻¹ y (Erhart & Hirche).
+
+    M* = blockdiag(S diag(m_i* I₃, R_o J_i* R_oᵀ) Sᵀ) of the virtual bodies (C.vmass, C.vinertia).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads W.R_o; W.m3[0] is scratch.
+        C: the controller (PackedControl StructRef): reads C.A and C.y; C.f (rk,) written; C.MA, C.G,
+            C.xk, C.x, C.v6, C.v3 and C.R3b scratch.
+
+    Returns:
+        bool: False when A M*Aᵀ is singular (a zero pivot; C.f not written), else True.
+    """
     S = P.rows
     k = S.shape[0]
     r = len(P.dof) - 1
@@ -442,8 +599,19 @@ def nonsqueezing_distribution(P, W, C):
 
 @kernel
 def min_energy_distribution(C, k):
-    """C.f ← argmin ½ τᵀQτ, τ = τ_arms + Jᵀf, s.t. A f = y: the KKT system [J Q Jᵀ, Aᵀ; A, 0][f; λ] =
-    [−J Q τ_arms; y] (eqs. 33–35). Returns False when it is singular."""
+    """C.f ← argmin ½ τᵀQτ, τ = τ_arms + Jᵀf, subject to A f = y (eqs. 33–35).
+
+    By the KKT system [J Q Jᵀ, Aᵀ; A, 0][f; λ] = [−J Q τ_arms; y], Gaussian elimination with partial
+    pivoting.
+
+    Args:
+        C: the controller (PackedControl StructRef): reads C.JT, C.weights (Q), C.tau_arms, C.A and C.y;
+            C.f (rk,) written; C.kkt and C.x scratch.
+        k: rows per grasp.
+
+    Returns:
+        bool: False when the KKT system is singular (a zero pivot; C.f not written), else True.
+    """
     N, mk = C.JT.shape
     K = C.kkt
     Q = C.weights
@@ -472,9 +640,22 @@ def min_energy_distribution(C, k):
 
 @kernel
 def squeeze_wrenches(P, W, C, force):
-    """C.f += the squeeze: each grasp pushes `force` N towards C along its grasp line (ρ_m = −s_m),
-    F_m = S [−force ρ_m/|ρ_m|; 0], projected on the null space of A: F − Aᵀ(AAᵀ)⁻¹A F
-    (`coopsim.control.laws.squeeze_wrenches`). Returns False when A Aᵀ is singular."""
+    """C.f += the squeeze wrenches, projected on the null space of A (internal forces only).
+
+    Each grasp pushes `force` N towards C along its grasp line (ρ_m = −s_m), F_m = S [−force ρ_m/|ρ_m|; 0],
+    projected as F − Aᵀ(AAᵀ)⁻¹A F (`coopsim.control.laws.squeeze_wrenches`).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads the grasp offsets W.s.
+        C: the controller (PackedControl StructRef): reads C.A; C.f (rk,) added to; C.fs, C.MA, C.xk, C.G
+            and C.x scratch.
+        force: N, the squeeze force per grasp.
+
+    Returns:
+        bool: False when A Aᵀ is singular (a zero pivot; C.f unchanged), else True.
+    """
     S = P.rows
     k = S.shape[0]
     r = len(P.dof) - 1
@@ -499,8 +680,19 @@ def squeeze_wrenches(P, W, C, force):
 
 @kernel
 def state_terms(P, W, C, q, qd):
-    """The arm and object terms of (θ, θ̇) into W (`arm_terms`, `object_pose`, `object_dynamics`), the
-    arms' own mass-matrix blocks kept in C.Mb (object_dynamics adds the object's to the carrier's)."""
+    """The arm and object terms of (θ, θ̇) into W, the arms' own mass-matrix blocks kept in C.Mb.
+
+    `arm_terms`, `object_pose` and `object_dynamics`; C.Mb is copied before object_dynamics adds the
+    object's inertia to the carrier's block.
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): the arm and object terms written.
+        C: the controller (PackedControl StructRef): C.Mb (N, nmax) written.
+        q: (N,) rad or m, the joint coordinates θ.
+        qd: (N,) rad/s or m/s, the joint rates θ̇.
+    """
     arm_terms(P, W, q, qd)
     copy2(W.Mb, C.Mb)
     object_pose(P, W)
@@ -509,9 +701,24 @@ def state_terms(P, W, C, q, qd):
 
 @kernel
 def inverse_torques(P, W, C, qdd, squeeze, tau):
-    """τ (N,) ← the closed-chain inverse dynamics at (θ, θ̇, θ̈ = qdd) with the object's wrench
-    distributed by C.distribution, plus a squeeze; W and C.Mb hold the terms of (θ, θ̇)
-    (`state_terms`). Returns OK or CONTROL_SINGULAR."""
+    """τ ← the closed-chain inverse dynamics at (θ, θ̇, θ̈ = qdd), the object's wrench distributed by C.distribution.
+
+    τ = τ_arms + Jᵀ f with A f = y (module docstring), plus a squeeze when `squeeze` ≠ 0. W and C.Mb
+    hold the terms of (θ, θ̇) (`state_terms`).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef) with the terms of (θ, θ̇), read.
+        C: the controller (PackedControl StructRef): C.tau_arms, C.acc, C.Y, C.y, C.A, C.JT, C.f and the
+            distribution's scratch written.
+        qdd: (N,) rad/s² (m/s²), the joint accelerations θ̈.
+        squeeze: N, the squeeze force (0: none).
+        tau: (N,) written: N·m (N on a prismatic joint); left unchanged on CONTROL_SINGULAR.
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     S = P.rows
     k = S.shape[0]
     for m in range(len(P.dof) - 1):
@@ -554,7 +761,22 @@ def inverse_torques(P, W, C, qdd, squeeze, tau):
 
 @kernel
 def joint_pd(P, W, C, t, q, qd, u):
-    """u ← Kp (θ_r − θ) + Kd (θ̇_r − θ̇) + τ_comp (module docstring). Returns OK or CONTROL_SINGULAR."""
+    """u ← Kp (θ_r − θ) + Kd (θ̇_r − θ̇) + τ_comp (module docstring).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten when there is a compensation.
+        C: the controller (PackedControl StructRef): C.q_ref, C.qd_ref written, and with a compensation
+            C.tau_c and the inverse dynamics' scratch.
+        t: s, the time since the start of the run.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+        u: (N,) written: the command, N·m (N on a prismatic joint); not meaningful on CONTROL_SINGULAR.
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     joint_reference(C, t)
     for j in range(len(u)):
         u[j] = C.kp[j] * (C.q_ref[j] - q[j]) + C.kd[j] * (C.qd_ref[j] - qd[j])
@@ -569,8 +791,19 @@ def joint_pd(P, W, C, t, q, qd, u):
 
 @kernel
 def object_errors(P, W, C, t):
-    """C.err = [p_r − p; log(R_r Rᵀ)] and C.rate_err = v_r − v against the prescribed motion at t, and
-    the commanded object acceleration C.a = a_r + Kd ė + Kp e; W holds the object terms of (θ, θ̇)."""
+    """The object's pose and twist errors against the prescribed motion at t, and the commanded acceleration.
+
+    C.err = [p_r − p; log(R_r Rᵀ)], C.rate_err = v_r − v and C.a = a_r + Kd ė + Kp e; W holds the object
+    terms of (θ, θ̇).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads W.p_C, W.R_o and W.v_o.
+        C: the controller (PackedControl StructRef): C.err [m; rad], C.rate_err [m/s; rad/s] and C.a
+            [m/s²; rad/s²] (6,) written, world axes; C.p_r, C.v_r, C.a_r, C.R3, C.R3b, C.v3 scratch.
+        t: s, the time since the start of the run.
+    """
     object_reference(C, t, C.R3)
     for a in range(3):
         C.err[a] = C.p_r[a] - W.p_C[a]
@@ -586,9 +819,21 @@ def object_errors(P, W, C, t):
 
 @kernel
 def arm_accelerations(P, W, C):
-    """C.qdd: each arm's θ̈_m from S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m), a_EE,m = [a_C + ω̇ × ρ_m +
-    ω × (ω × ρ_m); ω̇] for the object acceleration C.a at the twist W.v_o (ρ_m = −s_m). Returns False
-    when an arm's S J_m is singular."""
+    """C.qdd ← each arm's θ̈_m from S J_m θ̈_m = S (a_EE,m − J̇_mθ̇_m) for the object acceleration C.a.
+
+    a_EE,m = [a_C + ω̇ × ρ_m + ω × (ω × ρ_m); ω̇] at the object twist W.v_o (ρ_m = −s_m). S J_m must be
+    square (k = n_m).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads W.v_o, W.s, W.J and W.Jd_qd.
+        C: the controller (PackedControl StructRef): reads C.a; C.qdd (N,) rad/s² written; C.v3, C.v6,
+            C.xk and C.G scratch.
+
+    Returns:
+        bool: False when an arm's S J_m is singular (a zero pivot), else True.
+    """
     S = P.rows
     k = S.shape[0]
     w, dw = W.v_o[3:], C.a[3:]
@@ -618,7 +863,22 @@ def arm_accelerations(P, W, C):
 
 @kernel
 def computed_torque(P, W, C, t, q, qd, u):
-    """u ← the object-space computed torque (module docstring). Returns OK or CONTROL_SINGULAR."""
+    """u ← the object-space computed torque (module docstring), with the grasp feedback added.
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten with the terms of (θ, θ̇).
+        C: the controller (PackedControl StructRef): C.err, C.rate_err, C.gerr written, and the
+            inverse dynamics' scratch.
+        t: s, the time since the start of the run.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+        u: (N,) written: the command, N·m (N on a prismatic joint); not meaningful on CONTROL_SINGULAR.
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     state_terms(P, W, C, q, qd)
     object_errors(P, W, C, t)
     if not arm_accelerations(P, W, C):
@@ -630,10 +890,22 @@ def computed_torque(P, W, C, t, q, qd, u):
 
 @kernel
 def grasp_feedback(P, W, C, qd, u):
-    """u += J_mᵀ Sᵀ S (Kp e_m + Kd ė_m) for every arm m (`coopsim.control.laws.grasp_errors`): e_m = [p_t − p_EE;
-    log(R_t R_EEᵀ)] the pose error of its end effector against where its grasp puts it on the object
-    (p_t = p_C + R_o g_m, R_t = R_o G_m), ė_m = [v_C + ω × R_o g_m; ω] − J_m θ̇_m the twist error; the
-    errors are kept in C.gerr. Gains gkp, gkd (2,) [linear, angular]; W holds the terms of (θ, θ̇)."""
+    """u += J_mᵀ Sᵀ S (Kp e_m + Kd ė_m) for every arm m (`coopsim.control.laws.grasp_errors`).
+
+    e_m = [p_t − p_EE; log(R_t R_EEᵀ)] is the pose error of its end effector against where its grasp
+    puts it on the object (p_t = p_C + R_o g_m, R_t = R_o G_m), ė_m = [v_C + ω × R_o g_m; ω] − J_m θ̇_m
+    the twist error; gains gkp, gkd (2,) [linear, angular]. W holds the terms of (θ, θ̇).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef): reads W.R_o, W.p_C, W.v_o, W.p_ee, W.R_ee
+            and W.J.
+        C: the controller (PackedControl StructRef): C.gerr (r, 6) [m; rad] written, world axes; C.v3,
+            C.v6, C.R3, C.R3b and C.xk scratch.
+        qd: (N,) rad/s or m/s, θ̇.
+        u: (N,) N·m (N on a prismatic joint), added to.
+    """
     S = P.rows
     k = S.shape[0]
     w = W.v_o[3:]
@@ -676,8 +948,21 @@ def grasp_feedback(P, W, C, qd, u):
 
 @kernel
 def command(P, W, C, t, q, qd, u):
-    """u (N,) ← the law's command at (t, θ, θ̇) on the controller's model (P, W). Returns OK or
-    CONTROL_SINGULAR."""
+    """u ← the law's command at (t, θ, θ̇) on the controller's model (P, W).
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten.
+        C: the controller (PackedControl StructRef): the law's references, errors and scratch written.
+        t: s, the time since the start of the run.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+        u: (N,) written: the command, N·m (N on a prismatic joint); not meaningful on CONTROL_SINGULAR.
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     if C.law == JOINT_PD:
         return joint_pd(P, W, C, t, q, qd, u)
     return computed_torque(P, W, C, t, q, qd, u)
@@ -685,9 +970,26 @@ def command(P, W, C, t, q, qd, u):
 
 @kernel
 def feedback(P, W, C, t, q, qd, tau):
-    """τ (N,) (holding the torque tables at t) ← the law's command plus the tables (C.raw), clipped to
-    the motor lines τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) of eq. 36 with `saturate`; counted in C.count. Returns OK
-    or CONTROL_SINGULAR."""
+    """τ ← the law's command plus the torque tables, clipped to the motor lines with `saturate`.
+
+    The sum (C.raw) is clipped to τ_min(θ̇) ≤ τ ≤ τ_max(θ̇) of eq. 36 when C.saturate is set; the
+    evaluation and its clipped joints are counted in C.count.
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten.
+        C: the controller (PackedControl StructRef): C.u, C.raw and the law's outputs written, C.count
+            incremented.
+        t: s, the time since the start of the run.
+        q: (N,) rad or m, θ.
+        qd: (N,) rad/s or m/s, θ̇.
+        tau: (N,) N·m (N on a prismatic joint): holds the torque tables at t on entry, overwritten
+            with the controller's torque (not meaningful on CONTROL_SINGULAR).
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     st = command(P, W, C, t, q, qd, C.u)
     C.count[0] += 1
     clipped = 0
@@ -708,9 +1010,24 @@ def feedback(P, W, C, t, q, qd, tau):
 
 @entry
 def commands(P, W, C, t, Y, tables, raw, tau, q_ref, qd_ref, err, rate_err, status):
-    """The controller at S samples (t (S,), Y (S, 2N) = [θ; θ̇], tables (S, N) the torque tables there):
-    raw, tau (S, N) before and after saturation, q_ref, qd_ref (S, N), err, rate_err (S, 6) as the law
-    sets them (nan for the other law's), status (S,)."""
+    """The controller at S samples, with what the law sets at each (`feedback`).
+
+    q_ref, qd_ref, err and rate_err hold what the law sets and nan for the other law's.
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten.
+        C: the controller (PackedControl StructRef): scratch, C.count incremented.
+        t: (S,) s, the sample times since the start of the run.
+        Y: (S, 2N) the states [θ; θ̇] (rad or m, rad/s or m/s).
+        tables: (S, N) N·m, the torque tables at t.
+        raw: (S, N) written: N·m, command plus tables before saturation.
+        tau: (S, N) written: N·m, the torques (after saturation when C.saturate is set).
+        q_ref, qd_ref: (S, N) written: the joint reference θ_r, θ̇_r (rad or m, per s).
+        err, rate_err: (S, 6) written: the object pose and twist error [m; rad], [m/s; rad/s], world axes.
+        status: (S,) int written: OK or CONTROL_SINGULAR per sample.
+    """
     N = tables.shape[1]
     for i in range(len(t)):
         for j in range(N):
@@ -729,7 +1046,22 @@ def commands(P, W, C, t, Y, tables, raw, tau, q_ref, qd_ref, err, rate_err, stat
 
 @entry
 def evaluate(P, W, C, t, y, tau):
-    """τ (N,) (the torque tables at t on entry) ← the controller's torque at (t, y = [θ; θ̇]) (`feedback`),
-    for one state (the MuJoCo twin's control callback). Returns OK or CONTROL_SINGULAR."""
+    """τ ← the controller's torque at (t, y = [θ; θ̇]) for one state (`feedback`).
+
+    For the MuJoCo twin's control callback.
+
+    Args:
+        P: the controller's compiled model (PackedModel StructRef, read only: the scene with the
+            controller's object mass).
+        W: the controller's workspace (Workspace StructRef), overwritten.
+        C: the controller (PackedControl StructRef): scratch, C.count incremented.
+        t: s, the time since the start of the run.
+        y: (2N,) the state [θ; θ̇] (rad or m, rad/s or m/s).
+        tau: (N,) N·m (N on a prismatic joint): the torque tables at t on entry, overwritten with the
+            controller's torque.
+
+    Returns:
+        int: OK or CONTROL_SINGULAR.
+    """
     N = len(tau)
     return feedback(P, W, C, t, y[:N], y[N:], tau)

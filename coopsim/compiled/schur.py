@@ -36,13 +36,32 @@ SCHUR_MIN_RATIO = 1e-10
 
 @kernel
 def group_arm(g, c):
-    """The arm of row group g (the g-th arm other than the carrier c)."""
+    """The arm of row group g: the g-th arm other than the carrier c.
+
+    Args:
+        g: row-group index, 0-based (rows g·k … g·k + k − 1 of Λ).
+        c: the carrier arm's index.
+
+    Returns:
+        int: the arm index m_g.
+    """
     return g + 1 if g >= c else g
 
 
 @kernel
 def constraint_trace(P, Y):
-    """trace(Y Yᵀ) = Σ over row groups of ‖Y_g‖_F² + ‖U_g‖_F² (the nonzero blocks of Y (K, N))."""
+    """trace(Y Yᵀ) from the nonzero blocks of Y only.
+
+    Σ over row groups g of ‖Y_g‖_F² + ‖U_g‖_F² (module docstring).
+
+    Args:
+        P: the compiled model (PackedModel StructRef, read only): dof, carrier and the rows S.
+        Y: (K, N) block-structured matrix (Λ L⁻ᵀ or Λ; zero outside the columns of m_g and the
+            carrier in each row group).
+
+    Returns:
+        float: trace(Y Yᵀ), in the squared units of Y.
+    """
     dof, c, k = P.dof, P.carrier, P.rows.shape[0]
     oc, ec = dof[c], dof[c + 1]
     tr = 0.0
@@ -59,10 +78,23 @@ def constraint_trace(P, Y):
 
 @kernel
 def cholesky_entry(L, d_inv, o, i, l, a):
-    """Entry (i, l), l ≤ i, of the lower Cholesky factor in L[o:, o:] of a symmetric matrix whose
-    (i, l) entry is a, factored row by row (rows < i and entries < l of row i done): L_il = (a −
-    Σ_t<l L_it L_lt) / L_ll, or on the diagonal its square root, with its reciprocal in d_inv[o + i].
-    Returns False if a diagonal entry is not positive."""
+    """Entry (i, l), l ≤ i, of the lower Cholesky factor in L[o:, o:] of a symmetric matrix.
+
+    The matrix's (i, l) entry is a; it is factored row by row (rows < i and entries < l of row i done):
+    L_il = (a − Σ_t<l L_it L_lt) / L_ll, or on the diagonal its square root, with its reciprocal in
+    d_inv[o + i].
+
+    Args:
+        L: (n, n) the factor's array, the block at offset o; entry (o + i, o + l) written.
+        d_inv: (n,) reciprocals of the factor's diagonal; d_inv[o + i] written on the diagonal (and read
+            for l < i: d_inv[o + l]).
+        o: offset of the block in L and d_inv.
+        i, l: row and column in the block, l ≤ i.
+        a: the (i, l) entry of the matrix being factored.
+
+    Returns:
+        bool: False if a diagonal entry is not positive (nothing written then), else True.
+    """
     for t in range(l):
         a -= L[o + i, o + t] * L[o + l, o + t]
     if l < i:
@@ -77,11 +109,22 @@ def cholesky_entry(L, d_inv, o, i, l, a):
 
 @kernel
 def schur_factor(P, W, Y, trA):
-    """Factor A = Y Yᵀ (Y (K, N) block-structured, trA its trace) as D + U Uᵀ (module docstring):
-    L_g into the diagonal blocks of W.A_f (lower triangle) with the reciprocals of their diagonals in
-    W.d_inv, V = L_D⁻¹U into W.V[:, :n_c], L_S into W.S (lower triangle) with reciprocals in W.S_inv.
-    Returns True when A's conditioning is certified above max(SCHUR_MIN_RATIO, rank_tol), False (and
-    the factors unusable) otherwise."""
+    """Factor A = Y Yᵀ (Y block-structured) as D + U Uᵀ for `schur_solve` (module docstring).
+
+    L_g goes into the diagonal blocks of W.A_f (lower triangle; `linalg.inverse_factor_norm2` uses their
+    strict upper triangle as scratch) with the reciprocals of their diagonals in W.d_inv, V = L_D⁻¹U into
+    W.V[:, :n_c], L_S into W.S[:n_c, :n_c] (lower triangle) with reciprocals in W.S_inv.
+
+    Args:
+        P: the compiled model (PackedModel StructRef, read only): dof, carrier, rows S and rank_tol.
+        W: the workspace (Workspace StructRef): W.A_f, W.d_inv, W.V, W.S, W.S_inv written.
+        Y: (K, N) block-structured matrix (Λ L⁻ᵀ or Λ), K = k(r − 1).
+        trA: trace(Y Yᵀ) (`constraint_trace`).
+
+    Returns:
+        bool: True when A's conditioning is certified above max(SCHUR_MIN_RATIO, rank_tol) (and for
+        K = 0), False (and the factors unusable) otherwise.
+    """
     dof, c, k = P.dof, P.carrier, P.rows.shape[0]
     Lf, di, V, S, Si = W.A_f, W.d_inv, W.V, W.S, W.S_inv
     K = k * (len(dof) - 2)
@@ -92,7 +135,8 @@ def schur_factor(P, W, Y, trA):
     for g in range(len(dof) - 2):
         m = group_arm(g, c)
         om, nm, i0 = dof[m], dof[m + 1] - dof[m], g * k
-        Yg, Ug, Lg, dg, Vg = Y[i0:i0 + k, om:om + nm], Y[i0:i0 + k, oc:oc + nc], Lf[i0:i0 + k, i0:i0 + k], di[i0:i0 + k], V[i0:i0 + k]
+        Yg, Ug, Lg, dg, Vg = (Y[i0:i0 + k, om:om + nm], Y[i0:i0 + k, oc:oc + nc], Lf[i0:i0 + k, i0:i0 + k],
+                              di[i0:i0 + k], V[i0:i0 + k])
         for i in range(k):
             for l in range(i + 1):
                 a = 0.0
@@ -119,8 +163,15 @@ def schur_factor(P, W, Y, trA):
 
 @kernel
 def schur_solve(P, W, b, x):
-    """x (K,) ← A⁻¹ b with the factors of `schur_factor`; b (K,) is left unchanged and must not alias
-    x; W.yN (n_c,) is scratch."""
+    """x ← A⁻¹ b with the factors of `schur_factor` (Sherman–Morrison–Woodbury, module docstring).
+
+    Args:
+        P: the compiled model (PackedModel StructRef, read only): dof, carrier and the rows S.
+        W: the workspace (Workspace StructRef) holding the factors (W.A_f, W.d_inv, W.V, W.S,
+            W.S_inv); W.yN (n_c,) is overwritten as scratch.
+        b: (K,) right-hand side, left unchanged; must not alias x.
+        x: (K,) written: A⁻¹ b.
+    """
     dof, c, k = P.dof, P.carrier, P.rows.shape[0]
     Lf, di, V, S, Si, y = W.A_f, W.d_inv, W.V, W.S, W.S_inv, W.yN
     K = k * (len(dof) - 2)

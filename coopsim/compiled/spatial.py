@@ -9,13 +9,26 @@ from coopsim.compiled.toolchain.jit import kernel
 
 @kernel
 def cross3(a0, a1, a2, b0, b1, b2):
-    """a × b as three scalars."""
+    """a × b as three scalars.
+
+    Args:
+        a0, a1, a2: the components of a (any units, one set of axes).
+        b0, b1, b2: the components of b, in the same axes.
+
+    Returns:
+        tuple[float, float, float]: the components of a × b, in those axes.
+    """
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @kernel
 def cross_into(a, b, out):
-    """out ← a × b (3-vectors; out may not alias a or b)."""
+    """out ← a × b for 3-vectors (out may not alias a or b).
+
+    Args:
+        a, b: (3,) the factors, in one set of axes.
+        out: (3,) written: a × b, in the same axes.
+    """
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
@@ -23,7 +36,15 @@ def cross_into(a, b, out):
 
 @kernel
 def axis_rotation(axis, angle, out):
-    """out (3, 3) ← Rodrigues' R = I + sinφ [a×] + (1 − cosφ)[a×]² for the unit axis a, angle φ rad."""
+    """out ← the rotation of `angle` about the unit `axis`, by Rodrigues' formula.
+
+    R = I + sinφ [a×] + (1 − cosφ)[a×]² for the unit axis a and angle φ.
+
+    Args:
+        axis: (3,) unit rotation axis a.
+        angle: rad, the angle φ (right-handed about a).
+        out: (3, 3) written: R.
+    """
     s, c1 = np.sin(angle), 1.0 - np.cos(angle)
     x, y, z = axis[0], axis[1], axis[2]
     out[0, 0] = 1.0 - c1 * (y * y + z * z)
@@ -39,7 +60,12 @@ def axis_rotation(axis, angle, out):
 
 @kernel
 def matmul3(A, B, out):
-    """out (3, 3) ← A B (out may not alias A or B)."""
+    """out ← A B for 3 × 3 matrices (out may not alias A or B).
+
+    Args:
+        A, B: (3, 3) the factors.
+        out: (3, 3) written: A B.
+    """
     for i in range(3):
         for j in range(3):
             out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
@@ -47,7 +73,12 @@ def matmul3(A, B, out):
 
 @kernel
 def matmul3_T(A, B, out):
-    """out (3, 3) ← A Bᵀ."""
+    """out ← A Bᵀ for 3 × 3 matrices (out may not alias A or B).
+
+    Args:
+        A, B: (3, 3) the factors.
+        out: (3, 3) written: A Bᵀ.
+    """
     for i in range(3):
         for j in range(3):
             out[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
@@ -55,16 +86,29 @@ def matmul3_T(A, B, out):
 
 @kernel
 def rotate_inertia(R, I, tmp, out):
-    """out ← R I Rᵀ (3, 3); tmp (3, 3) scratch."""
+    """out ← R I Rᵀ: an inertia tensor re-expressed in the axes R maps to.
+
+    Args:
+        R: (3, 3) rotation, body to world axes.
+        I: (3, 3) kg·m², the inertia tensor in body axes.
+        tmp: (3, 3) scratch (overwritten; may not alias R, I or out).
+        out: (3, 3) written: R I Rᵀ, kg·m², world axes (may not alias R).
+    """
     matmul3(R, I, tmp)
     matmul3_T(tmp, R, out)
 
 
 @kernel
 def rot_log(R, out):
-    """out (3,) ← rotation vector φ (|φ| ≤ π) with exp([φ×]) = R, through the quaternion (Shepperd's
-    branches, w ≥ 0) as `coopsim.core.spatial.rot_log`: φ = 2 atan2(|v|, w) v/|v|, ~1e-15 rad at every
-    angle, near π included."""
+    """out ← the rotation vector φ (|φ| ≤ π) with exp([φ×]) = R.
+
+    Computed through the quaternion (Shepperd's branches, w ≥ 0) as `coopsim.core.spatial.rot_log`:
+    φ = 2 atan2(|v|, w) v/|v|, ~1e-15 rad at every angle, near π included.
+
+    Args:
+        R: (3, 3) rotation matrix.
+        out: (3,) written: φ, rad, in the axes R is expressed in.
+    """
     t = R[0, 0] + R[1, 1] + R[2, 2]
     if t > 0.0:
         s = 2.0 * np.sqrt(1.0 + t)
@@ -89,8 +133,14 @@ def rot_log(R, out):
 
 @kernel
 def rot_to_quat(R, q):
-    """q (4,) ← unit quaternion [w, x, y, z], w ≥ 0, of R (Shepperd's method, as
-    `coopsim.core.spatial.rot_to_quat`)."""
+    """q ← the unit quaternion [w, x, y, z], w ≥ 0, of R.
+
+    Shepperd's method, as `coopsim.core.spatial.rot_to_quat`.
+
+    Args:
+        R: (3, 3) rotation matrix (body to world axes).
+        q: (4,) written: [w, x, y, z], normalised, w ≥ 0.
+    """
     t = R[0, 0] + R[1, 1] + R[2, 2]
     if t > 0:
         s = 2.0 * np.sqrt(1.0 + t)

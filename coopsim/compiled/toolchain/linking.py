@@ -48,12 +48,26 @@ _MAKING_LAZY = ThreadScope()   # active while a lazy library's executable is mad
 
 
 def is_lazy(library) -> bool:
-    """Whether `library` is a kernel's lazy code library."""
+    """Whether `library` is a kernel's lazy code library.
+
+    Args:
+        library: a numba code library (`codegen.CodeLibrary`).
+
+    Returns:
+        bool: True when `KernelCompiler` made it lazy (or it was loaded lazy from the cache).
+    """
     return getattr(library, "_coopsim_lazy", False)
 
 
 def links_lazy(library) -> bool:
-    """Whether `library` links a lazy library, directly or through the libraries it links."""
+    """Whether `library` links a lazy library, directly or through the libraries it links.
+
+    Args:
+        library: a numba code library (`codegen.CodeLibrary`).
+
+    Returns:
+        bool: True when a lazy library is among those it links, at any depth.
+    """
     seen, todo = set(), list(getattr(library, "_linking_libraries", ()))
     while todo:
         linked = todo.pop()
@@ -67,8 +81,10 @@ def links_lazy(library) -> bool:
 
 @compiler_machinery.register_pass(mutates_CFG=False, analysis_only=True)
 class LazyLibrary(compiler_machinery.LoweringPass):
-    """Create the function's code library before lowering, marked lazy (a library handed in by the
-    caller of the pipeline is left as it is)."""
+    """Pass creating the function's code library before lowering, marked lazy.
+
+    A library handed in by the caller of the pipeline is left as it is.
+    """
 
     _name = "coopsim_lazy_library"
 
@@ -76,6 +92,14 @@ class LazyLibrary(compiler_machinery.LoweringPass):
         compiler_machinery.LoweringPass.__init__(self)
 
     def run_pass(self, state):
+        """Create the lazy code library of the function being compiled, unless it has one already.
+
+        Args:
+            state: numba's compiler state; state.library is set when None.
+
+        Returns:
+            bool: False (the pass changes no IR).
+        """
         if state.library is None:
             state.library = state.targetctx.codegen().create_library(state.func_id.func_qualname)
             state.library.enable_object_caching()
@@ -84,10 +108,17 @@ class LazyLibrary(compiler_machinery.LoweringPass):
 
 
 class KernelCompiler(resolution.CoopsimCompile, compiler.CompilerBase):
-    """numba's nopython pipeline, with the code library made lazy (`LazyLibrary`) before lowering; a
-    coopsim compile (`resolution.CoopsimCompile`)."""
+    """numba's nopython pipeline, with the code library made lazy (`LazyLibrary`) before lowering.
+
+    A coopsim compile (`resolution.CoopsimCompile`).
+    """
 
     def define_pipelines(self):
+        """numba's nopython pipeline with `LazyLibrary` added after type annotation.
+
+        Returns:
+            list: the one finalized pass manager.
+        """
         pm = compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)
         pm.add_pass_after(LazyLibrary, typed_passes.AnnotateTypes)
         pm.finalize()
@@ -132,7 +163,12 @@ def _set_environments(library) -> None:
 
 
 def install() -> bool:
-    """Wrap numba's methods (module docstring); True if installed (idempotent)."""
+    """Wrap numba's methods (module docstring); idempotent.
+
+    Returns:
+        bool: True if installed (now or before); False, nothing installed, on a numba outside
+        `numba_range.NUMBA_RANGE` or without the wrapped methods.
+    """
     if not supported_numba():
         return False
     lib, ctx, result = codegen.CPUCodeLibrary, cpu.CPUContext, compiler.CompileResult

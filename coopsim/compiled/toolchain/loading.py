@@ -26,8 +26,16 @@ MARK = "_coopsim_compiled"     # the attribute `jit.kernel` and `jit.entry` set 
 
 
 def is_coopsim(py_func) -> bool:
-    """Whether `py_func` is coopsim's: compiled by `jit.kernel` / `jit.entry` (marked MARK), or defined
-    in a module of the coopsim package."""
+    """Whether `py_func` is coopsim's.
+
+    Compiled by `jit.kernel` / `jit.entry` (marked MARK), or defined in a module of the coopsim package.
+
+    Args:
+        py_func: the Python function of a numba dispatcher (None allowed).
+
+    Returns:
+        bool: True for a coopsim function.
+    """
     if getattr(py_func, MARK, False):
         return True
     module = getattr(py_func, "__module__", None) or ""
@@ -35,7 +43,12 @@ def is_coopsim(py_func) -> bool:
 
 
 def install() -> bool:
-    """Wrap `Cache.load_overload` (module docstring); True if installed (idempotent)."""
+    """Wrap `Cache.load_overload` (module docstring); idempotent.
+
+    Returns:
+        bool: True if installed (now or before); False, nothing installed, on a numba outside
+        `numba_range.NUMBA_RANGE` or without the wrapped methods.
+    """
     cache = caching.Cache
     if not supported_numba() or not hasattr(cache, "load_overload") or not hasattr(cache, "_load_overload"):
         return False

@@ -36,7 +36,11 @@ coopsim_compile = ThreadScope()   # `with coopsim_compile():` the scope of a coo
 
 
 def in_coopsim_compile() -> bool:
-    """Whether a coopsim function is being compiled on this thread."""
+    """Whether a coopsim function is being compiled on this thread.
+
+    Returns:
+        bool: True inside a `coopsim_compile` scope.
+    """
     return coopsim_compile.active
 
 
@@ -61,7 +65,12 @@ def _flags_key(flags):
 
 
 def install() -> bool:
-    """Wrap `BaseFunction.get_call_type` (module docstring); True if installed (idempotent)."""
+    """Wrap `BaseFunction.get_call_type` (module docstring); idempotent.
+
+    Returns:
+        bool: True if installed (now or before); False, nothing installed, on a numba outside
+        `numba_range.NUMBA_RANGE` or without the wrapped methods.
+    """
     base = functions.BaseFunction
     if not (supported_numba() and hasattr(base, "get_call_type")
             and hasattr(targetconfig.ConfigStack, "top_or_none")):

@@ -24,4 +24,5 @@ class ThreadScope:
 
     @property
     def active(self) -> bool:
+        """Whether this thread is inside the scope (at any nesting depth)."""
         return getattr(self._local, "depth", 0) > 0
