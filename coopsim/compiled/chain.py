@@ -42,8 +42,16 @@ EIGEN, DENSE, SCHUR = 0, 1, 2   # the constraint solve's paths (`chain_solve`)
 
 @kernel
 def place_point(R, x, l, o, rel, world):
-    """A point l (3,) fixed in a frame (R (3, 3), origin x (3,) relative to the arm's base point o):
-    rel ← x + R l, world ← o + rel."""
+    """A point l fixed in a frame, relative to the arm's base point and in the world: rel ← x + R l, world ← o + rel.
+
+    Args:
+        R: (3, 3) world ← the frame.
+        x: (3,) m, the frame's origin relative to the arm's base point o, world axes.
+        l: (3,) m, the point in the frame.
+        o: (3,) m, the arm's base point, world.
+        rel: (3,) written: the point relative to o, m, world axes.
+        world: (3,) written: the point, m, world.
+    """
     for a in range(3):
         v = x[a] + R[a, 0] * l[0] + R[a, 1] * l[1] + R[a, 2] * l[2]
         rel[a] = v
@@ -52,13 +60,25 @@ def place_point(R, x, l, o, rel, world):
 
 @kernel
 def arm_kinematics(P, W, m, q):
-    """Frame poses of arm m at the stacked joint angles q (rad): R_i = R_{i−1} R0_i Rot(axis_i, θ_i),
-    p_i = p_{i−1} + R_{i−1} d_i; z_i, c_i, I_i (world) and the end-effector frame. With Rodrigues'
-    Rot(a, θ) = 1 + sinθ [a×] + (1 − cosθ)[a×]², R0_i Rot(a_i, θ_i) = R0_i + sinθ K1_i + (1 − cosθ) K2_i
-    (K1 = R0[a×], K2 = R0[a×]² packed), z_i = R_i a_i = R_{i−1} (R0_i a_i) (Rot(a, θ) a = a), and
-    I_i = R_i I_link R_iᵀ formed as a symmetric matrix. The parent frame is carried in scalars. Positions
-    are accumulated from the base point (W.p_rel, c_rel, p_ee_rel); the world ones add base_pos.
-    A prismatic joint keeps R_i = R_{i−1} R0_i and moves p_i by θ_i z_i (θ_i in m)."""
+    """Frame poses of arm m at the stacked joint angles q: R_i, p_i, z_i, c_i, I_i and the end-effector frame.
+
+    R_i = R_{i−1} R0_i Rot(axis_i, θ_i), p_i = p_{i−1} + R_{i−1} d_i; z_i, c_i, I_i (world) and the
+    end-effector frame. With Rodrigues' Rot(a, θ) = 1 + sinθ [a×] + (1 − cosθ)[a×]²,
+    R0_i Rot(a_i, θ_i) = R0_i + sinθ K1_i + (1 − cosθ) K2_i (K1 = R0[a×], K2 = R0[a×]² packed),
+    z_i = R_i a_i = R_{i−1} (R0_i a_i) (Rot(a, θ) a = a), and I_i = R_i I_link R_iᵀ formed as a symmetric
+    matrix. The parent frame is carried in scalars. Positions are accumulated from the base point
+    (W.p_rel, c_rel, p_ee_rel); the world ones add base_pos. A prismatic joint keeps R_i = R_{i−1} R0_i
+    and moves p_i by θ_i z_i (θ_i in m).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef). Written in arm m's rows, world axes: W.R (world ← link
+            frame), W.z (unit joint axes), W.I (kg·m², about the centres of mass), W.p_rel, W.c_rel (m,
+            joint origins and centres of mass relative to the arm's base point), W.p, W.c (the same, world
+            positions), and W.R_ee[m], W.p_ee_rel[m], W.p_ee[m] (the end-effector frame).
+        m: the arm index, 0-based.
+        q: (N,) rad or m, the stacked joint coordinates (arm m's rows read).
+    """
     dof, jt = P.dof, P.joint_type
     bp, br, jp, jr, k1, k2, jz = P.base_pos, P.base_rot, P.joint_pos, P.joint_rot, P.joint_k1, P.joint_k2, P.joint_z
     lc, li, eep, eer = P.link_com, P.link_inertia, P.ee_pos, P.ee_rot
@@ -141,8 +161,17 @@ def arm_kinematics(P, W, m, q):
 
 @kernel
 def arm_jacobian(P, W, m):
-    """End-effector Jacobian J_m (6, n_m): columns [z_j × (p_EE − p_j); z_j] (revolute) or [z_j; 0]
-    (prismatic) (world axes; positions relative to the base point)."""
+    """End-effector Jacobian J_m (6, n_m) of arm m, world axes, positions relative to the base point.
+
+    Columns [z_j × (p_EE − p_j); z_j] (revolute) or [z_j; 0] (prismatic): the twist [v; ω] of the
+    end-effector frame's origin per unit joint rate.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.z, W.p_rel and W.p_ee_rel of `arm_kinematics` read;
+            W.J[m, :, :n_m] written.
+        m: the arm index, 0-based.
+    """
     dof, jt = P.dof, P.joint_type
     p, z, p_ee, J = W.p_rel, W.z, W.p_ee_rel, W.J
     o, e = dof[m], dof[m + 1]
@@ -169,12 +198,24 @@ def arm_jacobian(P, W, m):
 
 @kernel
 def arm_bias(P, W, m, qd):
-    """h_m = −Re_m (bias forces, eq. 10) and J̇_mθ̇_m of arm m from one forward recursion at θ̈ = 0
-    with base acceleration −g (eq. 9) and the backward recursion of ∂S/∂θ̈ (`gibbs_gradient_of_motion`):
-    ω_i = ω_{i−1} + z_i θ̇_i, ω̇_i = ω̇_{i−1} + ω_{i−1} × z_i θ̇_i, a_{i+1} = a_i + ω̇_i × d + ω_i × (ω_i × d);
-    F_j = m_j a_cj + F_{j+1}, N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1}
-    + (p_{j+1} − p_j) × F_{j+1}, h_j = z_j · N_j. A prismatic joint j leaves ω, ω̇ and adds
-    2 ω_{j−1} × z_j θ̇_j to a_j (`coopsim.dynamics.kinematics.link_motion`); its h_j = z_j · F_j."""
+    """h_m = −Re_m (bias forces, eq. 10) and J̇_mθ̇_m of arm m, from one forward and one backward recursion.
+
+    The forward recursion at θ̈ = 0 with base acceleration −g (eq. 9), the backward one of ∂S/∂θ̈
+    (`gibbs_gradient_of_motion`): ω_i = ω_{i−1} + z_i θ̇_i, ω̇_i = ω̇_{i−1} + ω_{i−1} × z_i θ̇_i,
+    a_{i+1} = a_i + ω̇_i × d + ω_i × (ω_i × d); F_j = m_j a_cj + F_{j+1},
+    N_j = (c_j − p_j) × m_j a_cj + I_j ω̇_j + ω_j × I_j ω_j + N_{j+1} + (p_{j+1} − p_j) × F_{j+1},
+    h_j = z_j · N_j. A prismatic joint j leaves ω, ω̇ and adds 2 ω_{j−1} × z_j θ̇_j to a_j
+    (`coopsim.dynamics.kinematics.link_motion`); its h_j = z_j · F_j.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): arm m's kinematics (`arm_kinematics`) read. Written, world
+            axes: W.w, W.dw, W.a in arm m's rows (rad/s, rad/s², m/s²: link motion at θ̈ = 0 with base
+            acceleration −g), W.h and W.h_arm in arm m's rows (N·m, or N for a prismatic joint), and
+            W.Jd_qd[m] ([m/s²; rad/s²], the end-effector's bias acceleration without −g).
+        m: the arm index, 0-based.
+        qd: (N,) rad/s or m/s, the stacked joint rates (arm m's rows read).
+    """
     dof, g, lm, jt = P.dof, P.gravity, P.link_mass, P.joint_type
     p, z, cw, Iw, Ww, DW, Aw = W.p_rel, W.z, W.c_rel, W.I, W.w, W.dw, W.a
     h, h_arm, Jd_qd, p_ee = W.h, W.h_arm, W.Jd_qd, W.p_ee_rel
@@ -257,10 +298,18 @@ def arm_bias(P, W, m, qd):
 
 @kernel
 def arm_mass_matrix(P, W, m):
-    """I_m (n_m, n_m) of arm m by the composite-rigid-body recursion (module docstring), positions
-    taken relative to the arm's base point, into W.Mb rows dof[m]:dof[m+1]. A unit θ̈_l of a prismatic
-    joint l moves the composite C_l by z_l: force f = m_C z_l, moment (base point) n = h_C × z_l; a
-    prismatic row j takes I_m[j, l] = z_j · f."""
+    """I_m (n_m, n_m) of arm m by the composite-rigid-body recursion (module docstring) into W.Mb.
+
+    Positions are taken relative to the arm's base point; the block goes into W.Mb rows dof[m]:dof[m+1].
+    A unit θ̈_l of a prismatic joint l moves the composite C_l by z_l: force f = m_C z_l, moment (base
+    point) n = h_C × z_l; a prismatic row j takes I_m[j, l] = z_j · f.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): arm m's kinematics (`arm_kinematics`) read; W.Mb rows
+            dof[m]:dof[m+1], columns 0:n_m written (kg·m², kg·m or kg by the joints' types).
+        m: the arm index, 0-based.
+    """
     dof, lm, jt = P.dof, P.link_mass, P.joint_type
     cw, Iw, z, p, Mb = W.c_rel, W.I, W.z, W.p_rel, W.Mb
     o, e = dof[m], dof[m + 1]
@@ -312,9 +361,18 @@ def arm_mass_matrix(P, W, m):
 
 @kernel
 def object_pose(P, W):
-    """The object carried by arm c (eqs. 11–13): pose (p_C, R_o = R_EE,c R_grasp,cᵀ, K_o = R_o K R_oᵀ),
-    offsets s_m = p_C − grasp point m (r, 3) and the object Jacobian J_o = W_c⁻ᵀ J_c (6, n_c), from the
-    current kinematics."""
+    """The object carried by arm c (eqs. 11–13): its pose, the grasp offsets and the object Jacobian.
+
+    Pose (p_C, R_o = R_EE,c R_grasp,cᵀ, K_o = R_o K R_oᵀ), offsets s_m = p_C − grasp point m (r, 3) and
+    the object Jacobian J_o = W_c⁻ᵀ J_c (6, n_c), from the current kinematics.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the carrier's kinematics and Jacobian (`arm_kinematics`,
+            `arm_jacobian`) read. Written: W.p_C (3,) m, world; W.R_o (3, 3) world ← object frame;
+            W.K_o (3, 3) kg·m², about C, world axes; W.s (r, 3) m, world axes; W.J_o[:, :n_c] ([v_C; ω]
+            per unit joint rate of the carrier).
+    """
     dof, c, gp, gr, oi = P.dof, P.carrier, P.grasp_pos, P.grasp_rot, P.obj_inertia
     R_ee, p_ee, R_o, p_C, K_o, s, J, J_o = W.R_ee, W.p_ee, W.R_o, W.p_C, W.K_o, W.s, W.J, W.J_o
     n = dof[c + 1] - dof[c]
@@ -363,9 +421,20 @@ def object_pose(P, W):
 
 @kernel
 def object_dynamics(P, W, qd):
-    """Object twist v_o = J_oθ̇_c, J̇_oθ̇_c = W_c⁻ᵀ J̇_cθ̇_c + [ω × (ω × s_c); 0], and the object's inertia
-    joined to the carrier block (eqs. 17–19): 𝐈_cc += J_oᵀ M_o J_o, h_c += J_oᵀ (M_o J̇_oθ̇_c + b_o),
-    b_o = [−m_o g; ω × K_o ω] (W.Y_bias holds M_o J̇_oθ̇_c + b_o). Needs `object_pose` and the arm terms."""
+    """Object twist, J̇_oθ̇_c, and the object's inertia joined to the carrier block (eqs. 17–19).
+
+    Object twist v_o = J_oθ̇_c, J̇_oθ̇_c = W_c⁻ᵀ J̇_cθ̇_c + [ω × (ω × s_c); 0], and the object's inertia
+    joined to the carrier block: 𝐈_cc += J_oᵀ M_o J_o, h_c += J_oᵀ (M_o J̇_oθ̇_c + b_o),
+    b_o = [−m_o g; ω × K_o ω] (W.Y_bias holds M_o J̇_oθ̇_c + b_o). Needs `object_pose` and the arm terms.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): `object_pose`'s terms and the carrier's W.Jd_qd read.
+            Written, world axes: W.v_o (6,) [v_C; ω] m/s, rad/s; W.Jd_o_qd (6,) m/s², rad/s²; W.Y_bias (6,)
+            N, N·m. Added to (once per evaluation, after `arm_bias` and `arm_mass_matrix`): W.h and W.Mb in
+            the carrier's rows.
+        qd: (N,) rad/s or m/s, the stacked joint rates (the carrier's rows read).
+    """
     dof, c, mo, g = P.dof, P.carrier, P.obj_mass, P.gravity
     s, J_o, v_o, Jd_qd, Jd_o_qd, K, Y, h, Mb = W.s, W.J_o, W.v_o, W.Jd_qd, W.Jd_o_qd, W.K_o, W.Y_bias, W.h, W.Mb
     o = dof[c]
@@ -418,8 +487,15 @@ def object_dynamics(P, W, qd):
 
 @kernel
 def constraint_jacobian(P, W):
-    """Λ (K, N) (eq. 23): for each arm m ≠ c the rows S (J_m θ̇_m − W_mᵀ J_o θ̇_c), with
-    W_mᵀ [v; ω] = [v + s_m × ω; ω]. Columns of arms other than m and c stay zero."""
+    """Λ (K, N) (eq. 23): for each arm m ≠ c the rows S (J_m θ̇_m − W_mᵀ J_o θ̇_c).
+
+    With W_mᵀ [v; ω] = [v + s_m × ω; ω]. Columns of arms other than m and c stay zero.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.J, W.s and W.J_o (`arm_jacobian`, `object_pose`) read;
+            W.Lam written (row group g = g-th arm other than c, rows g·k … g·k + k − 1).
+    """
     S, dof, c = P.rows, P.dof, P.carrier
     s, J, J_o, Lam = W.s, W.J, W.J_o, W.Lam
     k = S.shape[0]
@@ -446,7 +522,13 @@ def constraint_jacobian(P, W):
 
 @kernel
 def constraint_bias(P, W):
-    """Λ̇θ̇ (K,) (eq. 24): S (J̇_mθ̇_m − W_mᵀ J̇_oθ̇_c − [ω × (ω × (−s_m)); 0]) for each arm m ≠ c."""
+    """Λ̇θ̇ (K,) (eq. 24): S (J̇_mθ̇_m − W_mᵀ J̇_oθ̇_c − [ω × (ω × (−s_m)); 0]) for each arm m ≠ c.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Jd_qd, W.s, W.v_o and W.Jd_o_qd (`arm_bias`,
+            `object_pose`, `object_dynamics`) read; W.Lam_dot_qd (K,) written (m/s², rad/s² in the rows S).
+    """
     S, dof, c = P.rows, P.dof, P.carrier
     s, v_o, ad, Jd_qd, Ldq = W.s, W.v_o, W.Jd_o_qd, W.Jd_qd, W.Lam_dot_qd
     k = S.shape[0]
@@ -472,7 +554,15 @@ def constraint_bias(P, W):
 
 @kernel
 def arm_terms(P, W, q, qd):
-    """Stages 1–2 for every open arm at (q, qd) (N,): kinematics, J_m, J̇_mθ̇_m, h_m and I_m (eq. 10)."""
+    """Stages 1–2 for every open arm at (q, qd): kinematics, J_m, J̇_mθ̇_m, h_m and I_m (eq. 10).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): written by `arm_kinematics`, `arm_jacobian`, `arm_bias` and
+            `arm_mass_matrix` for every arm (no object terms yet).
+        q: (N,) rad or m, the stacked joint coordinates.
+        qd: (N,) rad/s or m/s, the stacked joint rates.
+    """
     for m in range(len(P.dof) - 1):
         arm_kinematics(P, W, m, q)
         arm_jacobian(P, W, m)
@@ -482,7 +572,15 @@ def arm_terms(P, W, q, qd):
 
 @kernel
 def chain_terms(P, W, q, qd):
-    """Stages 1–3 and the assembly of eqs. 17–24 at state (q, qd) (N,) into W."""
+    """Stages 1–3 and the assembly of eqs. 17–24 at state (q, qd) into W.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the arm terms, the object's (`object_pose`,
+            `object_dynamics`), Λ (W.Lam) and Λ̇θ̇ (W.Lam_dot_qd) written.
+        q: (N,) rad or m, the stacked joint coordinates.
+        qd: (N,) rad/s or m/s, the stacked joint rates.
+    """
     arm_terms(P, W, q, qd)
     object_pose(P, W)
     object_dynamics(P, W, qd)
@@ -492,10 +590,18 @@ def chain_terms(P, W, q, qd):
 
 @kernel
 def loop_residual(P, W):
-    """Φ (K,) into W.phi from the current kinematics: for each arm m ≠ c,
-    S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)] (m, rad), the grasp frame carried by the object.
-    No world position enters: p_EE,m − p_grasp,m = (o_m − o_c) + (p_EE,m − p_EE,c − s_c + s_m), the
-    end-effectors relative to their bases o (p_grasp,m = p_C − s_m, p_C = p_EE,c + s_c)."""
+    """Φ (K,) into W.phi from the current kinematics: the loop-closure error of each arm m ≠ c.
+
+    For each arm m ≠ c, S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)] (m, rad), the grasp frame
+    carried by the object. No world position enters: p_EE,m − p_grasp,m = (o_m − o_c) +
+    (p_EE,m − p_EE,c − s_c + s_m), the end-effectors relative to their bases o (p_grasp,m = p_C − s_m,
+    p_C = p_EE,c + s_c).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): every arm's kinematics and `object_pose`'s W.R_o and W.s
+            read; W.phi (K,) written (m, rad); W.v3 and W.m3 scratch.
+    """
     S, dof, c, gr, bp = P.rows, P.dof, P.carrier, P.grasp_rot, P.base_pos
     R_o, R_ee, p_ee, s, phi, lg, m3 = W.R_o, W.R_ee, W.p_ee_rel, W.s, W.phi, W.v3, W.m3
     Rd, E = m3[0], m3[1]
@@ -522,8 +628,15 @@ def loop_residual(P, W):
 
 @kernel
 def constraint_rhs(P, W, stab):
-    """b = Λ̇θ̇ + stab + Yᵀz (K,) into W.b (W.X = Yᵀ, W.x0 = z of `chain_solve`): row group g over
-    the columns of its arm and the carrier's only."""
+    """b = Λ̇θ̇ + stab + Yᵀz (K,) into W.b (W.X = Yᵀ, W.x0 = z of `chain_solve`).
+
+    Row group g runs over the columns of its arm and the carrier's only.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.X, W.x0 and W.Lam_dot_qd read; W.b (K,) written.
+        stab: (K,) the stabilising term added to the right-hand side (zeros: none).
+    """
     dof, c, k = P.dof, P.carrier, P.rows.shape[0]
     Yt, z, b, Ldq = W.X, W.x0, W.b, W.Lam_dot_qd
     oc, ec = dof[c], dof[c + 1]
@@ -541,9 +654,16 @@ def constraint_rhs(P, W, stab):
 
 @kernel
 def constraint_matrix(P, W):
-    """A = Λ𝐈⁻¹Λᵀ = YᵀY (K, K) into W.A, from W.X = Yᵀ: the dense path of `chain_solve` (when the
-    `schur` path is not certified) and the reported condition number. Rows g·k + i and l share the
-    carrier's columns, and the arm's when l is in the same group."""
+    """A = Λ𝐈⁻¹Λᵀ = YᵀY (K, K) into W.A, from W.X = Yᵀ.
+
+    The dense path of `chain_solve` (when the `schur` path is not certified) and the reported condition
+    number. Rows g·k + i and l share the carrier's columns, and the arm's when l is in the same group.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.X (`chain_solve`) read; W.A (K, K) written (both
+            triangles).
+    """
     dof, c, k = P.dof, P.carrier, P.rows.shape[0]
     Yt, A = W.X, W.A
     K = A.shape[0]
@@ -565,9 +685,20 @@ def constraint_matrix(P, W):
 
 @kernel
 def solve_constraints(P, W, K):
-    """F ← (Λ𝐈⁻¹Λᵀ)⁻¹ b (W.A, W.b): pivoted Cholesky when the pivots prove full rank, else the
-    minimum-norm eigen solution. Sets W.rank, W.cond (−1: not computed on the fast path). Returns
-    whether the Cholesky path was taken."""
+    """F ← (Λ𝐈⁻¹Λᵀ)⁻¹ b (W.A, W.b): pivoted Cholesky when the pivots prove full rank, else eigen.
+
+    The eigen path gives the minimum-norm solution. Sets W.rank, W.cond (−1: not computed on the fast
+    path).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.A and W.b read; W.F (K,) written (the loop-closure
+            wrenches, N and N·m in the rows S), W.rank, W.cond; W.A_f, W.perm, W.yK overwritten.
+        K: the number of constraint rows, k(r−1).
+
+    Returns:
+        bool: whether the Cholesky path was taken.
+    """
     rank_tol = P.rank_tol
     A, A_f, perm, b, yK, F, rank_, cond_ = W.A, W.A_f, W.perm, W.b, W.yK, W.F, W.rank, W.cond
     ratio = pivoted_cholesky(A, A_f, perm, K)
@@ -585,23 +716,36 @@ def solve_constraints(P, W, K):
 
 @kernel
 def chain_solve(P, W, tau, stab):
-    """θ̈ (eqs. 25–27) into W.qdd and the loop-closure wrenches F (K,) into W.F for torques tau (N,),
-    with `stab` (K,) added to the right-hand side of Λθ̈ = −Λ̇θ̇ − stab (zeros: none). Needs
-    `chain_terms` first. One step of iterative refinement on the acceleration constraint. Returns a
-    status code (module docstring).
+    """θ̈ (eqs. 25–27) into W.qdd and the loop-closure wrenches F (K,) into W.F for torques tau (N,).
+
+    `stab` (K,) is added to the right-hand side of Λθ̈ = −Λ̇θ̇ − stab (zeros: none). Needs `chain_terms`
+    first. One step of iterative refinement on the acceleration constraint.
 
     With 𝐈 = L Lᵀ (block by block: W.Lb, the reciprocals of its diagonal in W.Lb_inv, so that the
     substitutions multiply), Yᵀ = Λ L⁻ᵀ (W.X, K × N) and z = L⁻¹(τ − h) (W.x0):
         (Λ𝐈⁻¹Λᵀ) F = YᵀY F = Λ̇θ̇ + stab + Yᵀz,   θ̈ = 𝐈⁻¹(τ − h − ΛᵀF) = L⁻ᵀ(z − Y F);
     refinement: F += (YᵀY)⁻¹ (Λθ̈ + Λ̇θ̇ + stab), and θ̈ again from the refined F. YᵀY is solved in
-    O(r) by its block structure (`schur`) for three arms or more where that is certified, else formed (`constraint_matrix`)
-    and solved densely (`solve_constraints`), which also decides the rank. Row group g of Λ
-    (rows g·k … g·k + k − 1, arm m_g = the g-th arm other than the carrier c) is zero outside the
-    columns of m_g and c, and so is row g·k + i of Yᵀ: every product runs over those blocks only.
-    The factor is formed row by row (the same entries and sums as column by column), each row
-    followed by its forward substitution; its transpose is kept in the strict upper triangle of
-    W.Lb, so that both substitutions read rows. The loops run over views of one block, indexed
-    from 0 (numba then need not wrap negative indices)."""
+    O(r) by its block structure (`schur`) for three arms or more where that is certified, else formed
+    (`constraint_matrix`) and solved densely (`solve_constraints`), which also decides the rank. Row
+    group g of Λ (rows g·k … g·k + k − 1, arm m_g = the g-th arm other than the carrier c) is zero
+    outside the columns of m_g and c, and so is row g·k + i of Yᵀ: every product runs over those blocks
+    only. The factor is formed row by row (the same entries and sums as column by column), each row
+    followed by its forward substitution; its transpose is kept in the strict upper triangle of W.Lb, so
+    that both substitutions read rows. The loops run over views of one block, indexed from 0 (numba then
+    need not wrap negative indices).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): `chain_terms`' terms read (W.Mb, W.h, W.Lam,
+            W.Lam_dot_qd). Written: W.qdd (N,) rad/s² or m/s²; W.F (K,) N and N·m in the rows S; W.Lb,
+            W.Lb_inv, W.X, W.x0, W.b, W.res, W.dF, W.rank, W.cond, and the buffers of the `schur` or dense
+            solve.
+        tau: (N,) N·m (N for a prismatic joint), the joint torques.
+        stab: (K,) the stabilising term (zeros: none).
+
+    Returns:
+        int: OK, NOT_PD, RANK_DEFICIENT or NON_FINITE (module docstring).
+    """
     tau, stab = borrow(tau), borrow(stab)
     dof, c, k, rank_tol = P.dof, P.carrier, P.rows.shape[0], P.rank_tol
     Lam, Yt, z, h, Mb, Lb, Li, b, A = W.Lam, W.X, W.x0, W.h, W.Mb, W.Lb, W.Lb_inv, W.b, W.A
@@ -699,7 +843,15 @@ def chain_solve(P, W, tau, stab):
 
 @kernel
 def baumgarte_rhs(P, W, qd, out):
-    """out (K,) ← 2α Λθ̇ + β² Φ (Baumgarte's stabilising right-hand side), or zeros without it."""
+    """out (K,) ← 2α Λθ̇ + β² Φ (Baumgarte's stabilising right-hand side), or zeros without it.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Lam and the kinematics read; W.phi written
+            (`loop_residual`).
+        qd: (N,) rad/s or m/s, the stacked joint rates.
+        out: (K,) written (m/s², rad/s² in the rows S).
+    """
     Lam, phi = W.Lam, W.phi
     K, N = Lam.shape
     if P.stabilization != STAB_BAUMGARTE:
@@ -717,13 +869,26 @@ def baumgarte_rhs(P, W, qd, out):
 
 @kernel
 def chain_forward(P, W, q, qd, tau, stab):
-    """One closed-chain forward-dynamics evaluation at (q, qd) with torques tau: W.qdd, W.F and every
-    intermediate term in W; stab (K,) scratch for the Baumgarte term. Returns a status code.
+    """One closed-chain forward-dynamics evaluation at (q, qd) with torques tau: W.qdd, W.F and every term.
 
-    `chain_terms`, `baumgarte_rhs` and `chain_solve`, with the stages of the first called from here
-    directly: every level of calls takes references to its array arguments that numba cannot prune
-    (atomic updates), and the Baumgarte kernel is only entered when selected. The array arguments
-    are borrowed at once (`structs.borrow`): no reference to them is held across the calls."""
+    Every intermediate term goes into W. `chain_terms`, `baumgarte_rhs` and `chain_solve`, with the
+    stages of the first called from here directly: every level of calls takes references to its array
+    arguments that numba cannot prune (atomic updates), and the Baumgarte kernel is only entered when
+    selected. The array arguments are borrowed at once (`structs.borrow`): no reference to them is held
+    across the calls.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): every term of the evaluation written; the results are
+            W.qdd (N,) θ̈, rad/s² or m/s², and W.F (K,) the loop-closure wrenches, N and N·m in the rows S.
+        q: (N,) rad or m, the stacked joint coordinates.
+        qd: (N,) rad/s or m/s, the stacked joint rates.
+        tau: (N,) N·m (N for a prismatic joint), the joint torques.
+        stab: (K,) scratch, overwritten with the Baumgarte term (zeros without it).
+
+    Returns:
+        int: OK, NOT_PD, RANK_DEFICIENT or NON_FINITE (module docstring).
+    """
     q, qd, tau, stab = borrow(q), borrow(qd), borrow(tau), borrow(stab)
     for m in range(len(P.dof) - 1):
         arm_kinematics(P, W, m, q)

@@ -44,10 +44,21 @@ SAFETY, MIN_FACTOR, MAX_FACTOR, STRETCH, SUBSTEP_SLACK = 0.9, 0.2, 10.0, 1.01, 1
 
 
 class Tableau(NamedTuple):
-    """An explicit Runge–Kutta method as arrays (16 stage slots): code (DOP853 | DOPRI5 | RK4);
-    stages s; A (16, 16), C (16,), B (16,) step weights over stages 0…s−1; E5, E3 (16,) error weights
-    over stages 0…s (stage s = f(t + h, y_new)); D (4, 16) DOP853's dense-output rows (stages 0…15);
-    Pd (7, 4) Dormand–Prince's dense-output polynomial; err_order p̂ (controller exponent 1/(p̂+1))."""
+    """An explicit Runge–Kutta method as arrays (16 stage slots, unused ones zero).
+
+    Compiled code takes it as the StructRef of `structs.to_struct` (the kernels' argument tab).
+
+    Attributes:
+        code: DOP853, DOPRI5 or RK4.
+        stages: the number of stages of one step (s below).
+        A: (16, 16) the stage coefficients a_ij.
+        C: (16,) the nodes c_i (stage i is evaluated at t + c_i h).
+        B: (16,) step weights over stages 0…s−1.
+        E5, E3: (16,) error weights over stages 0…s (stage s = f(t + h, y_new)); E3 is DOP853's only.
+        D: (4, 16) DOP853's dense-output rows (stages 0…15).
+        Pd: (7, 4) Dormand–Prince's dense-output polynomial.
+        err_order: p̂ (controller exponent 1/(p̂+1)); 0 for RK4, which has no error estimate.
+    """
 
     code: int
     stages: int
@@ -62,7 +73,17 @@ class Tableau(NamedTuple):
 
 
 def tableau(method: str) -> Tableau:
-    """The tableau of 'dop853', 'dopri5' or 'rk4'."""
+    """The tableau of 'dop853', 'dopri5' or 'rk4'.
+
+    Args:
+        method: 'dop853', 'dopri5' or 'rk4'.
+
+    Returns:
+        Tableau: the method's coefficients (`coopsim.core.tableaux`) in the 16-slot arrays.
+
+    Raises:
+        ValueError: for any other method.
+    """
     A, C, B, E5, E3 = np.zeros((16, 16)), np.zeros(16), np.zeros(16), np.zeros(16), np.zeros(16)
     D, Pd = np.zeros((4, 16)), np.zeros((7, 4))
     if method == "dop853":
@@ -86,13 +107,30 @@ def tableau(method: str) -> Tableau:
 
 
 class Loop(NamedTuple):
-    """State and buffers of one integration (n = 2N state size, K constraint rows).
-    t (1,) s and h (1,) s (step proposal, 0 before the first step); y (n,) state [θ; θ̇]; fy (n,) its
-    derivative; has_fy (1,) int; k_next (1,) int: next output to fill (0: the initial state is not yet projected); count (4,) int: rhs
-    evaluations, accepted and rejected steps, projections; status (1,) int (0 or a failure code),
-    fail_t (1,), fail_y (n,): where it failed; warn (2,) int: [Λ𝐈⁻¹Λᵀ rank lost?, its rank],
-    warn_t (1,), warn_cond (1,), warn_y (n,): first such state; K (16, n) stages; y_new, ytmp (n,);
-    Fd (7, n) dense-output coefficients; stab (K,) Baumgarte term; step (N,) projection step."""
+    """State and buffers of one integration (n = 2N state size, N joints, K constraint rows).
+
+    Compiled code takes it as the StructRef of `structs.to_struct` (the kernels' argument L); `run`
+    advances it in place, and Python reads the counters and records after each call.
+
+    Attributes:
+        t: (1,) s, the time of the state y.
+        h: (1,) s, the step proposal (0 before the first step).
+        y: (n,) the state [θ; θ̇] (rad or m, rad/s or m/s).
+        fy: (n,) its derivative [θ̇; θ̈].
+        has_fy: (1,) int: 1 once fy holds the derivative at (t, y).
+        k_next: (1,) int: next output to fill (0: the initial state is not yet projected).
+        count: (4,) int: rhs evaluations, accepted and rejected steps, projections.
+        status: (1,) int: 0 or a failure code.
+        fail_t, fail_y: (1,) s and (n,): where it failed.
+        warn: (2,) int: [Λ𝐈⁻¹Λᵀ rank lost?, its rank].
+        warn_t, warn_cond, warn_y: (1,) s, (1,), (n,): the first such state, its time and the condition
+            number of Λ𝐈⁻¹Λᵀ there.
+        K: (16, n) the stage derivatives.
+        y_new, ytmp: (n,) the step's new state, and the stage input (scratch).
+        Fd: (7, n) dense-output coefficients.
+        stab: (K,) Baumgarte term.
+        step: (N,) projection step.
+    """
 
     t: np.ndarray
     h: np.ndarray
@@ -117,7 +155,16 @@ class Loop(NamedTuple):
 
 
 def new_loop(y0: np.ndarray, t0: float, n_rows: int) -> Loop:
-    """Fresh loop state at (t0, y0) for a model with n_rows constraint rows."""
+    """Fresh loop state at (t0, y0) for a model with n_rows constraint rows.
+
+    Args:
+        y0: (2N,) the initial state [θ; θ̇] (rad or m, rad/s or m/s), copied.
+        t0: s, its time.
+        n_rows: K = k(r−1), the model's constraint rows.
+
+    Returns:
+        Loop: counters and buffers zeroed; h = 0 (`run` chooses the first step), k_next = 0.
+    """
     n = len(y0)
     z, iz = np.zeros, lambda k: np.zeros(k, dtype=np.int64)  # noqa: E731
     return Loop(np.array([t0]), z(1), np.array(y0, dtype=float), z(n), iz(1), iz(1),
@@ -126,8 +173,19 @@ def new_loop(y0: np.ndarray, t0: float, n_rows: int) -> Loop:
 
 
 def stage_times(t0: float, t1: float, step: float, C: np.ndarray, stages: int) -> np.ndarray:
-    """Every stage time of the fixed-step mode over [t0, t1] (sorted, unique), computed exactly as the
-    loop computes them."""
+    """Every stage time of the fixed-step mode over [t0, t1], sorted and unique.
+
+    Computed exactly as the loop computes them, so that torques tabulated there are met exactly.
+
+    Args:
+        t0, t1: s, the ends of one output interval.
+        step: s, the largest fixed step: [t0, t1] is split into ceil((t1 − t0)/step − 1e-9) equal steps.
+        C: (16,) the tableau's nodes c_i.
+        stages: the number of stages of one step.
+
+    Returns:
+        np.ndarray: (T,) s, the stage times t + c_i h of every step, and t1.
+    """
     m = max(1, math.ceil((t1 - t0) / step - SUBSTEP_SLACK))
     h = (t1 - t0) / m
     out = [t0 + j * h + C[i] * h for j in range(m) for i in range(stages)] + [t1]
@@ -140,7 +198,13 @@ def stage_times(t0: float, t1: float, step: float, C: np.ndarray, stages: int) -
 
 @kernel
 def torque_at(P, t, tau):
-    """τ(t) (N,) from the packed per-joint tables: linear between knots, held outside."""
+    """τ(t) (N,) from the packed per-joint tables: linear between knots, held outside.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        t: s, the time.
+        tau: (N,) written: τ(t), N·m (N for a prismatic joint).
+    """
     off, tt, tv = P.tq_off, P.tq_t, P.tq_v
     for j in range(P.dof[-1]):
         lo, hi = off[j], off[j + 1] - 1
@@ -156,7 +220,17 @@ def torque_at(P, t, tau):
 
 @kernel
 def fail(L, code, t, y):
-    """Record a failure (code, time, state); returns the code."""
+    """Record a failure (code, time, state); returns the code.
+
+    Args:
+        L: the loop (Loop StructRef): L.status, L.fail_t and L.fail_y written.
+        code: the failure code (chain_forward's, the controller's or the integrator's).
+        t: s, the time of the failure.
+        y: (n,) the state there.
+
+    Returns:
+        int: code.
+    """
     L.status[0] = code
     L.fail_t[0] = t
     for i in range(len(y)):
@@ -166,11 +240,29 @@ def fail(L, code, t, y):
 
 @kernel
 def rhs(P, W, L, ctl, t, y, dy):
-    """dy ← [θ̇; θ̈(t, θ, θ̇)] (closed-chain forward dynamics with the tabulated torques, and a controller's
-    command added to them: ctl = (Pc, Wc, C), `control.feedback`; None: no controller — numba prunes
-    the branch, so the open loop's compiled code is what it was without controllers). A lost rank of
-    Λ𝐈⁻¹Λᵀ stops the loop (P.rank_error) or is recorded once (minimum-norm wrenches). Returns 0 or
-    a failure code."""
+    """dy ← [θ̇; θ̈(t, θ, θ̇)]: closed-chain forward dynamics with the tabulated torques.
+
+    A controller's command is added to the torques: ctl = (Pc, Wc, C), `control.feedback`; None: no
+    controller — numba prunes the branch, so the open loop's compiled code is what it was without
+    controllers. A lost rank of Λ𝐈⁻¹Λᵀ stops the loop (P.rank_error) or is recorded once (minimum-norm
+    wrenches).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.tau ← the torques applied, and every term of the
+            evaluation (`chain.chain_forward`) written.
+        L: the loop (Loop StructRef): L.count[0] counted, L.stab scratch for the Baumgarte term, the rank
+            warning (L.warn, warn_t, warn_cond, warn_y) or a failure recorded.
+        ctl: None, or (Pc, Wc, C): the controller's compiled model, a workspace of its own and its record
+            (`control.control_struct`), StructRefs.
+        t: s, the time.
+        y: (2N,) the state [θ; θ̇] (rad or m, rad/s or m/s).
+        dy: (2N,) written: [θ̇; θ̈].
+
+    Returns:
+        int: 0 (OK) or a failure code (the controller's, or chain_forward's: RANK_DEFICIENT only with
+            P.rank_error).
+    """
     N = P.dof[-1]
     L.count[0] += 1
     torque_at(P, t, W.tau)
@@ -202,7 +294,15 @@ def rhs(P, W, L, ctl, t, y, dy):
 
 @kernel
 def stage_input(tab, L, y, h, i):
-    """L.ytmp ← y + h Σ_{j<i} a_ij K_j, the state at which stage i is evaluated."""
+    """L.ytmp ← y + h Σ_{j<i} a_ij K_j, the state at which stage i is evaluated.
+
+    Args:
+        tab: the tableau (Tableau StructRef).
+        L: the loop (Loop StructRef): stage derivatives L.K[0:i] read, L.ytmp written.
+        y: (n,) the state at the start of the step.
+        h: s, the step.
+        i: the stage index, 1 ≤ i < 16.
+    """
     A, Ks, out = tab.A, L.K, L.ytmp
     for x in range(len(y)):
         acc = 0.0
@@ -213,7 +313,15 @@ def stage_input(tab, L, y, h, i):
 
 @kernel
 def rk_combine(tab, L, y, h, out):
-    """out ← y + h Σ_i b_i K_i."""
+    """out ← y + h Σ_i b_i K_i, the state at the end of the step.
+
+    Args:
+        tab: the tableau (Tableau StructRef).
+        L: the loop (Loop StructRef): stage derivatives L.K[0:s] read.
+        y: (n,) the state at the start of the step.
+        h: s, the step.
+        out: (n,) written.
+    """
     B, Ks, s = tab.B, L.K, tab.stages
     for x in range(len(y)):
         acc = 0.0
@@ -224,8 +332,21 @@ def rk_combine(tab, L, y, h, out):
 
 @kernel
 def error_norm(tab, L, y, y_new, h, rtol, atol):
-    """Scaled error of the step: DOP853 |h| ‖e5‖² / sqrt(n (‖e5‖² + 0.01 ‖e3‖²)) (Hairer's code),
-    else |h| ‖e‖_RMS, with e = Σ_j E_j K_j / (atol + rtol max(|y|, |y_new|))."""
+    """Scaled error of the step.
+
+    DOP853 |h| ‖e5‖² / sqrt(n (‖e5‖² + 0.01 ‖e3‖²)) (Hairer's code), else |h| ‖e‖_RMS, with
+    e = Σ_j E_j K_j / (atol + rtol max(|y|, |y_new|)).
+
+    Args:
+        tab: the tableau (Tableau StructRef).
+        L: the loop (Loop StructRef): stage derivatives L.K[0:s+1] read (stage s = f(t + h, y_new)).
+        y, y_new: (n,) the states at the start and end of the step.
+        h: s, the step.
+        rtol, atol: relative and absolute tolerances (atol in the units of the state's components).
+
+    Returns:
+        float: the scaled error (the step is accepted below 1).
+    """
     n = len(y)
     E5, E3, Ks, s = tab.E5, tab.E3, L.K, tab.stages
     e5 = 0.0
@@ -248,9 +369,17 @@ def error_norm(tab, L, y, y_new, h, rtol, atol):
 
 @kernel
 def dense_coefficients(tab, L, y, y_new, h):
-    """Dense-output coefficients of the accepted step (t, y) → (t + h, y_new) into L.Fd. DOP853 (its
-    extra stages 13–15 in L.K): F_0 = Δy, F_1 = h f_0 − Δy, F_2 = 2Δy − h (f_0 + f_new), F_3…6 = h D K.
-    Dormand–Prince: Q = Kᵀ Pd (rows 0…3 of Fd)."""
+    """Dense-output coefficients of the accepted step (t, y) → (t + h, y_new) into L.Fd.
+
+    DOP853 (its extra stages 13–15 in L.K): F_0 = Δy, F_1 = h f_0 − Δy, F_2 = 2Δy − h (f_0 + f_new),
+    F_3…6 = h D K. Dormand–Prince: Q = Kᵀ Pd (rows 0…3 of Fd).
+
+    Args:
+        tab: the tableau (Tableau StructRef).
+        L: the loop (Loop StructRef): stage derivatives L.K read, L.Fd written.
+        y, y_new: (n,) the states at the start and end of the step.
+        h: s, the step.
+    """
     n = len(y)
     Ks, Fd = L.K, L.Fd
     if tab.code == DOPRI5:
@@ -277,7 +406,16 @@ def dense_coefficients(tab, L, y, y_new, h):
 
 @kernel
 def dense_eval(tab, L, y, h, u, out):
-    """out ← the dense output at t + u h (0 ≤ u ≤ 1) of the prepared step from y."""
+    """out ← the dense output at t + u h (0 ≤ u ≤ 1) of the prepared step from y.
+
+    Args:
+        tab: the tableau (Tableau StructRef).
+        L: the loop (Loop StructRef): L.Fd of `dense_coefficients` read.
+        y: (n,) the state at the start of the step.
+        h: s, the step.
+        u: the fraction of the step, 0 ≤ u ≤ 1.
+        out: (n,) written: the interpolated state.
+    """
     n = len(y)
     Fd = L.Fd
     if tab.code == DOPRI5:
@@ -303,6 +441,14 @@ def dense_eval(tab, L, y, h, u, out):
 
 @kernel
 def finite(y):
+    """Whether every entry of y is finite (no NaN, no ±inf).
+
+    Args:
+        y: (n,) the array tested.
+
+    Returns:
+        bool: True when all are finite.
+    """
     for i in range(len(y)):
         if not np.isfinite(y[i]):
             return False
@@ -311,7 +457,18 @@ def finite(y):
 
 @kernel
 def project(P, W, L, t, y):
-    """Project y in place (projection stabilization only). Returns 0 or a failure code."""
+    """Project y in place (projection stabilization only; otherwise y is left as it is).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the kinematics, Λ and Φ of the projection written.
+        L: the loop (Loop StructRef): L.count[3] counted, L.step scratch, a failure recorded.
+        t: s, the time of y (for the failure record).
+        y: (2N,) the state [θ; θ̇], overwritten with its projection onto Φ(θ) = 0, Λ(θ)θ̇ = 0.
+
+    Returns:
+        int: 0 (OK) or a failure code (PROJECTION_FAILED, NON_FINITE_STATE).
+    """
     if P.stabilization != STAB_PROJECTION:
         return OK
     L.count[3] += 1
@@ -325,7 +482,16 @@ def project(P, W, L, t, y):
 
 @kernel
 def rms_scaled(x, y, rtol, atol):
-    """sqrt(mean((x_i / (atol + rtol |y_i|))²))."""
+    """sqrt(mean((x_i / (atol + rtol |y_i|))²)).
+
+    Args:
+        x: (n,) the vector measured.
+        y: (n,) the state setting the weights.
+        rtol, atol: relative and absolute tolerances.
+
+    Returns:
+        float: the weighted RMS norm of x.
+    """
     acc = 0.0
     for i in range(len(x)):
         acc += (x[i] / (atol + rtol * abs(y[i]))) ** 2
@@ -334,8 +500,18 @@ def rms_scaled(x, y, rtol, atol):
 
 @kernel
 def probe_step(L, span, rtol, atol):
-    """Hairer's starting step (Sec. II.4), first half: the Euler probe h0 = 0.01 ‖y0‖/‖f0‖ (weighted
-    RMS norms; 1e-6 when either is tiny), at most span; L.ytmp ← y0 + h0 f0."""
+    """Hairer's starting step (Sec. II.4), first half: the Euler probe h0 = 0.01 ‖y0‖/‖f0‖.
+
+    Weighted RMS norms (`rms_scaled`); h0 = 1e-6 when either is tiny, at most span; L.ytmp ← y0 + h0 f0.
+
+    Args:
+        L: the loop (Loop StructRef): y0 = L.y and f0 = L.fy read, L.ytmp written.
+        span: s, the time to the end of the run.
+        rtol, atol: relative and absolute tolerances.
+
+    Returns:
+        float: h0, s.
+    """
     d0 = rms_scaled(L.y, L.y, rtol, atol)
     d1 = rms_scaled(L.fy, L.y, rtol, atol)
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
@@ -347,8 +523,21 @@ def probe_step(L, span, rtol, atol):
 
 @kernel
 def first_step(tab, L, h0, span, h_max, rtol, atol):
-    """Second half, with f1 = f(t0 + h0, ytmp) in L.K[1]: h1 = (0.01 / max(‖f0‖, ‖f1 − f0‖/h0))^(1/(p̂+1)),
-    h = min(100 h0, h1, span, h_max)."""
+    """Hairer's starting step, second half, with f1 = f(t0 + h0, ytmp) in L.K[1].
+
+    h1 = (0.01 / max(‖f0‖, ‖f1 − f0‖/h0))^(1/(p̂+1)), h = min(100 h0, h1, span, h_max).
+
+    Args:
+        tab: the tableau (Tableau StructRef; its err_order p̂).
+        L: the loop (Loop StructRef): L.y, L.fy = f0 and L.K[1] = f1 read, L.ytmp scratch.
+        h0: s, the probe step of `probe_step`.
+        span: s, the time to the end of the run.
+        h_max: s, the largest step.
+        rtol, atol: relative and absolute tolerances.
+
+    Returns:
+        float: h, s, the first step to try.
+    """
     d1 = rms_scaled(L.fy, L.y, rtol, atol)
     for x in range(len(L.y)):
         L.ytmp[x] = L.K[1, x] - L.fy[x]
@@ -362,8 +551,20 @@ def first_step(tab, L, h0, span, h_max, rtol, atol):
 
 @kernel
 def clip_step(t, h_abs, t_end, h_max):
-    """Step to try from t: h_abs (at most h_max), shortened to end on t_end, or stretched onto t_end
-    when that is within 1 % and within h_max. Returns (h, t_new, clipped)."""
+    """Step to try from t: h_abs (at most h_max), or one that ends on t_end.
+
+    Shortened to end on t_end, or stretched onto t_end when that is within 1 % and within h_max.
+
+    Args:
+        t: s, the time at the start of the step.
+        h_abs: s, the step proposed (positive).
+        t_end: s, the time the step must not pass (the end of the run, or the next output with `land`).
+        h_max: s, the largest step.
+
+    Returns:
+        tuple[float, float, bool]: (h, t_new, clipped): the step, s; its end time, s (t_end exactly when it
+            ends there); whether h is shorter than min(h_abs, h_max).
+    """
     hc = min(h_abs, h_max)
     remaining = t_end - t
     if remaining <= hc or (remaining <= STRETCH * hc and remaining <= h_max):
@@ -376,8 +577,23 @@ def clip_step(t, h_abs, t_end, h_max):
 
 @kernel
 def next_step_size(err, expo, h, h_abs, h_max, rejected, clipped):
-    """The controller after an accepted step: h·min(10, 0.9·err^expo) (no growth right after a
-    rejection), at most h_max; after a step shortened onto the end, the earlier proposal is kept."""
+    """The step controller after an accepted step: the next step proposal.
+
+    h·min(10, 0.9·err^expo) (no growth right after a rejection), at most h_max; after a step shortened
+    onto the end, the earlier proposal is kept.
+
+    Args:
+        err: the accepted step's scaled error (`error_norm`, < 1).
+        expo: the controller exponent −1/(p̂+1).
+        h: s, the step taken.
+        h_abs: s, the proposal it was clipped from (`clip_step`).
+        h_max: s, the largest step.
+        rejected: whether a rejection preceded the step.
+        clipped: whether `clip_step` shortened the step.
+
+    Returns:
+        float: s, the next step proposal.
+    """
     factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** expo)
     if rejected:
         factor = min(1.0, factor)
@@ -389,20 +605,50 @@ def next_step_size(err, expo, h, h_abs, h_max, rejected, clipped):
 
 @kernel
 def step_too_small(t, h_abs, h_min):
+    """Whether the step proposal has collapsed: below h_min, or below 10 units in the last place of t.
+
+    Args:
+        t: s, the current time.
+        h_abs: s, the step proposal.
+        h_min: s, the smallest step allowed.
+
+    Returns:
+        bool: True when the loop must stop (STEP_COLLAPSED).
+    """
     return h_abs < max(h_min, 10.0 * (np.nextafter(abs(t), np.inf) - abs(t)))
 
 
 @entry
 def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_step, k_stop, land):
-    """Integrate from L's state until outputs up to k_stop − 1 are in Y (len(t_out), 2N): first the
-    projection of the initial state (output 0), then adaptive steps, or fixed steps of at most
-    fixed_step s when fixed_step > 0. Stops early on a failure (L.status). ctl = (Pc, Wc, C): the
+    """Integrate from L's state until outputs up to k_stop − 1 are in Y (len(t_out), 2N).
+
+    First the projection of the initial state (output 0), then adaptive steps, or fixed steps of at
+    most fixed_step s when fixed_step > 0. Stops early on a failure (L.status). ctl = (Pc, Wc, C): the
     controller in the loop (`rhs`). land: adaptive steps end on every output time (as the reference
     `coopsim.dynamics.integrate` does) instead of reaching them by dense output.
 
     This is the only function that evaluates the right-hand side (every stage, probe and dense-output
     stage is evaluated here): each compiled function that calls the closed-chain kernel compiles it
-    again, so the helpers above only prepare stage inputs and combine stage values."""
+    again, so the helpers above only prepare stage inputs and combine stage values.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef; scratch, overwritten).
+        L: the loop (Loop StructRef of `new_loop`): state, step proposal, counters, failure and rank
+            warning records, advanced in place; a later call resumes exactly where this one stopped.
+        tab: the tableau (Tableau StructRef of `tableau`).
+        ctl: None, or (Pc, Wc, C): the controller in the loop (`rhs`).
+        t_out: (S,) s, the output times, strictly increasing; t_out[0] is the initial time.
+        Y: (S, 2N) written: the states [θ; θ̇] at t_out, each row once the loop reaches its time (rows
+            L.k_next … k_stop − 1 at least, L.k_next as on entry).
+        rtol, atol: relative and absolute tolerances of the adaptive steps.
+        h_max: s, the largest adaptive step (inf: unbounded).
+        h_min: s, the smallest adaptive step (STEP_COLLAPSED below it).
+        max_steps: the most steps (accepted, and for adaptive steps rejected too) before MAX_STEPS.
+        fixed_step: s, the largest fixed step; 0: adaptive steps.
+        k_stop: outputs 0 … k_stop − 1 are filled before the call returns (unless it fails).
+        land: adaptive steps end on every output time.
+    """
     if L.k_next[0] == 0:
         if project(P, W, L, t_out[0], L.y) != OK:
             return

@@ -19,11 +19,22 @@ from coopsim.compiled.structs import borrow
 
 @kernel
 def pivoted_cholesky(A, Lf, perm, K):
-    """Cholesky factorization with diagonal pivoting P A Pᵀ = L Lᵀ of the symmetric PSD A (K, K) into
-    Lf (lower), perm[i] the row of A in position i. Returns the certified lower bound
-    1/(‖L⁻¹‖_F² trace A) of λ_min/λ_max (module docstring; 0 if a pivot is not positive). Works on the
-    lower triangle (A's is read; Lf's strict upper triangle is scratch for the columns of L⁻¹): a pivot swaps rows and columns j, p of the symmetric trailing matrix as
-    LAPACK's dsyswapr does, and rows j, p of the columns already factored."""
+    """Cholesky factorization with diagonal pivoting P A Pᵀ = L Lᵀ of the symmetric PSD A (K, K).
+
+    L goes into Lf (lower), perm[i] the row of A in position i. Works on the lower triangle (A's is read;
+    Lf's strict upper triangle is scratch for the columns of L⁻¹): a pivot swaps rows and columns j, p of
+    the symmetric trailing matrix as LAPACK's dsyswapr does, and rows j, p of the columns already factored.
+
+    Args:
+        A: (K, K) the symmetric PSD matrix (its lower triangle read), unchanged.
+        Lf: (K, K) written: L in the lower triangle, scratch in the strict upper one.
+        perm: (K,) int, written: the pivots, perm[i] the row of A in position i.
+        K: the order of A.
+
+    Returns:
+        float: the certified lower bound 1/(‖L⁻¹‖_F² trace A) of λ_min/λ_max (module docstring); 0 if a
+            pivot is not positive (and then Lf is incomplete).
+    """
     A, Lf, perm = borrow(A), borrow(Lf), borrow(perm)
     for i in range(K):
         perm[i] = i
@@ -60,6 +71,15 @@ def pivoted_cholesky(A, Lf, perm, K):
 
 @kernel
 def trace(A, K):
+    """The trace of A[:K, :K].
+
+    Args:
+        A: (K, K) or larger, a square matrix.
+        K: the order of the leading block summed.
+
+    Returns:
+        float: Σ_{i<K} A[i, i].
+    """
     v = 0.0
     for i in range(K):
         v += A[i, i]
@@ -68,10 +88,21 @@ def trace(A, K):
 
 @kernel
 def inverse_factor_norm2(Lf, o, K):
-    """‖L⁻¹‖_F² of the lower factor L = Lf[o:o+K, o:o+K]: column j of L⁻¹ by forward substitution
-    (L x = e_j, x_i = 0 for i < j), its entries below the diagonal kept in row j of the block's strict
-    upper triangle. (The block is addressed by its offset o, not passed as a view, so that every caller
-    shares one compiled specialization.)"""
+    """‖L⁻¹‖_F² of the lower factor L = Lf[o:o+K, o:o+K].
+
+    Column j of L⁻¹ by forward substitution (L x = e_j, x_i = 0 for i < j), its entries below the
+    diagonal kept in row j of the block's strict upper triangle. (The block is addressed by its offset
+    o, not passed as a view, so that every caller shares one compiled specialization.)
+
+    Args:
+        Lf: (≥ o+K, ≥ o+K) holding L in the lower triangle of the block; the block's strict upper
+            triangle is overwritten with the columns of L⁻¹ (transposed).
+        o: the offset of the block's first row and column.
+        K: the order of the block.
+
+    Returns:
+        float: ‖L⁻¹‖_F².
+    """
     total = 0.0
     for j in range(o, o + K):
         xj = 1.0 / Lf[j, j]
@@ -88,9 +119,19 @@ def inverse_factor_norm2(Lf, o, K):
 
 @kernel
 def pivoted_solve(Lf, perm, K, b, y, x):
-    """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b); y (K,) is
-    scratch; b is left unchanged and may alias neither y nor x. x holds the reciprocals 1/L_ii until
-    the end (the substitutions multiply: no division on their dependency chain)."""
+    """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b).
+
+    x holds the reciprocals 1/L_ii until the end (the substitutions multiply: no division on their
+    dependency chain).
+
+    Args:
+        Lf: (K, K) the factor L of `pivoted_cholesky` (lower triangle read).
+        perm: (K,) int, its pivots.
+        K: the order of A.
+        b: (K,) the right-hand side, unchanged; it may alias neither y nor x.
+        y: (K,) scratch.
+        x: (K,) written: the solution.
+    """
     Lf, perm, b, y, x = borrow(Lf), borrow(perm), borrow(b), borrow(y), borrow(x)
     for i in range(K):
         x[i] = 1.0 / Lf[i, i]
@@ -110,16 +151,38 @@ def pivoted_solve(Lf, perm, K, b, y, x):
 
 @kernel
 def safe_pivot_ratio(K, rank_tol):
-    """The value of `pivoted_cholesky`'s certified ratio above which λ_min/λ_max > rank_tol is proven:
-    rank_tol itself (the bound is rigorous; K is kept for the callers' signature)."""
+    """The value of `pivoted_cholesky`'s certified ratio above which λ_min/λ_max > rank_tol is proven.
+
+    It is rank_tol itself: the bound is rigorous.
+
+    Args:
+        K: the order of the system (unused: kept for the callers' signature).
+        rank_tol: the relative eigenvalue threshold of the rank decision.
+
+    Returns:
+        float: rank_tol.
+    """
     return rank_tol
 
 
 @kernel
 def eig_solve(A, b, x, K, rank_tol):
-    """Minimum-norm solution x of A x = b (A symmetric PSD) from its eigen-decomposition, keeping
-    eigenvalues above rank_tol·λ_max; returns (condition number λ_max/λ_min, rank). Allocates:
-    used only off the hot path (near-singular systems)."""
+    """Minimum-norm solution x of A x = b (A symmetric PSD) from its eigen-decomposition.
+
+    Keeps the eigenvalues above rank_tol·λ_max. Allocates: used only off the hot path (near-singular
+    systems).
+
+    Args:
+        A: (K, K) the symmetric PSD matrix, unchanged.
+        b: (K,) the right-hand side, unchanged.
+        x: (K,) written: the minimum-norm solution.
+        K: the order of A.
+        rank_tol: the relative eigenvalue threshold: eigenvalues λ > rank_tol·λ_max are kept.
+
+    Returns:
+        tuple[float, int]: the condition number λ_max/λ_min (inf when λ_min ≤ 0 or K = 0), and the
+            numerical rank.
+    """
     ev, V = np.empty(K), np.empty((K, K))
     jacobi_eigh(A, K, ev, V, True)
     top = ev[K - 1] if K > 0 else 0.0
@@ -144,12 +207,22 @@ JACOBI_SWEEPS = 100
 
 @kernel
 def jacobi_eigh(A, K, ev, V, vectors):
-    """Eigenvalues ev (K,) ascending of the symmetric A[:K, :K] (unchanged) and, with `vectors`, the
-    orthonormal eigenvectors as the columns of V (K, K), by the cyclic Jacobi method (Golub & Van Loan,
-    *Matrix Computations*, 4th ed., Alg. 8.5.3; rotations as Numerical Recipes' `jacobi`): sweeps of
-    plane rotations zeroing each off-diagonal entry, until the off-diagonal part is below ε²·‖A‖_F²
-    (absolute error ≈ ε‖A‖, as LAPACK's dsyev). Allocates a K × K copy. Replaces `np.linalg.eigh`,
-    whose numba wrapper costs seconds of compile time in every entry that reaches it."""
+    """Eigenvalues (ascending) and, with `vectors`, orthonormal eigenvectors of the symmetric A[:K, :K].
+
+    By the cyclic Jacobi method (Golub & Van Loan, *Matrix Computations*, 4th ed., Alg. 8.5.3; rotations
+    as Numerical Recipes' `jacobi`): sweeps of plane rotations zeroing each off-diagonal entry, until the
+    off-diagonal part is below ε²·‖A‖_F² (absolute error ≈ ε‖A‖, as LAPACK's dsyev). Allocates a K × K
+    copy. Replaces `np.linalg.eigh`, whose numba wrapper adds a long compile to every entry that reaches
+    it.
+
+    Args:
+        A: (K, K) or larger, symmetric; A[:K, :K] read, unchanged.
+        K: the order.
+        ev: (K,) written: the eigenvalues, ascending.
+        V: (K, K) written with `vectors`: the eigenvectors as its columns, in the order of ev (not touched
+            otherwise).
+        vectors: whether to compute the eigenvectors.
+    """
     a = np.empty((K, K))
     total = 0.0
     for i in range(K):
@@ -217,8 +290,17 @@ def _sort_pairs(ev, V, K, vectors):
 
 @kernel
 def singular_ratio(G, m, n):
-    """σ_min/σ_max of G[:m, :n] (m ≥ n) by one-sided Jacobi (Hestenes; Demmel & Veselić 1992: high
-    relative accuracy), 0 for a zero or non-finite G. Allocates an m × n copy."""
+    """σ_min/σ_max of G[:m, :n] (m ≥ n) by one-sided Jacobi.
+
+    Hestenes' method (Demmel & Veselić 1992: high relative accuracy). Allocates an m × n copy.
+
+    Args:
+        G: (m, n) or larger; G[:m, :n] read, unchanged.
+        m, n: the rows and columns of the block, m ≥ n.
+
+    Returns:
+        float: σ_min/σ_max in [0, 1]; 0 for a zero or non-finite G.
+    """
     U = np.empty((m, n))
     for i in range(m):
         for j in range(n):
@@ -261,8 +343,19 @@ def singular_ratio(G, m, n):
 
 @kernel
 def lu_solve(A, n, b, x):
-    """x (n,) ← A⁻¹ b for the square A[:n, :n] by Gaussian elimination with partial pivoting (A and b
-    unchanged); returns det A (0 for an exactly singular A, and then x is NaN). Allocates a copy."""
+    """x ← A⁻¹ b for the square A[:n, :n] by Gaussian elimination with partial pivoting.
+
+    A and b are unchanged. Allocates a copy of A.
+
+    Args:
+        A: (n, n) or larger; A[:n, :n] read, unchanged.
+        n: the order.
+        b: (n,) the right-hand side, unchanged.
+        x: (n,) written: the solution (NaN for an exactly singular A).
+
+    Returns:
+        float: det A (0 for an exactly singular A).
+    """
     a = np.empty((n, n))
     for i in range(n):
         x[i] = b[i]
@@ -273,9 +366,18 @@ def lu_solve(A, n, b, x):
 
 @kernel
 def gauss_solve(a, n, x):
-    """x ← a⁻¹ x for the square a[:n, :n] by Gaussian elimination with partial pivoting, in place (a is
-    overwritten by its factors, nothing allocated); returns det a (0 for an exactly singular a, and then
-    x is NaN)."""
+    """x ← a⁻¹ x for the square a[:n, :n] by Gaussian elimination with partial pivoting, in place.
+
+    a is overwritten by its factors; nothing is allocated.
+
+    Args:
+        a: (n, n) or larger; a[:n, :n] overwritten by its factors.
+        n: the order.
+        x: (n,) the right-hand side, overwritten with the solution (NaN for an exactly singular a).
+
+    Returns:
+        float: det a (0 for an exactly singular a).
+    """
     det = 1.0
     for k in range(n):
         p = k
@@ -307,8 +409,16 @@ def gauss_solve(a, n, x):
 
 @kernel
 def bisect(ts, lo, hi, t):
-    """The index i in [lo, hi) with ts[i] <= t < ts[i+1] for sorted ts and ts[lo] <= t < ts[hi]
-    (the interval of a table holding t)."""
+    """The index i in [lo, hi) with ts[i] <= t < ts[i+1]: the interval of a table holding t.
+
+    Args:
+        ts: (T,) sorted knots.
+        lo, hi: indices with ts[lo] <= t < ts[hi].
+        t: the value located.
+
+    Returns:
+        int: i.
+    """
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if ts[mid] <= t:
@@ -320,21 +430,37 @@ def bisect(ts, lo, hi, t):
 
 @kernel
 def copy1(src, dst):
-    """dst[:] ← src (1-D; explicit loop: slice assignment drags numba's shape-error formatting into
-    every caller's compile)."""
+    """dst[:] ← src (1-D).
+
+    An explicit loop: slice assignment drags numba's shape-error formatting into every caller's compile.
+
+    Args:
+        src: (n,) the source.
+        dst: (n,) or longer, written.
+    """
     for i in range(len(src)):
         dst[i] = src[i]
 
 
 @kernel
 def copy2(src, dst):
-    """dst[:, :] ← src (2-D)."""
+    """dst[:, :] ← src (2-D).
+
+    Args:
+        src: (a, b) the source.
+        dst: (a, b) or larger, written.
+    """
     for i in range(src.shape[0]):
         copy1(src[i], dst[i])
 
 
 @kernel
 def copy3(src, dst):
-    """dst[:, :, :] ← src (3-D)."""
+    """dst[:, :, :] ← src (3-D).
+
+    Args:
+        src: (a, b, c) the source.
+        dst: (a, b, c) or larger, written.
+    """
     for i in range(src.shape[0]):
         copy2(src[i], dst[i])

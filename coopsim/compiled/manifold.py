@@ -22,7 +22,14 @@ PROJECTION_FAILED = 7
 
 @kernel
 def closure_kinematics(P, W, q):
-    """Kinematics, EE Jacobians, object pose, Λ and Φ at q (no dynamics)."""
+    """Kinematics, EE Jacobians, object pose, Λ and Φ at q (no dynamics).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): every arm's kinematics and Jacobian, the object pose,
+            W.Lam (K, N) and W.phi (K,) (m, rad) written.
+        q: (N,) rad or m, the stacked joint coordinates.
+    """
     for m in range(len(P.dof) - 1):
         arm_kinematics(P, W, m, q)
         arm_jacobian(P, W, m)
@@ -33,9 +40,21 @@ def closure_kinematics(P, W, q):
 
 @kernel
 def min_norm_step(P, W, rhs, out):
-    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam: ΛΛᵀ solved in O(r) by its
-    block structure (`schur`) for three arms or more where that is certified, else formed and solved
-    densely."""
+    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam.
+
+    ΛΛᵀ is solved in O(r) by its block structure (`schur`) for three arms or more where that is
+    certified, else formed and solved densely (pivoted Cholesky, or the minimum-norm eigen solution
+    when the pivots do not prove full rank).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Lam read; W.b and W.dF overwritten, with the buffers of
+            the `schur` solve (W.A_f, W.d_inv, W.V, W.S, W.S_inv, W.yN) or of the dense one (W.A, W.A_f,
+            W.perm, W.yK).
+        rhs: (K,) the right-hand side (m or rad for a position step, m/s or rad/s for a rate step), read
+            before W.b is written.
+        out: (N,) written: Λ⁺ rhs, rad or m (rad/s or m/s for a rate step) per joint.
+    """
     Lam, A, A_f, perm, b, yK, dF, rank_tol = W.Lam, W.A, W.A_f, W.perm, W.b, W.yK, W.dF, P.rank_tol
     K, N = Lam.shape
     for i in range(K):
@@ -63,7 +82,14 @@ def min_norm_step(P, W, rhs, out):
 
 @kernel
 def max_abs(x):
-    """max |x_i| (NaN if any x_i is NaN)."""
+    """max |x_i| (NaN if any x_i is NaN).
+
+    Args:
+        x: (n,) the array.
+
+    Returns:
+        float: max |x_i|; 0 for an empty x; NaN if any x_i is NaN.
+    """
     v = 0.0
     for i in range(len(x)):
         a = abs(x[i])
@@ -76,8 +102,22 @@ def max_abs(x):
 
 @kernel
 def project_positions(P, W, q, tol, max_iter, step):
-    """Gauss–Newton steps q ← q − Λ⁺Φ(q) in place until max |Φ| ≤ tol; returns the number of steps, or
-    −1 after max_iter steps without convergence. Leaves the kinematics, Λ and Φ of the final q in W."""
+    """Gauss–Newton steps q ← q − Λ⁺Φ(q) in place until max |Φ| ≤ tol.
+
+    Leaves the kinematics, Λ and Φ of the final q in W.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the kinematics, W.Lam and W.phi of the final q written,
+            with the buffers of `min_norm_step`.
+        q: (N,) rad or m, the stacked joint coordinates, overwritten with the projected ones.
+        tol: m and rad, the tolerance on max |Φ|.
+        max_iter: the most Gauss–Newton steps.
+        step: (N,) scratch (the last step).
+
+    Returns:
+        int: the number of steps taken, or −1 after max_iter steps without convergence.
+    """
     for it in range(max_iter + 1):
         closure_kinematics(P, W, q)
         if max_abs(W.phi) <= tol:
@@ -92,7 +132,15 @@ def project_positions(P, W, q, tol, max_iter, step):
 
 @kernel
 def project_rates(P, W, qd, step):
-    """qd ← qd − Λ⁺Λ qd in place (twice: the second pass removes what rounding left), Λ from W."""
+    """qd ← qd − Λ⁺Λ qd in place (twice: the second pass removes what rounding left), Λ from W.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Lam (of the projected positions) read; W.res and the
+            buffers of `min_norm_step` overwritten.
+        qd: (N,) rad/s or m/s, the stacked joint rates, overwritten with Λ qd = 0 satisfied.
+        step: (N,) scratch.
+    """
     Lam, res = W.Lam, W.res
     K, N = Lam.shape
     for _ in range(2):
@@ -108,9 +156,23 @@ def project_rates(P, W, qd, step):
 
 @kernel
 def project_state(P, W, y, tol, max_iter, step):
-    """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 (to max |Φ| ≤ tol, at most max_iter Gauss–Newton steps)
-    and Λ(θ)θ̇ = 0, in place; step (N,) scratch. Returns 0 or PROJECTION_FAILED (W.phi holds the
-    last residual)."""
+    """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 and Λ(θ)θ̇ = 0, in place.
+
+    To max |Φ| ≤ tol, at most max_iter Gauss–Newton steps; W.phi holds the last residual.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the kinematics, W.Lam and W.phi of the last iterate
+            written, with the buffers of `min_norm_step`.
+        y: (2N,) the state [θ; θ̇] (rad or m, rad/s or m/s), overwritten with its projection (the rates
+            untouched when the positions fail).
+        tol: m and rad, the tolerance on max |Φ|.
+        max_iter: the most Gauss–Newton steps.
+        step: (N,) scratch.
+
+    Returns:
+        int: 0 or PROJECTION_FAILED.
+    """
     y, step = borrow(y), borrow(step)
     N = P.dof[-1]
     if project_positions(P, W, y[:N], tol, max_iter, step) < 0:
@@ -121,9 +183,23 @@ def project_state(P, W, y, tol, max_iter, step):
 
 @entry
 def consistent(P, W, y, tol, max_iter, info):
-    """A consistent initial state: y = [θ; θ̇] (2N,) projected in place as `project_state` does, and
-    info (3,) ← [max |Φ| before (m or rad), max |Φ| after, Gauss–Newton steps]. Returns 0 or
-    PROJECTION_FAILED (then y holds the last iterate and info[1] its residual)."""
+    """A consistent initial state: y = [θ; θ̇] (2N,) projected in place as `project_state` does.
+
+    Also reports the residuals and the steps taken in info.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): as `project_state` writes it.
+        y: (2N,) the state [θ; θ̇] (rad or m, rad/s or m/s), overwritten with the consistent state (with
+            the last iterate of the positions, rates untouched, on failure).
+        tol: m and rad, the tolerance on max |Φ|.
+        max_iter: the most Gauss–Newton steps.
+        info: (3,) written: [max |Φ| before (m or rad), max |Φ| after, Gauss–Newton steps (max_iter on
+            failure)].
+
+    Returns:
+        int: 0 or PROJECTION_FAILED (then y holds the last iterate and info[1] its residual).
+    """
     N = P.dof[-1]
     step = np.empty(N)
     closure_kinematics(P, W, y[:N])

@@ -20,22 +20,48 @@ PROJECTION_MAX_ITER = 50      # Gauss–Newton steps of a projection before it f
 
 
 class PackedModel(NamedTuple):
-    """Frozen model arrays (N joints in all, r arms, k rows per grasp).
+    """Frozen model arrays for the compiled kernels (N joints in all, r arms, k constraint rows per grasp).
 
-    dof (r+1,) int: arm m's joints are dof[m]:dof[m+1]; base_pos (r, 3), base_rot (r, 3, 3) world←base;
-    joint_pos (N, 3) in the parent frame; joint_rot (N, 3, 3) parent←joint frame at θ = 0;
-    joint_axis (N, 3) unit, joint frame; joint_k1, joint_k2 (N, 3, 3) R0[a×] and R0[a×]² (so that
-    R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2), joint_z (N, 3) R0 a (parent frame); joint_type (N,)
-    int: REVOLUTE or PRISMATIC (`coopsim.core.model`; a prismatic joint slides its frame θ m along a, and
-    its rows of the kernels are a force, N); link_mass (N,) kg; link_com (N, 3) link frame;
-    link_inertia (N, 3, 3) about the centre of mass, link axes; ee_pos (r, 3), ee_rot (r, 3, 3)
-    end-effector frame in the last link frame; obj_mass kg; obj_inertia (3, 3) about C, object axes;
-    grasp_pos (r, 3), grasp_rot (r, 3, 3) EE frame m in the object frame; carrier: arm index;
-    gravity (3,) m/s²; rows (k, 6) constraint rows S; rank_tol; rank_error: 1 to stop when Λ𝐈⁻¹Λᵀ
-    loses rank, 0 to warn; stabilization code (STAB_*);
-    alpha, beta 1/s (Baumgarte); projection_tol m, rad; projection_max_iter (PROJECTION_MAX_ITER);
-    tq_off (N+1,) int, tq_t, tq_v: joint j's torque table is (tq_t, tq_v)[tq_off[j]:tq_off[j+1]]
-    (s, N·m), linear between knots, held outside."""
+    Joints of all arms are stacked arm after arm: arm m owns rows dof[m]:dof[m+1] of every per-joint
+    array. Units SI, frames as in `coopsim.core.model`. A prismatic joint slides its frame θ m along its
+    axis a, and its rows of the kernels are a force (N) instead of a moment. Compiled code reads these
+    arrays through the StructRef `structs.to_struct` makes of the record (the kernels' argument P).
+
+    Attributes:
+        dof: (r+1,) int: arm m's joints are dof[m]:dof[m+1] (dof[r] = N).
+        base_pos: (r, 3) m, the arms' base points, world.
+        base_rot: (r, 3, 3) world ← base frame.
+        joint_pos: (N, 3) m, origin of each joint's frame in the parent frame (the base frame for an arm's
+            first joint).
+        joint_rot: (N, 3, 3) R0, parent frame ← joint frame at θ = 0.
+        joint_axis: (N, 3) the unit joint axis a, joint frame.
+        joint_k1, joint_k2: (N, 3, 3) K1 = R0[a×] and K2 = R0[a×]², so that
+            R0 Rot(a, θ) = R0 + sinθ K1 + (1 − cosθ) K2.
+        joint_z: (N, 3) R0 a, the joint axis in the parent frame.
+        joint_type: (N,) int: REVOLUTE or PRISMATIC (`coopsim.core.model`).
+        link_mass: (N,) kg.
+        link_com: (N, 3) m, centres of mass, link frame.
+        link_inertia: (N, 3, 3) kg·m², about the centre of mass, link axes.
+        ee_pos, ee_rot: (r, 3) m and (r, 3, 3): the end-effector frame in the last link frame (its origin,
+            and last link frame ← end-effector frame).
+        obj_mass: kg, the object's mass m_o.
+        obj_inertia: (3, 3) kg·m², the object's inertia K about C, object axes.
+        grasp_pos, grasp_rot: (r, 3) m and (r, 3, 3): EE frame m in the object frame (its origin relative to
+            C, and object frame ← EE frame m).
+        carrier: index c of the arm that carries the object in the reduced model (eqs. 17–19).
+        gravity: (3,) m/s², world.
+        rows: (k, 6) the constraint rows S kept per grasp, applied to twists [v; ω] and wrenches [f; n] in
+            world axes.
+        rank_tol: relative eigenvalue (of λ_max) below which Λ𝐈⁻¹Λᵀ counts as rank-deficient.
+        rank_error: 1 to stop when Λ𝐈⁻¹Λᵀ loses rank, 0 to warn (minimum-norm grasp wrenches).
+        stabilization: stabilization code: STAB_NONE, STAB_PROJECTION or STAB_BAUMGARTE.
+        alpha, beta: 1/s, Baumgarte's gains in Λθ̈ = −Λ̇θ̇ − 2αΛθ̇ − β²Φ.
+        projection_tol: m and rad, the loop-closure tolerance on max |Φ| of a projection.
+        projection_max_iter: Gauss–Newton steps of a projection before it fails (PROJECTION_MAX_ITER).
+        tq_off: (N+1,) int: joint j's torque table is (tq_t, tq_v)[tq_off[j]:tq_off[j+1]].
+        tq_t, tq_v: the knots of the torque tables, s, and their values, N·m (N for a prismatic joint),
+            joint after joint; linear between knots, held outside.
+    """
 
     dof: np.ndarray
     base_pos: np.ndarray
@@ -74,6 +100,9 @@ class PackedModel(NamedTuple):
 class Workspace(NamedTuple):
     """Buffers of one evaluation: N joints, r arms, nmax joints in the longest arm, K = k(r−1) rows.
 
+    The kernels write into these (no evaluation allocates); compiled code reaches them through the
+    StructRef of `structs.to_struct` (the kernels' argument W). World axes, SI.
+
     Attributes:
         p, R, z, c, I: (N, …) link geometry, world axes: joint origins, frames, axes, centres of mass,
             inertias.
@@ -96,8 +125,12 @@ class Workspace(NamedTuple):
         X, x0: (K, N) Λ L⁻ᵀ and (N,) L⁻¹(τ − h) (𝐈 = L Lᵀ).
         A, A_f: (K, K) Λ𝐈⁻¹Λᵀ and its factor.
         b, F, res, dF: (K,) right-hand side, grasp wrenches, residual, refinement step.
-        perm: (K,) int pivots; yK: (K,) scratch; phi: (K,) the loop residual Φ.
-        qdd, tau: (N,) outputs; cond: (1,) condition number; rank: (1,) int.
+        perm: (K,) int pivots.
+        yK: (K,) scratch.
+        phi: (K,) the loop residual Φ (m, rad).
+        qdd, tau: (N,) outputs: θ̈ (rad/s² or m/s²) and the joint torques τ applied (N·m or N).
+        cond: (1,) condition number λ_max/λ_min of Λ𝐈⁻¹Λᵀ (−1: not computed on the fast path).
+        rank: (1,) int, the numerical rank of Λ𝐈⁻¹Λᵀ.
         vec6, v3, m3: (6,), (3,), (4, 3, 3) scratch.
         d_inv, V, S, S_inv, yN: the O(r) constraint solve (`schur`; n_c ≤ nmax the carrier's joints):
             (K,) reciprocals of the diagonals of the k × k factors L_g (kept in A_f's diagonal
@@ -165,8 +198,19 @@ def _f(x) -> np.ndarray:
 
 
 def torque_arrays(torques, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-joint torque tables (tq_off, tq_t, tq_v) of the model's per-arm tables (a TorqueFunction
-    packs as zero torque: its values are supplied per stage by the caller)."""
+    """Per-joint torque tables (tq_off, tq_t, tq_v) of the model's per-arm tables.
+
+    A TorqueFunction packs as zero torque: its values are supplied per stage by the caller.
+
+    Args:
+        torques: the model's torques: the per-arm TorqueTables (times (k,) s, values (k, n_m) N·m, N for a
+            prismatic joint), arm after arm, or a TorqueFunction.
+        n: N, the number of joints of all arms (the width of the zero table a TorqueFunction packs as).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, np.ndarray]: tq_off (N+1,) int, tq_t and tq_v (the knots of all
+            tables, joint after joint) s and N·m, as the PackedModel fields of those names.
+    """
     if isinstance(torques, TorqueFunction):
         tables = [TorqueTable(np.zeros(1), np.zeros((1, n)))]
     else:
@@ -181,7 +225,15 @@ def torque_arrays(torques, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def tabulated_torques(P: PackedModel, t: np.ndarray) -> np.ndarray:
-    """τ (S, N) N·m at times t (S,) from P's per-joint tables (as `integrate.torque_at`)."""
+    """τ at times t from P's per-joint tables (as `integrate.torque_at`).
+
+    Args:
+        P: the packed model (PackedModel; its tables tq_off, tq_t, tq_v are read).
+        t: (S,) s, the sample times.
+
+    Returns:
+        np.ndarray: (S, N) N·m (N for a prismatic joint), linear between knots, held outside.
+    """
     t = np.asarray(t, dtype=float)
     out = np.empty((len(t), int(P.dof[-1])))
     for j in range(out.shape[1]):
@@ -191,7 +243,15 @@ def tabulated_torques(P: PackedModel, t: np.ndarray) -> np.ndarray:
 
 
 def pack(model: Model) -> PackedModel:
-    """The frozen arrays of `model` for the compiled kernels."""
+    """The frozen arrays of `model` for the compiled kernels.
+
+    Args:
+        model: the frozen Model (its arms, object, torques, gravity, constraint rows and integrator
+            settings are read).
+
+    Returns:
+        PackedModel: joints stacked arm after arm, SI, frames as in `coopsim.core.model`.
+    """
     arms, obj, s = model.arms, model.object, model.integrator
     dof = np.cumsum([0] + [a.n for a in arms]).astype(np.int64)
     cat = lambda name: _f(np.concatenate([getattr(a, name) for a in arms]))  # noqa: E731
@@ -208,12 +268,20 @@ def pack(model: Model) -> PackedModel:
         np.ascontiguousarray(model.joint_type, dtype=np.int64),
         cat("link_mass"), cat("link_com"), cat("link_inertia"), stack("ee_pos"), stack("ee_rot"),
         float(obj.mass), _f(obj.inertia), _f(obj.grasp_pos), _f(obj.grasp_rot), int(obj.carrier),
-        _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"), _STAB[s.stabilization],
-        float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol), PROJECTION_MAX_ITER, tq_off, tq_t, tq_v)
+        _f(model.gravity), _f(model.rows), float(s.rank_tol), int(s.on_rank_deficiency == "error"),
+        _STAB[s.stabilization], float(s.baumgarte_alpha), float(s.baumgarte_beta), float(s.projection_tol),
+        PROJECTION_MAX_ITER, tq_off, tq_t, tq_v)
 
 
 def workspace(P: PackedModel) -> Workspace:
-    """Fresh buffers for the kernels of model P."""
+    """Fresh buffers for the kernels of model P.
+
+    Args:
+        P: the packed model (PackedModel); its sizes N, r, nmax and K = k(r−1) set the buffers' shapes.
+
+    Returns:
+        Workspace: zero-filled buffers (float64; perm and rank int64).
+    """
     r, N = len(P.dof) - 1, int(P.dof[-1])
     nmax = int(np.max(np.diff(P.dof)))
     K = P.rows.shape[0] * (r - 1)
@@ -225,5 +293,6 @@ def workspace(P: PackedModel) -> Workspace:
         z((N, nmax)), z((N, nmax)), z(N), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
         z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),
         z((K, N)), z(K), z((K, N)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
-        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3), z((4, 3, 3)),
+        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3),
+        z((4, 3, 3)),
         z(K), z((K, nmax)), z((nmax, nmax)), z(nmax), z(nmax))

@@ -15,7 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled.chain import arm_terms, chain_forward, constraint_matrix, loop_residual, object_dynamics, object_pose
+from coopsim.compiled.chain import (arm_terms, chain_forward, constraint_matrix, loop_residual, object_dynamics,
+                                    object_pose)
 from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import copy1, copy2, copy3, jacobi_eigh
 from coopsim.compiled.manifold import max_abs
@@ -23,10 +24,23 @@ from coopsim.compiled.spatial import rot_to_quat
 
 
 class Samples(NamedTuple):
-    """Output arrays for S samples (N joints, r arms), world axes, SI: qdd, tau (S, N);
-    object_pos (S, 3); object_quat (S, 4) [w, x, y, z]; object_twist, object_acc (S, 6) [v_C; ω],
-    [v̇_C; ω̇]; grasp_wrench, internal_wrench (S, r, 6); residual_pos (S,) max |Φ|; residual_vel (S,)
-    max |Λθ̇|; cond (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ; status (S,) int (chain_forward's code)."""
+    """Output arrays for S samples (N joints, r arms), world axes, SI.
+
+    Attributes:
+        qdd: (S, N) θ̈, rad/s² or m/s².
+        tau: (S, N) the joint torques τ, N·m (N for a prismatic joint): the input of `evaluate`.
+        object_pos: (S, 3) m, the object's centre of mass C, world.
+        object_quat: (S, 4) [w, x, y, z], the object frame's orientation (world ← object frame).
+        object_twist: (S, 6) [v_C; ω], m/s and rad/s.
+        object_acc: (S, 6) [v̇_C; ω̇], m/s² and rad/s².
+        grasp_wrench: (S, r, 6) the grasp wrenches F_e^m [f; n], N and N·m, at the end-effectors (module
+            docstring).
+        internal_wrench: (S, r, 6) the internal wrenches F_I^m [f; n] at C, N and N·m (eq. 7).
+        residual_pos: (S,) max |Φ|, m or rad.
+        residual_vel: (S,) max |Λθ̇|, m/s or rad/s.
+        cond: (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ (inf when λ_min ≤ 0, 1 without constraint rows).
+        status: (S,) int, chain_forward's code.
+    """
 
     qdd: np.ndarray
     tau: np.ndarray
@@ -43,6 +57,16 @@ class Samples(NamedTuple):
 
 
 def new_samples(S: int, N: int, r: int) -> Samples:
+    """Zero-filled Samples for S samples of a model with N joints and r arms.
+
+    Args:
+        S: the number of samples.
+        N: the number of joints of all arms.
+        r: the number of arms.
+
+    Returns:
+        Samples: float64 arrays of the shapes its fields list (status int64).
+    """
     z = np.zeros
     return Samples(z((S, N)), z((S, N)), z((S, 3)), z((S, 4)), z((S, 6)), z((S, 6)), z((S, r, 6)),
                    z((S, r, 6)), z(S), z(S), z(S), np.zeros(S, dtype=np.int64))
@@ -50,7 +74,15 @@ def new_samples(S: int, N: int, r: int) -> Samples:
 
 @kernel
 def object_acceleration(P, W, qdd, out):
-    """v̇_o (6,) = J_o θ̈_c + J̇_oθ̇_c."""
+    """v̇_o (6,) = J_o θ̈_c + J̇_oθ̇_c.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.J_o and W.Jd_o_qd (`chain.object_pose`,
+            `chain.object_dynamics`) read.
+        qdd: (N,) θ̈, rad/s² or m/s² (the carrier's rows read).
+        out: (6,) written: [v̇_C; ω̇], m/s² and rad/s², world axes.
+    """
     dof, c, J_o, Jd_o_qd = P.dof, P.carrier, W.J_o, W.Jd_o_qd
     o, n = dof[c], dof[c + 1] - dof[c]
     for a in range(6):
@@ -62,7 +94,14 @@ def object_acceleration(P, W, qdd, out):
 
 @kernel
 def object_wrench(P, W, vd, out):
-    """Y (6,) = M_o v̇_o + b_o = [m_o (v̇_C − g); K_o ω̇ + ω × K_o ω]."""
+    """Y (6,) = M_o v̇_o + b_o = [m_o (v̇_C − g); K_o ω̇ + ω × K_o ω].
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.K_o and the object twist W.v_o read.
+        vd: (6,) v̇_o = [v̇_C; ω̇], m/s² and rad/s², world axes.
+        out: (6,) written: Y = [f; n] at C, N and N·m, world axes.
+    """
     K, w, mo, g = W.K_o, W.v_o[3:], P.obj_mass, P.gravity
     for a in range(3):
         out[a] = mo * (vd[a] - g[a])
@@ -77,7 +116,15 @@ def object_wrench(P, W, vd, out):
 
 @kernel
 def move_to_centre(s, F, out):
-    """out (6,) ← W(s) F = [f; n − s × f]."""
+    """out (6,) ← W(s) F = [f; n − s × f].
+
+    The wrench F = [f; n] at a point p moved to the point p + s (to C for s = s_m: eqs. 1–2).
+
+    Args:
+        s: (3,) m, world axes: the offset from the point of F to the new point (s_m = p_C − grasp point m).
+        F: (6,) [f; n], N and N·m, world axes.
+        out: (6,) written.
+    """
     out[0], out[1], out[2] = F[0], F[1], F[2]
     out[3] = F[3] - (s[1] * F[2] - s[2] * F[1])
     out[4] = F[4] - (s[2] * F[0] - s[0] * F[2])
@@ -86,8 +133,18 @@ def move_to_centre(s, F, out):
 
 @kernel
 def grasp_wrenches(P, W, Y, F_e, F_I):
-    """F_e (r, 6) from the loop-closure wrenches W.F and the object wrench Y (6,) (overwritten), and the
-    internal wrenches F_I (r, 6) (module docstring)."""
+    """F_e (r, 6) from the loop-closure wrenches W.F and the object wrench Y, and the internal wrenches F_I.
+
+    See the module docstring (eqs. 4–7, 11).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.F (`chain.chain_solve`) and W.s read; W.vec6 scratch.
+        Y: (6,) the object wrench M_o v̇_o + b_o at C (`object_wrench`), N and N·m, world axes;
+            overwritten.
+        F_e: (r, 6) written: the grasp wrenches [f; n] at the end-effectors, N and N·m, world axes.
+        F_I: (r, 6) written: the internal wrenches [f; n] at C, N and N·m, world axes.
+    """
     S = P.rows
     k = S.shape[0]
     c = P.carrier
@@ -133,10 +190,24 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
 @kernel
 def reported(P, W, i, qd, out, Yw, ev, V):
-    """Row i of `out` after an evaluation at rates qd: object pose, twist and acceleration, grasp and
-    internal wrenches, loop residuals (position, velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw (6,), ev (K,), V (K, K)
-    scratch (the eigenvectors are computed though unused: `jacobi_eigh` is then compiled once, for
-    this call and `eig_solve`'s)."""
+    """Row i of `out` after an evaluation at rates qd: every reported quantity but θ̈, τ and the status.
+
+    Object pose, twist and acceleration, grasp and internal wrenches, loop residuals (position,
+    velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw, ev, V are scratch (the eigenvectors are computed though unused:
+    `jacobi_eigh` is then compiled once, for this call and `eig_solve`'s).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef) after `chain.chain_forward` at (θ, qd): read; W.phi, W.A,
+            W.vec6, W.v3 and W.m3 overwritten.
+        i: the sample's row.
+        qd: (N,) rad/s or m/s, the stacked joint rates of the evaluation.
+        out: the Samples: row i of object_pos, object_quat, object_twist, object_acc, grasp_wrench,
+            internal_wrench, residual_pos, residual_vel and cond written.
+        Yw: (6,) scratch (the object wrench).
+        ev: (K,) scratch (eigenvalues).
+        V: (K, K) scratch (eigenvectors).
+    """
     N = P.dof[-1]
     K = W.Lam.shape[0]
     copy1(W.p_C, out.object_pos[i])
@@ -164,8 +235,19 @@ def reported(P, W, i, qd, out, Yw, ev, V):
 
 @entry
 def evaluate(P, W, Y, out, full):
-    """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques out.tau (S, N): θ̈ into out.qdd and
-    status codes into out.status; with `full`, every other field of `out` (Samples) too."""
+    """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques out.tau (S, N).
+
+    θ̈ goes into out.qdd and the status codes into out.status; with `full`, every other field of `out`
+    (Samples) too.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef; scratch, overwritten).
+        Y: (S, 2N) the states [θ; θ̇], rad or m and rad/s or m/s.
+        out: the Samples (S rows): out.tau read (N·m, N for a prismatic joint); out.qdd and out.status
+            written, and with `full` every other field.
+        full: whether to fill the reported fields (`reported`).
+    """
     N = P.dof[-1]
     stab = np.zeros(W.Lam.shape[0])
     Yw, ev, V = np.empty(6), np.empty(W.Lam.shape[0]), np.empty((W.Lam.shape[0], W.Lam.shape[0]))
@@ -177,10 +259,20 @@ def evaluate(P, W, Y, out, full):
 
 
 class InverseTerms(NamedTuple):
-    """Per-sample terms of the inverse dynamics (S samples, N joints, r arms, nmax joints per arm at
-    most): tau_arms (S, N) = I_m θ̈_m + h_m per open arm (eq. 29, no object); J (S, r, 6, nmax) EE
-    Jacobians; s (S, r, 3) p_C − grasp points; p_C (S, 3); R_o (S, 3, 3); twist (S, 6) [v_C; ω];
-    acc (S, 6) [v̇_C; ω̇]; Y (S, 6) = M_o v̇_o + b_o at C."""
+    """Per-sample terms of the inverse dynamics (S samples, N joints, r arms, nmax joints per arm at most).
+
+    World axes, SI.
+
+    Attributes:
+        tau_arms: (S, N) N·m (N for a prismatic joint), I_m θ̈_m + h_m per open arm (eq. 29, no object).
+        J: (S, r, 6, nmax) EE Jacobians (columns 0:n_m of arm m).
+        s: (S, r, 3) m, p_C − grasp points.
+        p_C: (S, 3) m, the object's centre of mass, world.
+        R_o: (S, 3, 3) world ← object frame.
+        twist: (S, 6) [v_C; ω], m/s and rad/s.
+        acc: (S, 6) [v̇_C; ω̇], m/s² and rad/s².
+        Y: (S, 6) = M_o v̇_o + b_o at C, N and N·m.
+    """
 
     tau_arms: np.ndarray
     J: np.ndarray
@@ -193,6 +285,17 @@ class InverseTerms(NamedTuple):
 
 
 def new_inverse_terms(S: int, N: int, r: int, nmax: int) -> InverseTerms:
+    """Zero-filled InverseTerms for S samples of a model with N joints, r arms, nmax joints per arm at most.
+
+    Args:
+        S: the number of samples.
+        N: the number of joints of all arms.
+        r: the number of arms.
+        nmax: the joints of the longest arm.
+
+    Returns:
+        InverseTerms: float64 arrays of the shapes its fields list.
+    """
     z = np.zeros
     return InverseTerms(z((S, N)), z((S, r, 6, nmax)), z((S, r, 3)), z((S, 3)), z((S, 3, 3)), z((S, 6)),
                         z((S, 6)), z((S, 6)))
@@ -200,7 +303,16 @@ def new_inverse_terms(S: int, N: int, r: int, nmax: int) -> InverseTerms:
 
 @entry
 def inverse_terms(P, W, Q, QD, QDD, out):
-    """Fill `out` (InverseTerms) at the states (Q, QD, QDD) (S, N)."""
+    """Fill `out` (InverseTerms) at the states (Q, QD, QDD) (S, N).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef; scratch, overwritten).
+        Q: (S, N) rad or m, the stacked joint coordinates.
+        QD: (S, N) rad/s or m/s, the stacked joint rates.
+        QDD: (S, N) rad/s² or m/s², the stacked joint accelerations.
+        out: the InverseTerms (S rows), every field written.
+    """
     for i in range(Q.shape[0]):
         arm_terms(P, W, Q[i], QD[i])
         for m in range(len(P.dof) - 1):
