@@ -29,16 +29,39 @@ COORDINATE, RATE, EFFORT = 0, 1, 2                                       # index
 
 
 def joint_transform(joint_type: int, axis: np.ndarray, q: float) -> tuple[np.ndarray, np.ndarray]:
-    """(R_J (3, 3), d_J (3,)): frame i at coordinate q relative to frame i at q = 0, in frame i's axes
-    (revolute: Rot(axis, q), 0; prismatic: 1, q axis)."""
+    """The joint transform X_J: frame i at coordinate q relative to frame i at q = 0, in frame i's axes.
+
+    Revolute: (Rot(axis, q), 0); prismatic: (1, q axis).
+
+    Args:
+        joint_type: the joint's type code (REVOLUTE or PRISMATIC).
+        axis: (3,) the unit joint axis a_i, frame i.
+        q: rad or m, the joint coordinate θ_i.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: (R_J (3, 3), d_J (3,) m), rotation and displacement, frame i's
+            axes.
+    """
     if joint_type == PRISMATIC:
         return np.eye(3), q * np.asarray(axis, dtype=float)
     return axis_angle_to_rot(axis, q), np.zeros(3)
 
 
 def joint_transforms(joint_type: int, axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`joint_transform` over samples q (S,): (R_J (S, 3, 3), d_J (S, 3)), Rodrigues' formula
-    1 + sin q [a×] + (1 − cos q)[a×]² for a revolute joint, as `spatial.axis_angle_to_rot`."""
+    """`joint_transform` of one joint over a series of coordinate samples.
+
+    A revolute joint's rotation is Rodrigues' formula 1 + sin q [a×] + (1 − cos q)[a×]², as
+    `spatial.axis_angle_to_rot`.
+
+    Args:
+        joint_type: the joint's type code (REVOLUTE or PRISMATIC).
+        axis: (3,) the unit joint axis a_i, frame i.
+        q: (S,) rad or m, the joint coordinate at each sample.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: (R_J (S, 3, 3), d_J (S, 3) m), frame i's axes (R_J a read-only
+            broadcast view for a prismatic joint).
+    """
     q = np.asarray(q, dtype=float)
     a = np.asarray(axis, dtype=float)
     if joint_type == PRISMATIC:
@@ -49,33 +72,74 @@ def joint_transforms(joint_type: int, axis: np.ndarray, q: np.ndarray) -> tuple[
 
 
 def revolute_mask(joint_type: np.ndarray) -> np.ndarray:
-    """(n, 1) float: 1 for a revolute joint, 0 for a prismatic one (to scale per-joint 3-vectors)."""
+    """1 for a revolute joint, 0 for a prismatic one, shaped to scale per-joint 3-vectors.
+
+    Args:
+        joint_type: (n,) joint type codes (REVOLUTE, PRISMATIC).
+
+    Returns:
+        np.ndarray: (n, 1) float, 1.0 where revolute, 0.0 where prismatic.
+    """
     return (np.asarray(joint_type) == REVOLUTE).astype(float)[:, None]
 
 
-def motion_subspace(joint_type: np.ndarray, z: np.ndarray, p: np.ndarray, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(linear (…, n, 3), angular (…, n, 3)): the velocity of `point` (…, 3) and the angular velocity
-    per unit rate of each joint, z (n, 3) world axes, p (n, 3) frame origins (same origin as point):
-    revolute z × (point − p), z; prismatic z, 0 (module docstring). Broadcasts over leading axes of
-    point (…, 1, 3)."""
+def motion_subspace(joint_type: np.ndarray, z: np.ndarray, p: np.ndarray,
+                    point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joints' motion subspaces at a point: its velocity and the angular velocity per unit joint rate.
+
+    Revolute: z × (point − p), z; prismatic: z, 0 (module docstring). Broadcasts over the leading axes
+    of point, given as (…, 1, 3).
+
+    Args:
+        joint_type: (n,) joint type codes (REVOLUTE, PRISMATIC).
+        z: (n, 3) unit joint axes, world axes.
+        p: (n, 3) m, the joints' frame origins, world axes, relative to the same origin as `point`.
+        point: (…, 3) m, the point P, world axes ((…, 1, 3) to broadcast over several points).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: (linear (…, n, 3), angular (…, n, 3)), world axes: the velocity
+            of P (m/s per rad/s, or m/s per m/s) and the angular velocity (rad/s per rad/s, or 0) per
+            unit rate of each joint.
+    """
     rev = revolute_mask(joint_type)
     linear = np.where(rev > 0, cross(z, point - p), z)
     return linear, np.broadcast_to(z * rev, linear.shape)
 
 
 def type_names(joint_type: Sequence[int]) -> list[str]:
-    """'revolute' or 'prismatic' per joint of the type codes joint_type (n,)."""
+    """'revolute' or 'prismatic' per joint, from type codes.
+
+    Args:
+        joint_type: (n,) joint type codes (REVOLUTE, PRISMATIC).
+
+    Returns:
+        list[str]: (n,) the type names.
+    """
     return [TYPE_NAMES[int(t)] for t in joint_type]
 
 
 def joint_units(joint_type: int | str) -> tuple[str, str, str]:
-    """(coordinate, rate, effort) units of a joint type (code or name): ('rad', 'rad/s', 'N·m') or
-    ('m', 'm/s', 'N')."""
+    """The (coordinate, rate, effort) units of a joint type.
+
+    Args:
+        joint_type: a type code (REVOLUTE, PRISMATIC) or name ('revolute', 'prismatic').
+
+    Returns:
+        tuple[str, str, str]: ('rad', 'rad/s', 'N·m') or ('m', 'm/s', 'N').
+    """
     return UNITS[joint_type if isinstance(joint_type, str) else TYPE_NAMES[int(joint_type)]]
 
 
 def units_of(joint_type: Sequence, kind: int, sep: str = " or ") -> str:
-    """The unit of quantity `kind` (COORDINATE, RATE, EFFORT) of several joints (codes or names), for one
-    axis label: 'rad', 'm', or both joined by `sep` ('rad or m') when the joints mix types."""
+    """The unit of one quantity of several joints, for one axis label.
+
+    Args:
+        joint_type: (n,) the joints' type codes or names.
+        kind: the quantity: COORDINATE, RATE or EFFORT.
+        sep: the separator between the units when the joints mix types.
+
+    Returns:
+        str: e.g. 'rad', 'm', or both joined by `sep` ('rad or m'), in the order the types first occur.
+    """
     units = list(dict.fromkeys(joint_units(t)[kind] for t in joint_type))
     return sep.join(units)

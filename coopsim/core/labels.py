@@ -14,28 +14,67 @@ from collections.abc import Mapping, Sequence
 
 
 def arm_label(name: str, m: int) -> str:
-    """'arm 2' for arm index m = 1 named 'arm2' (the scenario's default name), else 'arm 2 (name)'."""
+    """The label of one arm, counted from 1: 'arm 2' for the default name 'arm2', else 'arm 2 (name)'.
+
+    Args:
+        name: the arm's name in the scenario.
+        m: arm index, 0-based.
+
+    Returns:
+        str: 'arm {m + 1}', followed by ' (name)' when the name is not the default 'arm{m + 1}'.
+    """
     return f"arm {m + 1}" if name == f"arm{m + 1}" else f"arm {m + 1} ({name})"
 
 
 def arm_joint_labels(names: Sequence[str], dofs: Sequence[int]) -> list[str]:
-    """Labels of the stacked joints of arms `names` with `dofs` joints each: 'arm 2 joint 3', …"""
+    """Labels of the stacked joints of several arms: 'arm 2 joint 3', …
+
+    Args:
+        names: (r,) the arms' names, in stacking order.
+        dofs: (r,) the number of joints of each arm.
+
+    Returns:
+        list[str]: (sum(dofs),) one label per stacked joint, arm after arm, joints counted from 1.
+    """
     return [f"{arm_label(name, m)} joint {j + 1}" for m, (name, n) in enumerate(zip(names, dofs)) for j in range(n)]
 
 
 def joint_labels(model) -> list[str]:
-    """Labels (n,) of a model's stacked joints (`arm_joint_labels` of its arms)."""
+    """Labels of a model's stacked joints (`arm_joint_labels` of its arms).
+
+    Args:
+        model: the Model (its arms' names and joint counts are read).
+
+    Returns:
+        list[str]: (n_total,) one label per stacked joint.
+    """
     return arm_joint_labels([a.name for a in model.arms], [a.n for a in model.arms])
 
 
 def plain_joint_labels(n: int) -> list[str]:
-    """'joint 1', …, 'joint n': labels when nothing says which arm a joint belongs to."""
+    """'joint 1', …, 'joint n': labels when nothing says which arm a joint belongs to.
+
+    Args:
+        n: the number of joints.
+
+    Returns:
+        list[str]: (n,) the labels.
+    """
     return [f"joint {j + 1}" for j in range(n)]
 
 
 def metadata_arms(metadata: Mapping) -> tuple[list[str], list[int]] | None:
-    """(arm names, joints per arm) of a log's "model" metadata record (as `coopsim.io.log.run_metadata`
-    writes it), or None when it is missing or unreadable."""
+    """The arm names and joints per arm of a log's "model" metadata record, or None.
+
+    The record is read as `coopsim.io.log.run_metadata` writes it (JSON strings under "arms" and "dofs").
+
+    Args:
+        metadata: the log's metadata (record name → record).
+
+    Returns:
+        tuple[list[str], list[int]] | None: (arm names, joints per arm), or None when the record is
+            missing or unreadable.
+    """
     rec = metadata.get("model", {})
     try:
         names, dofs = json.loads(rec["arms"]), json.loads(rec["dofs"])
@@ -45,9 +84,18 @@ def metadata_arms(metadata: Mapping) -> tuple[list[str], list[int]] | None:
 
 
 def metadata_joint_types(metadata: Mapping, n: int) -> list[str]:
-    """'revolute' or 'prismatic' per joint (n,) from a log's "model" metadata record; every joint
-    revolute when the record is missing, unreadable or describes another number of joints (a log
-    written before joint types were recorded holds revolute joints only)."""
+    """'revolute' or 'prismatic' per joint, from a log's "model" metadata record.
+
+    Every joint is revolute when the record is missing, unreadable or describes another number of joints
+    (a log written before joint types were recorded holds revolute joints only).
+
+    Args:
+        metadata: the log's metadata (record name → record).
+        n: the number of stacked joints the log holds.
+
+    Returns:
+        list[str]: (n,) 'revolute' or 'prismatic' per joint.
+    """
     try:
         types = [str(x) for x in json.loads(metadata.get("model", {})["joint_types"])]
     except (KeyError, TypeError, ValueError):
@@ -56,14 +104,31 @@ def metadata_joint_types(metadata: Mapping, n: int) -> list[str]:
 
 
 def metadata_joint_labels(metadata: Mapping, n: int) -> list[str]:
-    """Labels (n,) of the joints of a log from its "model" metadata record (`metadata_arms`);
-    `plain_joint_labels` when the record is missing, unreadable or describes another number of joints."""
+    """Labels of the joints of a log, from its "model" metadata record (`metadata_arms`).
+
+    Args:
+        metadata: the log's metadata (record name → record).
+        n: the number of stacked joints the log holds.
+
+    Returns:
+        list[str]: (n,) the labels; `plain_joint_labels` when the record is missing, unreadable or
+            describes another number of joints.
+    """
     arms = metadata_arms(metadata)
     labels = [] if arms is None else arm_joint_labels(*arms)
     return labels if len(labels) == n else plain_joint_labels(n)
 
 
 def field_name(column: str) -> str:
-    """A column's name as a JSON field that Foxglove's message paths can address: characters other than
-    letters, digits and '_' become '_' (`capacity.payload.min_energy.mass_kg` → `capacity_payload_min_energy_mass_kg`)."""
+    """A column's name as a JSON field that Foxglove's message paths can address.
+
+    Each run of characters other than letters, digits and '_' becomes one '_', and leading or trailing
+    '_' are dropped (`capacity.payload.min_energy.mass_kg` → `capacity_payload_min_energy_mass_kg`).
+
+    Args:
+        column: the column name.
+
+    Returns:
+        str: the field name ('_' when nothing else is left).
+    """
     return re.sub(r"[^A-Za-z0-9_]+", "_", column).strip("_") or "_"

@@ -26,15 +26,24 @@ JOINT_TYPES = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
 class ArmModel:
     """One serial arm of n joints, each revolute or prismatic.
 
-    base_pos (3,) world, base_rot (3, 3) world←base;
-    joint_pos (n, 3) origin of frame i in frame i−1 (the base frame for i = 0);
-    joint_rot (n, 3, 3) frame i−1 ← frame i at θ_i = 0; joint_axis (n, 3) unit, in frame i;
-    link_mass (n,) kg; link_com (n, 3) centre of mass in frame i; link_inertia (n, 3, 3) about the
-    centre of mass, frame-i axes (kg·m²); link_box (n, 3) box size for drawing (zeros: none) along
-    its own axes; ee_pos (3,) and ee_rot (3, 3) end-effector frame in frame n−1;
-    joint_type (n,) int: REVOLUTE or PRISMATIC per joint (None: every joint revolute);
-    box_pos (n, 3) the drawing box's centre in frame i (None: link_com) and box_rot (n, 3, 3) frame i ←
-    box axes (None: the link's own axes). Drawing only: the dynamics never reads link_box, box_pos, box_rot.
+    link_box, box_pos and box_rot are for drawing only: the dynamics never reads them.
+
+    Attributes:
+        name: the arm's name in the scenario.
+        base_pos: (3,) m, the base frame's origin, world axes.
+        base_rot: (3, 3) world ← base.
+        joint_pos: (n, 3) m, origin of frame i in frame i−1 (the base frame for i = 0).
+        joint_rot: (n, 3, 3) frame i−1 ← frame i at θ_i = 0.
+        joint_axis: (n, 3) unit joint axes, each in its own frame i.
+        link_mass: (n,) kg.
+        link_com: (n, 3) m, each link's centre of mass in frame i.
+        link_inertia: (n, 3, 3) kg·m², about the link's centre of mass, frame-i axes.
+        link_box: (n, 3) m, box size for drawing (zeros: none) along the box's own axes.
+        ee_pos: (3,) m, the end-effector frame's origin in frame n−1.
+        ee_rot: (3, 3) frame n−1 ← end-effector frame.
+        joint_type: (n,) int, REVOLUTE or PRISMATIC per joint (given as None: every joint revolute).
+        box_pos: (n, 3) m, the drawing box's centre in frame i (given as None: link_com).
+        box_rot: (n, 3, 3) frame i ← box axes (given as None: the link's own axes).
     """
 
     name: str
@@ -63,6 +72,7 @@ class ArmModel:
 
     @property
     def n(self) -> int:
+        """The number of joints n."""
         return len(self.link_mass)
 
     @property
@@ -73,10 +83,19 @@ class ArmModel:
 
 @dataclass(frozen=True, eq=False)
 class ObjectModel:
-    """The grasped rigid object. mass kg; inertia (3, 3) about C in object axes; box (3,) size for
-    drawing (zeros: none). grasp_pos (r, 3) and grasp_rot (r, 3, 3): pose of arm m's end-effector
-    frame in the object frame (row m belongs to arm m). carrier: index of the arm whose last link the
-    object is rigidly attached to in the reduced model (paper eqs. 17–19, arm "1")."""
+    """The grasped rigid object.
+
+    Attributes:
+        mass: kg.
+        inertia: (3, 3) kg·m², about the centre of mass C, object axes.
+        box: (3,) m, box size along the object axes (zeros: none), for drawing and for the section loads
+            of a box object (`coopsim.inverse.stress`).
+        grasp_pos: (r, 3) m, the origin of arm m's end-effector frame in the object frame (row m belongs
+            to arm m).
+        grasp_rot: (r, 3, 3) object frame ← arm m's end-effector frame (row m belongs to arm m).
+        carrier: index (0-based) of the arm whose last link the object is rigidly attached to in the
+            reduced model (paper eqs. 17–19, arm "1").
+    """
 
     mass: float
     inertia: np.ndarray
@@ -88,9 +107,14 @@ class ObjectModel:
 
 @dataclass(frozen=True, eq=False)
 class TorqueTable:
-    """Piecewise-linear joint torques of one arm: times (k,) s strictly increasing, values (k, n) N·m
-    (N for a prismatic joint);
-    held constant outside [times[0], times[-1]] (one row = constant torque)."""
+    """Piecewise-linear joint torques of one arm, held constant outside [times[0], times[-1]].
+
+    One row is a constant torque.
+
+    Attributes:
+        times: (k,) s, strictly increasing.
+        values: (k, n) N·m (N for a prismatic joint), the torques at those times.
+    """
 
     times: np.ndarray
     values: np.ndarray
@@ -98,20 +122,31 @@ class TorqueTable:
 
 @dataclass(frozen=True, eq=False)
 class TorqueFunction:
-    """Joint torques given as a function of time: fn(t) -> stacked τ (n_total,) N·m. Used in place of
-    the per-arm tables when the torque is itself computed at the integrator's stage times (e.g. the
-    inverse-dynamics torques of a trajectory, replayed through the forward dynamics)."""
+    """Joint torques given as a function of time, fn(t) -> stacked τ.
+
+    Used in place of the per-arm tables when the torque is itself computed at the integrator's stage
+    times (e.g. the inverse-dynamics torques of a trajectory, replayed through the forward dynamics).
+
+    Attributes:
+        fn: t (s) -> τ (n_total,) N·m (N on a prismatic joint), joints stacked arm after arm.
+    """
 
     fn: Callable[[float], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
 class TorqueFeedback(TorqueFunction):
-    """Joint torques of a controller in the loop: fn(t, q, qd) -> stacked τ (n_total,) N·m from the time s
-    and the state the integrator is evaluating (every stage of the native reference engine, every RK4
-    stage of the MuJoCo twin). A notebook passes its own τ = u(t, q, q̇) as
+    """Joint torques of a controller in the loop, fn(t, q, qd) -> stacked τ.
+
+    τ comes from the time and the state the integrator is evaluating (every stage of the native reference
+    engine, every RK4 stage of the MuJoCo twin). A notebook passes its own τ = u(t, q, q̇) as
     `replace(model, torques=TorqueFeedback(u))`; a scenario's `control:` section builds one
-    (`coopsim.control.controller.closed_loop`)."""
+    (`coopsim.control.controller.closed_loop`).
+
+    Attributes:
+        fn: (t s, q (n_total,) rad or m, qd (n_total,) rad/s or m/s) -> τ (n_total,) N·m (N on a
+            prismatic joint), joints stacked arm after arm.
+    """
 
     fn: Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 
@@ -133,20 +168,49 @@ class LoopController(Protocol):
     compiled_reason: str | None
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """τ (n,) N·m at time t s and state q (n,), qd (n,)."""
+        """The controller's joint torques at one time and state.
+
+        Args:
+            t: s, the time.
+            q: (n,) rad (m on a prismatic joint), stacked joint coordinates.
+            qd: (n,) rad/s (m/s), stacked joint rates.
+
+        Returns:
+            np.ndarray: (n,) N·m (N on a prismatic joint), the stacked torques τ.
+        """
 
     def loop_record(self) -> tuple:
-        """The record the compiled time loop evaluates (`coopsim.compiled.api.integrate_chain`'s
-        controller), its evaluation counters reset for a new run."""
+        """The record the compiled time loop evaluates, its evaluation counters reset for a new run.
+
+        Returns:
+            tuple: the controller record of `coopsim.compiled.api.integrate_chain`.
+        """
 
     def loop_counts(self) -> tuple:
-        """The compiled evaluations' counters since `loop_record`."""
+        """The compiled evaluations' counters since `loop_record`.
+
+        Returns:
+            tuple: the counters.
+        """
 
     def loop_torques(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """τ (N, n) N·m at the samples t (N,) s, q, qd (N, n) of a run."""
+        """The controller's joint torques at the samples of a run.
+
+        Args:
+            t: (N,) s, the sample times.
+            q: (N, n) rad (m on a prismatic joint), stacked joint coordinates.
+            qd: (N, n) rad/s (m/s), stacked joint rates.
+
+        Returns:
+            np.ndarray: (N, n) N·m (N on a prismatic joint), the torques τ.
+        """
 
     def run_warnings(self) -> list:
-        """What the controller reports about the run so far (`coopsim.forward.diagnostics.RunWarning`s)."""
+        """What the controller reports about the run so far.
+
+        Returns:
+            list: `coopsim.forward.diagnostics.RunWarning`s.
+        """
 
 
 def loop_controller(model: "Model") -> LoopController | None:
@@ -164,26 +228,48 @@ def loop_controller(model: "Model") -> LoopController | None:
 
 @dataclass(frozen=True, eq=False)
 class ControlSettings:
-    """A controller in the loop (scenario `control:`), added to the scenario's torque tables (which then
-    act as a disturbance). law: 'joint_pd' | 'computed_torque'.
-    joint_pd: τ = τ_comp + Kp (θ_r − θ) + Kd (θ̇_r − θ̇) with kp (n,) N·m/rad, kd (n,) N·m·s/rad;
-    compensation 'none' | 'gravity' (closed-chain inverse dynamics at (θ, 0, 0)) | 'bias' (at (θ, θ̇, 0)),
-    the object's share distributed by the resolution `distribution`; reference 'setpoint' (setpoint (n,)
-    rad, None: the consistent initial state) or 'object_motion' (the joint trajectory of
-    inverse.object_motion).
-    computed_torque: track inverse.object_motion with the object acceleration
-    a = a_r + Kd (v_r − v) + Kp e (object_kp, object_kd (2,): [linear, angular], 1/s² and 1/s), the
-    closed-chain inverse dynamics of that acceleration distributed by `distribution`, plus a squeeze
-    force (N, along each grasp line towards the centre of mass, in the null space of the grasp matrix),
-    plus joint-space feedback on each arm's grasp error e_m (`coopsim.control.laws.grasp_errors`),
-    τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m) with grasp_kp (2,) [N/m, N·m/rad] and grasp_kd (2,) [N·s/m,
-    N·m·s/rad] (zero: none; e_m is zero on the native model up to its loop-closure tolerance).
-    mass_scale: the controller's object mass and inertia relative to the true ones (a model error; 1 =
-    none). saturate: clip τ to the motor lines of eq. 36 (`torque_limits`).
-    fallback (distribution 'bounded' only, its bounds inverse.internal_force_bound and
-    internal_moment_bound, none: unbounded): where its QP has no solution, the resolution used instead
-    ('nonsqueezing', 'paper', 'min_energy': a `distribution_fallback` RunWarning counts them) or
-    'error' (the run stops there with a one-line error)."""
+    """A controller in the loop (scenario `control:`), added to the scenario's torque tables.
+
+    The tables then act as a disturbance. Two laws:
+
+    joint_pd: τ = τ_comp + Kp (θ_r − θ) + Kd (θ̇_r − θ̇), τ_comp the compensation, the object's share
+    distributed by the resolution `distribution`; the reference θ_r is a setpoint or the joint
+    trajectory of inverse.object_motion.
+
+    computed_torque: track inverse.object_motion with the object acceleration a = a_r + Kd (v_r − v) + Kp e,
+    the closed-chain inverse dynamics of that acceleration distributed by `distribution`, plus a squeeze
+    force, plus joint-space feedback on each arm's grasp error e_m (`coopsim.control.laws.grasp_errors`),
+    τ_m += J_mᵀSᵀS (Kp e_m + Kd ė_m).
+
+    Joint vectors (n,) are stacked arm after arm (n = n_total).
+
+    Attributes:
+        law: 'joint_pd' | 'computed_torque'.
+        kp: (n,) N·m/rad, joint_pd's Kp (zeros for computed_torque).
+        kd: (n,) N·m·s/rad, joint_pd's Kd (zeros for computed_torque).
+        compensation: joint_pd's τ_comp: 'none' | 'gravity' (closed-chain inverse dynamics at (θ, 0, 0)) |
+            'bias' (at (θ, θ̇, 0)).
+        distribution: the resolution of the redundant inverse dynamics that distributes the object's
+            share among the arms (`coopsim.inverse.resolutions`, e.g. 'paper', 'nonsqueezing',
+            'min_energy', 'bounded').
+        reference: joint_pd's θ_r: 'setpoint' or 'object_motion' (the joint trajectory of
+            inverse.object_motion); computed_torque always 'object_motion'.
+        setpoint: (n,) rad, joint_pd's setpoint (None: the consistent initial state).
+        object_kp: (2,) 1/s², computed_torque's Kp on the object: [linear, angular].
+        object_kd: (2,) 1/s, computed_torque's Kd on the object: [linear, angular].
+        squeeze: N, the squeeze force along each grasp line towards the centre of mass, in the null space
+            of the grasp matrix.
+        grasp_kp: (2,) [N/m, N·m/rad], the Kp of the grasp-error feedback (zero: none; e_m is zero on the
+            native model up to its loop-closure tolerance).
+        grasp_kd: (2,) [N·s/m, N·m·s/rad], the Kd of the grasp-error feedback (zero: none).
+        mass_scale: the controller's object mass and inertia relative to the true ones (a model error;
+            1 = none).
+        saturate: clip τ to the motor lines of eq. 36 (`torque_limits`).
+        fallback: distribution 'bounded' only (its bounds inverse.internal_force_bound and
+            internal_moment_bound, none: unbounded): where its QP has no solution, the resolution used
+            instead ('nonsqueezing', 'paper', 'min_energy': a `distribution_fallback` RunWarning counts
+            them) or 'error' (the run stops there with a one-line error).
+    """
 
     law: str
     kp: np.ndarray
@@ -204,9 +290,14 @@ class ControlSettings:
 
 @dataclass(frozen=True, eq=False)
 class Motors:
-    """Per joint, stacked: stall_torque (n,) N·m (N for a prismatic joint: a force), no_load_speed (n,)
-    rad/s (m/s for a prismatic joint) (eq. 36; inf: no limit),
-    energy_weight (n,) diagonal of Q (eqs. 33–35), passive (n,) bool."""
+    """The joints' motors, per joint, stacked arm after arm (n = n_total).
+
+    Attributes:
+        stall_torque: (n,) N·m (N for a prismatic joint: a force), τ_s of eq. 36 (inf: no limit).
+        no_load_speed: (n,) rad/s (m/s for a prismatic joint), ω_s of eq. 36 (inf: no limit).
+        energy_weight: (n,) the diagonal of Q (eqs. 33–35).
+        passive: (n,) bool, which joints are passive (unactuated).
+    """
 
     stall_torque: np.ndarray
     no_load_speed: np.ndarray
@@ -238,23 +329,36 @@ def torque_limits(motors: Motors, qd: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @dataclass(frozen=True)
 class IntegratorSettings:
-    """method: 'dop853' | 'dopri5' (adaptive, rtol/atol; outputs from their dense output) | 'rk4'
-    (fixed `step`, s); max_step: largest step of the adaptive methods, s (None: unbounded);
-    output_dt: sample interval of the results, s;
-    stabilization: 'projection' | 'baumgarte' | 'none'; baumgarte_alpha (1/s), baumgarte_beta (1/s)
-    in Λθ̈ = −Λ̇θ̇ − 2αΛθ̇ − β²Φ; projection_tol: loop-closure tolerance (m and rad);
-    max_initial_correction: largest joint correction (rad) accepted when the initial state is made
-    consistent; constraint_rows: 'auto' (planar rows for planar scenes) or 'spatial';
-    rank_tol: relative eigenvalue below which the constraint matrix counts as rank-deficient;
-    on_rank_deficiency: 'warn' (minimum-norm grasp wrenches, warning) or 'error';
-    condition_limit: condition number of Λ𝐈⁻¹Λᵀ above which a sample counts as ill-conditioned (the
-    chain is near a singular configuration: grasp wrenches lose about log10(cond) digits);
-    on_ill_conditioning: 'warn' (a warning naming the worst sample) or 'error' (the run stops);
-    initial_correction_warning: joint correction (rad) of the initial state above which a warning
-    says so (max_initial_correction stops the run);
-    singularity_limit: an arm counts as near a singularity where σ_min/σ_max of its end-effector
-    Jacobian in the scene's rows (linear rows divided by the arm's reach) falls below this.
-    rtol/atol are also the accuracy a fixed rk4 step is checked against (`coopsim.forward.diagnostics`)."""
+    """The forward run's time integration, constraint stabilization and conditioning checks.
+
+    rtol/atol are also the accuracy a fixed rk4 step is checked against (`coopsim.forward.diagnostics`).
+
+    Attributes:
+        method: 'dop853' | 'dopri5' (adaptive, rtol/atol; outputs from their dense output) | 'rk4'
+            (fixed `step`).
+        rtol: relative tolerance of the adaptive methods.
+        atol: absolute tolerance of the adaptive methods (units of the state: rad, rad/s; m, m/s on a
+            prismatic joint).
+        step: s, the fixed step of 'rk4'.
+        max_step: s, largest step of the adaptive methods (None: unbounded).
+        output_dt: s, sample interval of the results.
+        stabilization: 'projection' | 'baumgarte' | 'none'.
+        baumgarte_alpha: 1/s, α in Λθ̈ = −Λ̇θ̇ − 2αΛθ̇ − β²Φ.
+        baumgarte_beta: 1/s, β in the same.
+        projection_tol: m and rad, the loop-closure tolerance.
+        max_initial_correction: rad, largest joint correction accepted when the initial state is made
+            consistent.
+        constraint_rows: 'auto' (planar rows for planar scenes) or 'spatial'.
+        rank_tol: relative eigenvalue below which the constraint matrix counts as rank-deficient.
+        on_rank_deficiency: 'warn' (minimum-norm grasp wrenches, warning) or 'error'.
+        condition_limit: condition number of Λ𝐈⁻¹Λᵀ above which a sample counts as ill-conditioned (the
+            chain is near a singular configuration: grasp wrenches lose about log10(cond) digits).
+        on_ill_conditioning: 'warn' (a warning naming the worst sample) or 'error' (the run stops).
+        initial_correction_warning: rad, joint correction of the initial state above which a warning
+            says so (max_initial_correction stops the run).
+        singularity_limit: an arm counts as near a singularity where σ_min/σ_max of its end-effector
+            Jacobian in the scene's rows (linear rows divided by the arm's reach) falls below this.
+    """
 
     method: str = "dop853"
     rtol: float = 1e-11
@@ -278,15 +382,23 @@ class IntegratorSettings:
 
 @dataclass(frozen=True)
 class MujocoSettings:
-    """The MuJoCo twin's numerics: timestep s; integrator 'RK4' | 'Euler' | 'implicit' |
-    'implicitfast'; weld solref [timeconst s, dampratio] and solimp [d0, d_width, width m, midpoint,
-    power]; Newton solver `tolerance`, `iterations`; object_mass_scale: a deliberate error in the
-    twin's object mass and inertia (1 = none), to prove the harness detects a wrong twin.
+    """The MuJoCo twin's numerics.
 
     MuJoCo enforces a weld as J q̈ = −b J q̇ − k r (b = 2/timeconst, k = 1/timeconst² at critical
     damping, impedance d → 1), without the J̇q̇ term, so the weld yields by about
     timeconst² · |J̇q̇|. The default timeconst is therefore one timestep (None), with MuJoCo's
-    `refsafe` clamp to 2·timestep disabled: RK4 stays stable down to about timestep/2.8."""
+    `refsafe` clamp to 2·timestep disabled: RK4 stays stable down to about timestep/2.8.
+
+    Attributes:
+        timestep: s.
+        integrator: 'RK4' | 'Euler' | 'implicit' | 'implicitfast'.
+        weld_solref: [timeconst s, dampratio] of the welds (None: [timestep, 1], `solref`).
+        weld_solimp: [d0, d_width, width m, midpoint, power] of the welds.
+        tolerance: the Newton solver's tolerance.
+        iterations: the Newton solver's iteration cap.
+        object_mass_scale: a deliberate error in the twin's object mass and inertia (1 = none), to prove
+            the harness detects a wrong twin.
+    """
 
     timestep: float = 1e-3
     integrator: str = "RK4"
@@ -297,14 +409,26 @@ class MujocoSettings:
     object_mass_scale: float = 1.0
 
     def solref(self) -> tuple[float, float]:
+        """The welds' solref: weld_solref, or one timestep at critical damping when it is None.
+
+        Returns:
+            tuple[float, float]: (timeconst s, dampratio).
+        """
         return self.weld_solref if self.weld_solref is not None else (self.timestep, 1.0)
 
 
 @dataclass(frozen=True)
 class ValidationThresholds:
-    """Agreement the native model and the MuJoCo twin must reach over the run (max over samples and
-    joints): joint angle rad, joint rate rad/s, object position m, object orientation rad, MuJoCo weld
-    violation (max |efc_pos| of the welds, m or rad), native loop-closure residual."""
+    """Agreement the native model and the MuJoCo twin must reach over the run (max over samples and joints).
+
+    Attributes:
+        max_angle_error: rad, joint angle.
+        max_rate_error: rad/s, joint rate.
+        max_object_position_error: m, object position.
+        max_object_orientation_error: rad, object orientation.
+        max_weld_violation: m or rad, the MuJoCo weld violation (max |efc_pos| of the welds).
+        max_native_residual: m or rad, the native loop-closure residual.
+    """
 
     max_angle_error: float = 1e-6
     max_rate_error: float = 1e-5
@@ -316,15 +440,26 @@ class ValidationThresholds:
 
 @dataclass(frozen=True, eq=False)
 class ObjectMotion:
-    """A prescribed object motion (scenario `inverse.object_motion`): waypoint times (w,) s strictly
-    increasing, positions (w, 3) m of the centre of mass C and rotations (w, 3, 3) world←object; the
-    object rests at every waypoint and moves between them along a straight line and a single-axis
-    rotation with the time law `time_law` ('quintic': s = 10u³ − 15u⁴ + 6u⁵, zero rate and
-    acceleration at both ends; 'cubic': s = 3u² − 2u³, zero rate only); sampled every output_dt s.
-    initial_guess (n_total,) rad: joint angles that pick the inverse-kinematics branch at the first
-    waypoint (None: the scenario's initial angles). Arms with more joints than constraint rows
-    (redundant) move by least joint-velocity norm plus a null-space pull toward rest_posture (n_total,)
-    rad (None: the scenario's initial angles) with gain rest_gain 1/s (`coopsim.inverse.trajectory.redundant_rates`)."""
+    """A prescribed object motion (scenario `inverse.object_motion`) through w waypoints.
+
+    The object rests at every waypoint and moves between them along a straight line and a single-axis
+    rotation with the time law `time_law`. Arms with more joints than constraint rows (redundant) move by
+    least joint-velocity norm plus a null-space pull toward rest_posture
+    (`coopsim.inverse.trajectory.redundant_rates`).
+
+    Attributes:
+        times: (w,) s, waypoint times, strictly increasing.
+        positions: (w, 3) m, the centre of mass C at the waypoints, world axes.
+        rotations: (w, 3, 3) world ← object, at the waypoints.
+        time_law: 'quintic' (s = 10u³ − 15u⁴ + 6u⁵, zero rate and acceleration at both ends) or 'cubic'
+            (s = 3u² − 2u³, zero rate only).
+        output_dt: s, the sample interval.
+        initial_guess: (n_total,) rad, joint angles that pick the inverse-kinematics branch at the first
+            waypoint (None: the scenario's initial angles).
+        rest_posture: (n_total,) rad, the redundant arms' null-space target (None: the scenario's initial
+            angles).
+        rest_gain: 1/s, the gain of the null-space pull toward rest_posture.
+    """
 
     times: np.ndarray
     positions: np.ndarray
@@ -338,14 +473,21 @@ class ObjectMotion:
 
 @dataclass(frozen=True, eq=False)
 class InverseSettings:
-    """Inverse dynamics and load capacity (scenario `inverse`). trajectory: 'forward' (the joint
-    trajectory of the forward run, the paper's choice) or 'object_motion' (object_motion, through
-    closed-chain inverse kinematics); nonsqueezing_masses (r,) relative virtual masses of the
-    Erhart–Hirche non-squeezing distribution (None: the shares whose centroid is the object's centre of
-    mass, as equal as possible); payload_position (3,) m, object frame: where the point payload of the
-    payload capacity sits (None: no payload capacity); internal_force_bound N and
-    internal_moment_bound N·m: bounds on every internal-wrench component (grasp-line frame) of the
-    bounded minimum-energy resolution (None: half the minimum-energy distribution's peak)."""
+    """Inverse dynamics and load capacity (scenario `inverse`).
+
+    Attributes:
+        trajectory: 'forward' (the joint trajectory of the forward run, the paper's choice) or
+            'object_motion' (object_motion, through closed-chain inverse kinematics).
+        object_motion: the prescribed object motion (None: none given).
+        nonsqueezing_masses: (r,) relative virtual masses of the Erhart–Hirche non-squeezing
+            distribution (None: the shares whose centroid is the object's centre of mass, as equal as
+            possible).
+        payload_position: (3,) m, object frame: where the point payload of the payload capacity sits
+            (None: no payload capacity).
+        internal_force_bound: N, bound on every internal-force component (grasp-line frame) of the
+            bounded minimum-energy resolution (None: half the minimum-energy distribution's peak).
+        internal_moment_bound: N·m, bound on every internal-moment component, likewise.
+    """
 
     trajectory: str = "forward"
     object_motion: ObjectMotion | None = None
@@ -357,13 +499,33 @@ class InverseSettings:
 
 @dataclass(frozen=True, eq=False)
 class Model:
-    """A whole scene. gravity (3,) m/s² world; plane (3, 3) rows e1, e2, n of the plane of motion for
-    a planar scene, else None; rows (k, 6) the constraint rows kept per grasp (k = 3 planar, 6
-    spatial), applied to twists [v; ω] and wrenches [f; n] in world axes; q0, qd0 (n_total,) initial
-    state as given (not yet consistent); duration s; joint_range (n_total, 2) lower and upper position
-    limit of each stacked joint, rad (m for a prismatic joint; ±inf: none; None: no joint has one),
-    from a robot file or a joint's `range`: checked at the initial state and along trajectories
-    (object-motion IK stops, a forward run warns), not enforced by the dynamics."""
+    """A whole scene: r arms grasping one object in a closed chain, its torques and its settings.
+
+    Attributes:
+        name: the scenario's name.
+        arms: (r,) the arms, in stacking order.
+        object: the grasped object.
+        gravity: (3,) m/s², world axes.
+        plane: (3, 3) rows e1, e2, n (world axes) of the plane of motion for a planar scene, else None.
+        rows: (k, 6) the constraint rows S kept per grasp (k = 3 planar, 6 spatial), applied to twists
+            [v; ω] and wrenches [f; n] in world axes.
+        q0: (n_total,) rad (m on a prismatic joint), the initial joint coordinates as given (not yet
+            consistent).
+        qd0: (n_total,) rad/s (m/s), the initial joint rates as given (not yet consistent).
+        duration: s.
+        torques: the applied joint torques: one TorqueTable per arm, or a TorqueFunction (a
+            TorqueFeedback for a controller in the loop).
+        motors: the joints' motors.
+        integrator: the forward run's integrator settings.
+        mujoco: the MuJoCo twin's numerics.
+        validation: the agreement the twin must reach.
+        inverse: the inverse dynamics and load capacity settings.
+        joint_range: (n_total, 2) rad (m for a prismatic joint), lower and upper position limit of each
+            stacked joint (±inf: none; None: no joint has one), from a robot file or a joint's `range`:
+            checked at the initial state and along trajectories (object-motion IK stops, a forward run
+            warns), not enforced by the dynamics.
+        control: the controller in the loop (None: open loop, the torque tables alone).
+    """
 
     name: str
     arms: tuple[ArmModel, ...]
@@ -385,10 +547,12 @@ class Model:
 
     @property
     def r(self) -> int:
+        """The number of arms r."""
         return len(self.arms)
 
     @property
     def n_total(self) -> int:
+        """The number of joints of all arms together."""
         return int(sum(a.n for a in self.arms))
 
     @cached_property
@@ -398,13 +562,26 @@ class Model:
 
     @cached_property
     def dof_slices(self) -> tuple[slice, ...]:
+        """(r,) each arm's slice of the stacked joint vectors, arm after arm."""
         ends = np.cumsum([0] + [a.n for a in self.arms])
         return tuple(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:]))
 
 
 def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> np.ndarray:
-    """Stacked joint torques τ(t) (n_total,) N·m, linear between table rows, held outside (or the
-    value of a TorqueFunction at t; a TorqueFeedback needs the state: `applied_torque`)."""
+    """Stacked joint torques τ(t): linear between table rows, held outside them.
+
+    Or the value of a TorqueFunction at t; a TorqueFeedback needs the state (`applied_torque`).
+
+    Args:
+        tables: one TorqueTable per arm, or a TorqueFunction.
+        t: s, the time.
+
+    Returns:
+        np.ndarray: (n_total,) N·m (N on a prismatic joint), joints stacked arm after arm.
+
+    Raises:
+        ValueError: `tables` is a TorqueFeedback.
+    """
     if isinstance(tables, TorqueFeedback):
         raise ValueError("torques fed back from the state need it: use applied_torque(torques, t, q, qd)")
     if isinstance(tables, TorqueFunction):
@@ -420,8 +597,19 @@ def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> n
 
 def applied_torque(torques: "tuple[TorqueTable, ...] | TorqueFunction", t: float, q: np.ndarray,
                    qd: np.ndarray) -> np.ndarray:
-    """Stacked joint torques (n_total,) N·m applied at time t in the state (q, qd): a TorqueFeedback's
-    value there, otherwise τ(t) (`torque_at`)."""
+    """Stacked joint torques applied at time t in the state (q, qd).
+
+    A TorqueFeedback's value there, otherwise τ(t) (`torque_at`).
+
+    Args:
+        torques: one TorqueTable per arm, or a TorqueFunction (a TorqueFeedback included).
+        t: s, the time.
+        q: (n_total,) rad (m on a prismatic joint), stacked joint coordinates.
+        qd: (n_total,) rad/s (m/s), stacked joint rates.
+
+    Returns:
+        np.ndarray: (n_total,) N·m (N on a prismatic joint), joints stacked arm after arm.
+    """
     if isinstance(torques, TorqueFeedback):
         return np.asarray(torques.fn(t, q, qd), dtype=float)
     return torque_at(torques, t)

@@ -10,9 +10,18 @@ import numpy as np
 
 @dataclass(frozen=True, eq=False)
 class SampledMotion:
-    """Motion sampled at t (N,) s, joints stacked arm by arm (n), SI units, world axes:
-    q, qd, qdd (N, n) rad, rad/s, rad/s²; tau (N, n) N·m; object_pos (N, 3) m (centre of mass);
-    object_quat (N, 4) [w, x, y, z]; object_twist (N, 6) [v_C; ω]."""
+    """Motion sampled at N times, joints stacked arm by arm (n), SI units, world axes.
+
+    Attributes:
+        t: (N,) s, the sample times.
+        q: (N, n) rad (m on a prismatic joint), joint coordinates.
+        qd: (N, n) rad/s (m/s), joint rates.
+        qdd: (N, n) rad/s² (m/s²), joint accelerations.
+        tau: (N, n) N·m (N on a prismatic joint), joint torques.
+        object_pos: (N, 3) m, the object's centre of mass C, world axes.
+        object_quat: (N, 4) [w, x, y, z], the object's orientation (object frame to world).
+        object_twist: (N, 6) [v_C (m/s); ω (rad/s)], the object's twist at C, world axes.
+    """
 
     t: np.ndarray
     q: np.ndarray
@@ -25,8 +34,17 @@ class SampledMotion:
 
 
 class Projection(NamedTuple):
-    """Result of a projection: q, qd the consistent state; dq, dqd the corrections applied;
-    residual_before / residual_after: max |Φ| (m or rad); iterations: Gauss–Newton steps."""
+    """Result of a projection of a state onto the loop-closure manifold.
+
+    Attributes:
+        q: (n,) rad (m on a prismatic joint), the consistent joint coordinates.
+        qd: (n,) rad/s (m/s), the consistent joint rates.
+        dq: (n,) rad (m), the correction applied to q.
+        dqd: (n,) rad/s (m/s), the correction applied to qd.
+        residual_before: m or rad, max |Φ| of the loop closure before the projection.
+        residual_after: m or rad, max |Φ| after it.
+        iterations: the number of Gauss–Newton steps taken.
+    """
 
     q: np.ndarray
     qd: np.ndarray
@@ -38,15 +56,16 @@ class Projection(NamedTuple):
 
 
 def output_times(duration: float, dt: float) -> np.ndarray:
-    """The output grid of a run: 0, dt, 2dt, … up to and including `duration` (the last interval may
-    be shorter).
+    """The output grid of a run: 0, dt, 2dt, … up to and including `duration`.
+
+    The last interval may be shorter.
 
     Args:
         duration: s.
         dt: s, the sample interval (integrator.output_dt).
 
     Returns:
-        (N,) s, strictly increasing, from 0 to `duration`.
+        np.ndarray: (N,) s, strictly increasing, from 0 to `duration`.
     """
     k = int(np.floor(duration / dt + 1e-9))
     t = dt * np.arange(k + 1)

@@ -11,18 +11,40 @@ import numpy as np
 
 
 def skew(v: np.ndarray) -> np.ndarray:
-    """[v×], shape (3, 3): skew(v) @ u == cross(v, u)."""
+    """The skew-symmetric cross-product matrix [v×] of a 3-vector: skew(v) @ u == cross(v, u).
+
+    Args:
+        v: (3,) the vector, any units and axes.
+
+    Returns:
+        np.ndarray: (3, 3) [v×], in v's units and axes.
+    """
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def axis_angle_to_rot(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' formula R = I + sinφ [a×] + (1 − cosφ)[a×]², `axis` a unit 3-vector, angle in rad."""
+    """Rotation by `angle` about `axis`, by Rodrigues' formula R = I + sinφ [a×] + (1 − cosφ)[a×]².
+
+    Args:
+        axis: (3,) unit rotation axis a (not normalised here).
+        angle: rad, the rotation angle φ.
+
+    Returns:
+        np.ndarray: (3, 3) the rotation matrix, in the axes `axis` is given in.
+    """
     K = skew(axis)
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
 def rpy_to_rot(rpy: np.ndarray) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll) for rpy = (roll, pitch, yaw) in rad."""
+    """Rotation matrix R = Rz(yaw) Ry(pitch) Rx(roll) of roll-pitch-yaw angles (fixed axes x, y, z).
+
+    Args:
+        rpy: (3,) rad, (roll, pitch, yaw).
+
+    Returns:
+        np.ndarray: (3, 3) R, body-frame coordinates to world coordinates.
+    """
     r, p, y = rpy
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
     return np.array([
@@ -33,7 +55,14 @@ def rpy_to_rot(rpy: np.ndarray) -> np.ndarray:
 
 
 def quat_to_rot(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion q = [w, x, y, z] (normalised here)."""
+    """Rotation matrix of a unit quaternion q = [w, x, y, z] (normalised here).
+
+    Args:
+        q: (4,) [w, x, y, z], any non-zero norm.
+
+    Returns:
+        np.ndarray: (3, 3) R, body-frame coordinates to world coordinates.
+    """
     w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -43,7 +72,14 @@ def quat_to_rot(q: np.ndarray) -> np.ndarray:
 
 
 def rot_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion [w, x, y, z] (w >= 0) of rotation matrix R (Shepperd's method)."""
+    """Unit quaternion [w, x, y, z] (w >= 0) of a rotation matrix (Shepperd's method).
+
+    Args:
+        R: (3, 3) rotation matrix, body-frame coordinates to world coordinates.
+
+    Returns:
+        np.ndarray: (4,) [w, x, y, z], unit norm, w >= 0.
+    """
     t = np.trace(R)
     if t > 0:
         s = 2.0 * np.sqrt(1.0 + t)
@@ -62,8 +98,16 @@ def rot_to_quat(R: np.ndarray) -> np.ndarray:
 
 
 def rots_to_quats(R: np.ndarray) -> np.ndarray:
-    """`rot_to_quat` over rotation matrices R (..., 3, 3) → (..., 4) [w, x, y, z], w >= 0: Shepperd's
-    branch chosen per matrix as there (the trace when positive, else the largest diagonal entry)."""
+    """`rot_to_quat` over a stack of rotation matrices, Shepperd's branch chosen per matrix as there.
+
+    The branch is the trace when it is positive, else the largest diagonal entry.
+
+    Args:
+        R: (..., 3, 3) rotation matrices, body-frame coordinates to world coordinates.
+
+    Returns:
+        np.ndarray: (..., 4) unit quaternions [w, x, y, z], w >= 0.
+    """
     R = np.asarray(R, dtype=float)
     shape, R = R.shape[:-2], R.reshape(-1, 3, 3)
     q = np.empty((len(R), 4))
@@ -95,7 +139,14 @@ def rot_log(R: np.ndarray) -> np.ndarray:
     2 atan2(|v|, w) v/|v|. Near the identity v carries the angle to full relative precision; near π
     Shepperd's branch takes the axis from the symmetric part of R and w from its antisymmetric part,
     so neither the axis nor the sign degrade (the form sin φ · a / sin φ lost 2e-5 rad at π − 1e-11,
-    and the sign below π − 1e-12). At exactly π both ±π a are valid."""
+    and the sign below π − 1e-12). At exactly π both ±π a are valid.
+
+    Args:
+        R: (3, 3) rotation matrix.
+
+    Returns:
+        np.ndarray: (3,) rad, the rotation vector φ = angle · axis, in the axes R is written in.
+    """
     q = rot_to_quat(R)
     v = q[1:]
     n = float(np.sqrt(v @ v))
@@ -105,13 +156,27 @@ def rot_log(R: np.ndarray) -> np.ndarray:
 
 
 def orientation_error(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
-    """Angle (N,) rad of the rotation between two quaternion series [w, x, y, z] (N, 4)."""
+    """Angle of the rotation between two series of orientations, sample by sample.
+
+    Args:
+        q_a, q_b: (N, 4) quaternions [w, x, y, z] (normalised here).
+
+    Returns:
+        np.ndarray: (N,) rad in [0, π], the angle of R(q_a) R(q_b)ᵀ at each sample.
+    """
     return np.array([np.linalg.norm(rot_log(quat_to_rot(a) @ quat_to_rot(b).T)) for a, b in zip(q_a, q_b)])
 
 
 def rotation_from(q: np.ndarray, R0: np.ndarray) -> np.ndarray:
-    """Rotation vectors φ (N, 3) rad, world axes, of the orientations q (N, 4) [w, x, y, z] relative to
-    R0 (3, 3): exp([φ×]) R0 = R(q) (|φ| <= π)."""
+    """Rotation vectors of a series of orientations relative to a reference: exp([φ×]) R0 = R(q).
+
+    Args:
+        q: (N, 4) quaternions [w, x, y, z] (normalised here), body to world.
+        R0: (3, 3) the reference orientation, body to world.
+
+    Returns:
+        np.ndarray: (N, 3) rad, world axes, the rotation vectors φ (|φ| <= π).
+    """
     return np.array([rot_log(quat_to_rot(x) @ R0.T) for x in q]).reshape(len(q), 3)
 
 
@@ -119,21 +184,47 @@ _I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (…, 3), broadcasting; a lean replacement of np.cross for tiny arrays."""
+    """a × b over the last axis, broadcasting; a lean replacement of np.cross for tiny arrays.
+
+    Args:
+        a, b: (…, 3) vectors in common axes (leading axes broadcast).
+
+    Returns:
+        np.ndarray: (…, 3) a × b, in the same axes.
+    """
     a, b = np.asarray(a), np.asarray(b)
     return a.take(_I1, -1) * b.take(_I2, -1) - a.take(_I2, -1) * b.take(_I1, -1)
 
 
 def rigid_acceleration(a_O: np.ndarray, w: np.ndarray, dw: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Acceleration (…, 3) of a point P of a rigid body: a_P = a_O + ω̇ × r + ω × (ω × r), for the
-    acceleration a_O of a body point O, the body's angular velocity ω and acceleration ω̇, and
-    r = p_P − p_O (all (…, 3), broadcasting; a_O may be 0). The one place this formula is written."""
+    """Acceleration of a point P of a rigid body: a_P = a_O + ω̇ × r + ω × (ω × r).
+
+    The one place this formula is written. All vectors in common axes, leading axes broadcasting.
+
+    Args:
+        a_O: (…, 3) m/s², the acceleration of a body point O (may be 0).
+        w: (…, 3) rad/s, the body's angular velocity ω.
+        dw: (…, 3) rad/s², the body's angular acceleration ω̇.
+        r: (…, 3) m, r = p_P − p_O.
+
+    Returns:
+        np.ndarray: (…, 3) m/s², the acceleration a_P of P.
+    """
     return a_O + cross(dw, r) + cross(w, cross(w, r))
 
 
 def box_inertia(mass, size: np.ndarray) -> np.ndarray:
-    """Inertia (…, 3, 3) of a solid box of `mass` (…) kg and edges `size` (…, 3) m about its centre,
-    box axes: m/12 diag(b² + c², a² + c², a² + b²) (broadcasting over the leading axes)."""
+    """Inertia of a solid box about its centre, box axes: m/12 diag(b² + c², a² + c², a² + b²).
+
+    Broadcasts over the leading axes.
+
+    Args:
+        mass: (…) kg, the box's mass m (a float for one box).
+        size: (…, 3) m, the edge lengths (a, b, c) along the box axes.
+
+    Returns:
+        np.ndarray: (…, 3, 3) kg·m², the inertia about the box's centre, box axes.
+    """
     a2 = np.asarray(size, dtype=float) ** 2
     d = np.stack([a2[..., 1] + a2[..., 2], a2[..., 0] + a2[..., 2], a2[..., 0] + a2[..., 1]], axis=-1)
     return np.asarray(mass, dtype=float)[..., None, None] / 12.0 * (d[..., :, None] * np.eye(3))

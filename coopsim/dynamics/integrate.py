@@ -96,9 +96,20 @@ _METHODS = {"dop853": _DOP853, "dopri5": _DOPRI5, "rk4": _RK4}
 # --------------------------------------------------------------------------------------------
 
 class IntegrationError(RuntimeError):
-    """Integration could not continue. Attributes: ``t`` (float, s) and ``y`` (ndarray) where the
-    failure was detected, ``reason`` (str). ``str(e)`` is one line:
-    ``'integration failed at t=<t> s: <reason>'``."""
+    """Integration could not continue.
+
+    ``str(e)`` is one line: ``'integration failed at t=<t> s: <reason>'``.
+
+    Args:
+        t: s, the time where the failure was detected.
+        y: (n,) the state there (copied).
+        reason: what failed.
+
+    Attributes:
+        t: float, s, the time where the failure was detected.
+        y: (n,) ndarray, the state there, y = [q, q̇] (rad, rad/s; m, m/s on a prismatic joint).
+        reason: str, what failed.
+    """
 
     def __init__(self, t: float, y: np.ndarray, reason: str):
         self.t = float(t)
@@ -112,8 +123,14 @@ class IntegrationError(RuntimeError):
 
 @dataclass(frozen=True)
 class IntegratorStats:
-    """Work counters of one :func:`integrate` call. ``n_rhs`` counts every rhs evaluation
-    (including the two of the initial-step heuristic); ``n_projections`` includes y0."""
+    """Work counters of one :func:`integrate` call.
+
+    Attributes:
+        n_rhs: every rhs evaluation (including the two of the initial-step heuristic).
+        n_accepted: accepted steps.
+        n_rejected: rejected step attempts (adaptive methods).
+        n_projections: calls of ``project`` (y0 included).
+    """
     n_rhs: int
     n_accepted: int
     n_rejected: int
@@ -126,45 +143,43 @@ def integrate(rhs: Callable[[float, np.ndarray], np.ndarray], y0, t_out, *, meth
               project: Callable[[float, np.ndarray], np.ndarray] | None = None):
     """Integrate dy/dt = rhs(t, y), y(t_out[0]) = y0, and return ``(Y, stats)``.
 
-    ``Y`` has shape (len(t_out), len(y0)) with Y[k] = y(t_out[k]); Y[0] = y0 (projected if
-    ``project`` is given). ``stats`` is an :class:`IntegratorStats`.
-
-    method
-        'dop853' (Dormand–Prince 8(5,3), adaptive, Hairer's error estimator), 'dopri5'
-        (Dormand–Prince 5(4), adaptive, FSAL) or 'rk4' (classical, fixed step ``step``).
-    rtol, atol
-        Adaptive methods: a step is accepted when the RMS of e_i / (atol + rtol·max(|y_i|,
-        |y_new_i|)) is < 1 (dop853: Hairer's 5th/3rd-order combination, see module docstring);
-        step controller h_new = h·min(10, max(0.2, 0.9·err^(−1/(p̂+1)))), no growth right after a
-        rejection. ``atol`` may be a scalar or an array of shape (n,).
-    step
-        Adaptive methods: MAXIMUM step size (may be ``np.inf``); the initial step is
-        min(step, Hairer's starting-step estimate). rk4: nominal step; each interval
-        [t_k, t_{k+1}] is split into ceil((t_{k+1} − t_k)/step − 1e-9) equal substeps.
-    h_min
-        Adaptive methods: an IntegrationError is raised when the controller's step size falls
-        below max(h_min, 10 ulp(t)). Steps shortened only to land on an output time are exempt.
-    max_steps
-        Maximum number of step attempts (accepted + rejected) over the whole call.
-    project
-        ``project(t, y) -> y`` onto the constraint manifold: applied to y0 and after every
-        accepted step (never inside RK stages). The derivative at the projected state is
-        re-evaluated (for dopri5 the FSAL stage is discarded).
-
     Steps are clipped (or stretched by ≤ 1 % within ``step``) so they end exactly on every
     t_out[k]; after a step shortened for an output time, the controller's previous proposal is
-    kept. ``rhs`` and ``project`` must not modify their ``y`` argument in place.
+    kept. ``rhs`` and ``project`` must not modify their ``y`` argument in place. Exceptions raised
+    by ``rhs`` or ``project`` propagate unchanged.
 
-    Raises
-    ------
-    ValueError
-        t_out not 1-D, empty, non-finite or not strictly increasing; bad y0/options; rhs or
-        project returning an array of the wrong shape.
-    IntegrationError
-        'step size collapsed to … s' (h < h_min), 'non-finite derivative in component i'
-        (rhs output; .t/.y are the arguments of that rhs call), 'non-finite state in component
-        i' (step result or projection), 'maximum number of steps (N) exceeded'.
-    Exceptions raised by ``rhs`` or ``project`` propagate unchanged.
+    Args:
+        rhs: ``rhs(t, y) -> ẏ``, t in s, y and ẏ (n,) (the multibody state y = [q, q̇]).
+        y0: (n,) the initial state (copied; must be finite).
+        t_out: (K,) s, the output times, strictly increasing and finite; t_out[0] is the initial time.
+        method: 'dop853' (Dormand–Prince 8(5,3), adaptive, Hairer's error estimator), 'dopri5'
+            (Dormand–Prince 5(4), adaptive, FSAL) or 'rk4' (classical, fixed step ``step``).
+        rtol, atol: adaptive methods: a step is accepted when the RMS of e_i / (atol + rtol·max(|y_i|,
+            |y_new_i|)) is < 1 (dop853: Hairer's 5th/3rd-order combination, see module docstring);
+            step controller h_new = h·min(10, max(0.2, 0.9·err^(−1/(p̂+1)))), no growth right after a
+            rejection. ``atol`` (units of y) may be a scalar or an array of shape (n,).
+        step: s. Adaptive methods: MAXIMUM step size (may be ``np.inf``); the initial step is
+            min(step, Hairer's starting-step estimate). rk4: nominal step; each interval
+            [t_k, t_{k+1}] is split into ceil((t_{k+1} − t_k)/step − 1e-9) equal substeps.
+        h_min: s. Adaptive methods: an IntegrationError is raised when the controller's step size
+            falls below max(h_min, 10 ulp(t)). Steps shortened only to land on an output time are
+            exempt.
+        max_steps: maximum number of step attempts (accepted + rejected) over the whole call.
+        project: ``project(t, y) -> y`` onto the constraint manifold, or None: applied to y0 and after
+            every accepted step (never inside RK stages). The derivative at the projected state is
+            re-evaluated (for dopri5 the FSAL stage is discarded).
+
+    Returns:
+        tuple[np.ndarray, IntegratorStats]: ``(Y, stats)``: Y (K, n) with Y[k] = y(t_out[k]);
+            Y[0] = y0 (projected if ``project`` is given); stats the call's work counters.
+
+    Raises:
+        ValueError: t_out not 1-D, empty, non-finite or not strictly increasing; bad y0/options; an
+            unknown method; rhs or project returning an array of the wrong shape.
+        IntegrationError: 'step size collapsed to … s' (h < h_min), 'non-finite derivative in
+            component i' (rhs output; .t/.y are the arguments of that rhs call), 'non-finite state in
+            component i' (step result) or 'non-finite projected state in component i' (projection),
+            'maximum number of steps (N) exceeded'.
     """
     tab = _METHODS.get(method)
     if tab is None:
