@@ -18,9 +18,18 @@ def _duration(seconds: float) -> str:
 
 
 class ProgressBar:
-    """`bar(label, fraction)` redraws `label    ETA 12 s [#####.....]  50%` (the remaining time of the
-    stage from its pace so far; when the stage is done, the time it took); `bar.close()` (or leaving a
-    `with` block) ends the line. A new label starts a new line and a new stage clock."""
+    """A progress bar: `bar(label, fraction)` redraws `label    ETA 12 s [#####.....]  50%`.
+
+    The ETA is the remaining time of the stage from its pace so far; when the stage is done, the time
+    it took. `bar.close()` (or leaving a `with` block) ends the line. A new label starts a new line
+    and a new stage clock. Drawn on `stream` only when it is a terminal and `enabled`.
+
+    Args:
+        stream: the text stream drawn on (None: stderr).
+        width: characters of the bar between the brackets.
+        enabled: False: draw nothing (e.g. with --json).
+        clock: a function giving seconds (the stages' elapsed times).
+    """
 
     def __init__(self, stream=None, width: int = 30, enabled: bool = True, clock=time.monotonic):
         """Drawn on `stream` (default stderr) when it is a terminal and `enabled` (e.g. not with --json);
@@ -59,6 +68,7 @@ class ProgressBar:
         self.stream.flush()
 
     def close(self) -> None:
+        """End the bar's line (a newline when something was drawn); the next call starts afresh."""
         if self.enabled and self.last is not None:
             self.stream.write("\n")
             self.stream.flush()

@@ -28,13 +28,28 @@ from coopsim.core.spatial import rigid_acceleration, rot_log
 
 class ChainTerms(NamedTuple):
     """Everything the closed-chain solve needs at one state (world axes, SI).
-    poses: ArmPose per arm; J (r) EE Jacobians (6, n_m); Jd_qd (r, 6) J̇_mθ̇_m;
-    M (n, n) 𝐈 of eq. 22 (object inertia in the carrier block); h (n,) τ-side terms
-    (−Re + C_oθ̇ + C_g); M_arms, h_arms: per-arm I_m, −Re_m without the object (eq. 10);
-    obj: ObjectPose; J_o (6, n_c) object Jacobian through the carrier; Jd_o_qd (6,) J̇_oθ̇_c;
-    v_o (6,) object twist [v_C; ω]; M_o (6, 6), b_o (6,) object terms (eq. 11);
-    s (r, 3) p_C − grasp point of each arm; Lam (k(r−1), n) Λ; Lam_dot_qd (k(r−1),) Λ̇θ̇;
-    Lam_qd (k(r−1),) Λθ̇."""
+
+    n joints stacked arm by arm, r arms, k constraint rows per grasp, c the carrier arm.
+
+    Attributes:
+        poses: the ArmPose of each arm (r).
+        J: the end-effector Jacobians J_m (6, n_m) of the arms (r), world axes, EE point.
+        Jd_qd: (r, 6) J̇_mθ̇_m [m/s²; rad/s²] at each EE point.
+        M: (n, n) 𝐈 of eq. 22 (object inertia in the carrier block), kg·m², kg·m or kg by joint types.
+        h: (n,) N·m (N on a prismatic joint), the τ-side terms (−Re + C_oθ̇ + C_g).
+        M_arms: the per-arm mass matrices I_m (n_m, n_m) without the object (eq. 10).
+        h_arms: the per-arm bias forces −Re_m (n_m,) without the object (eq. 10).
+        obj: the ObjectPose carried by arm c.
+        J_o: (6, n_c) object Jacobian through the carrier, v_o = J_o θ̇_c (at C).
+        Jd_o_qd: (6,) J̇_oθ̇_c [m/s²; rad/s²] at C.
+        v_o: (6,) the object twist [v_C; ω] (m/s, rad/s).
+        M_o: (6, 6) object mass matrix diag(m_o I₃, K_o) at C (eq. 11), kg and kg·m².
+        b_o: (6,) [N; N·m] object bias wrench at C (eq. 11).
+        s: (r, 3) m, p_C − grasp point of each arm.
+        Lam: (k(r−1), n) the constraint Jacobian Λ.
+        Lam_dot_qd: (k(r−1),) Λ̇θ̇ (m/s², rad/s² by row).
+        Lam_qd: (k(r−1),) Λθ̇ (m/s, rad/s by row).
+    """
 
     poses: list
     J: list
@@ -56,10 +71,16 @@ class ChainTerms(NamedTuple):
 
 
 class ChainAcceleration(NamedTuple):
-    """Closed-chain forward dynamics result: qdd (n,) rad/s²; F_e (r, 6) grasp wrenches (EE on
-    object, at the EE point, world axes; out-of-plane components zero in a planar scene);
-    vd_o (6,) object acceleration [v̇_C; ω̇]; cond: condition number of Λ𝐈⁻¹Λᵀ; rank: its
-    numerical rank (< rows: rank-deficient, minimum-norm grasp wrenches)."""
+    """Closed-chain forward dynamics result (`forward_dynamics`), world axes.
+
+    Attributes:
+        qdd: (n,) rad/s² (m/s² on a prismatic joint), the joint accelerations θ̈.
+        F_e: (r, 6) [f; n] N, N·m, the grasp wrenches (EE on object, at the EE point, world axes;
+            out-of-plane components zero in a planar scene).
+        vd_o: (6,) the object acceleration [v̇_C; ω̇] (m/s², rad/s²).
+        cond: the condition number of Λ𝐈⁻¹Λᵀ.
+        rank: its numerical rank (< rows: rank-deficient, minimum-norm grasp wrenches).
+    """
 
     qdd: np.ndarray
     F_e: np.ndarray
@@ -69,26 +90,60 @@ class ChainAcceleration(NamedTuple):
 
 
 def arm_poses(model: Model, q: np.ndarray) -> list[ArmPose]:
-    """Stage 1 for every arm: forward kinematics at the stacked joint angles q (n,)."""
+    """Stage 1 for every arm: forward kinematics at the stacked joint angles.
+
+    Args:
+        model: the Model.
+        q: (n,) rad or m, the stacked joint coordinates, arm by arm.
+
+    Returns:
+        list[ArmPose]: one per arm (r).
+    """
     return [arm_pose(arm, q[sl]) for arm, sl in zip(model.arms, model.dof_slices)]
 
 
 def carrier_object(model: Model, poses: list[ArmPose]) -> ObjectPose:
-    """Object pose carried by arm c's end-effector (eqs. 11–13 via arm 1)."""
+    """Object pose carried by arm c's end-effector (eqs. 11–13 via arm 1).
+
+    Args:
+        model: the Model (its object's carrier arm c and grasp).
+        poses: the ArmPose of every arm (`arm_poses`).
+
+    Returns:
+        ObjectPose: C, R_o and the object's inertia about C, world axes.
+    """
     c = model.object.carrier
     return object_pose(model.object, poses[c].p_ee, poses[c].R_ee, c)
 
 
 def grasp_offsets(model: Model, obj: ObjectPose) -> np.ndarray:
-    """s (r, 3): p_C − (grasp point of arm m on the object), world axes."""
+    """Grasp offsets s_m = p_C − (grasp point of arm m on the object), world axes.
+
+    Args:
+        model: the Model (its object's grasp positions, object frame).
+        obj: the ObjectPose (its rotation R_o).
+
+    Returns:
+        np.ndarray: (r, 3) m, s_m, world axes.
+    """
     return -(obj.R_o @ model.object.grasp_pos.T).T
 
 
 def position_residual(model: Model, q: np.ndarray) -> np.ndarray:
-    """Loop-closure residual Φ (k(r−1),): for each arm m ≠ c, S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)]
-    (m and rad, world axes), the grasp frame carried by the object on the carrier arm. The position
-    error is formed without world positions (module `kinematics`), as the base offset
-    o_m − o_c plus p_EE,m − p_grasp,m relative to the bases, p_grasp,m = p_EE,c + R_o (g_m − g_c)."""
+    """Loop-closure residual Φ: for each arm m ≠ c, S [p_EE,m − p_grasp,m; log(R_EE,m R_grasp,mᵀ)].
+
+    The grasp frame is carried by the object on the carrier arm. The position error is formed without
+    world positions (module `kinematics`), as the base offset o_m − o_c plus p_EE,m − p_grasp,m
+    relative to the bases, p_grasp,m = p_EE,c + R_o (g_m − g_c).
+
+    Args:
+        model: the Model.
+        q: (n,) rad or m, the stacked joint coordinates.
+
+    Returns:
+        np.ndarray: (k(r−1),) Φ, m (position rows) and rad (orientation rows), world axes, in the
+        scene's rows S.
+    """
     poses = arm_poses(model, q)
     obj = carrier_object(model, poses)
     c, gp = model.object.carrier, model.object.grasp_pos
@@ -107,7 +162,16 @@ def _others(model: Model) -> list[int]:
 
 
 def chain_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> ChainTerms:
-    """Stages 1–3 and the assembly of eqs. 17–24 at state (q, qd)."""
+    """Stages 1–3 and the assembly of eqs. 17–24 at state (q, qd).
+
+    Args:
+        model: the Model.
+        q: (n,) rad or m, the stacked joint coordinates.
+        qd: (n,) rad/s or m/s, the stacked joint rates.
+
+    Returns:
+        ChainTerms: every term of the closed-chain solve at that state.
+    """
     sl, c, g = model.dof_slices, model.object.carrier, model.gravity
     poses = arm_poses(model, q)
     dyn = [arm_dynamics(arm, pose, qd[s], g) for arm, pose, s in zip(model.arms, poses, sl)]
@@ -152,8 +216,21 @@ def _constraints(model, J, Jd_qd, J_o, Jd_o_qd, w, s):
 
 def forward_dynamics(model: Model, terms: ChainTerms, tau: np.ndarray,
                      stabilization: np.ndarray | None = None) -> ChainAcceleration:
-    """θ̈ (eqs. 25–27) and the grasp wrenches for joint torques tau (n,) N·m.
-    stabilization (k(r−1),): extra right-hand side of Λθ̈ = −Λ̇θ̇ − stabilization (Baumgarte)."""
+    """θ̈ (eqs. 25–27) and the grasp wrenches for joint torques tau.
+
+    Args:
+        model: the Model (its constraint rows, carrier arm and integrator.rank_tol).
+        terms: the ChainTerms at the state (`chain_terms`).
+        tau: (n,) N·m (N on a prismatic joint), the stacked joint torques.
+        stabilization: (k(r−1),) extra right-hand side of Λθ̈ = −Λ̇θ̇ − stabilization (Baumgarte,
+            2αΛθ̇ + β²Φ); None: none.
+
+    Returns:
+        ChainAcceleration: θ̈, the grasp wrenches, the object acceleration, cond and rank of Λ𝐈⁻¹Λᵀ.
+
+    Raises:
+        ConstraintError: the closed-chain mass matrix 𝐈 is not positive definite.
+    """
     # 𝐈 = L Lᵀ (LAPACK potrf: fails unless 𝐈 is positive definite) and both solves on that factor
     # (potrs; scipy's solve_triangular would cost ~10× more on these tiny matrices). Imported here: the
     # commands run the compiled engine and need not load scipy.linalg (about 0.3 s) to start.

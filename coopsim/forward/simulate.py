@@ -63,6 +63,8 @@ class SimResult(SampledMotion):
         engine: the engine that ran: 'compiled', 'reference' or 'stages'.
         control_counts: with a controller in the compiled loop, (stage evaluations, evaluations in
             which the motor lines clipped a joint, clipped (evaluation, joint) pairs); else None.
+        arm_terms: the per-sample end-effector Jacobians, 𝐈_m θ̇_m and object rotations
+            (`coopsim.forward.diagnostics.ArmTerms`), computed on first use.
         manipulability: (N, r) of each arm, computed on first use (`coopsim.forward.diagnostics`).
         kinetic_energy: (N,) J, computed on first use.
         warnings: every RunWarning of the run, events included, computed on first use.
@@ -84,18 +86,22 @@ class SimResult(SampledMotion):
 
     @cached_property
     def arm_terms(self) -> diagnostics.ArmTerms:
+        """Per-sample Jacobians, 𝐈_m θ̇_m and object rotations (`diagnostics.arm_terms`), on first use."""
         return diagnostics.arm_terms(self.model, self.q, self.qd)
 
     @cached_property
     def manipulability(self) -> np.ndarray:
+        """(N, r) each arm's manipulability in the scene's rows (`diagnostics.manipulability`), on first use."""
         return diagnostics.manipulability(self.model, self.arm_terms.J)
 
     @cached_property
     def kinetic_energy(self) -> np.ndarray:
+        """(N,) J, the kinetic energy of arms and object (`diagnostics.kinetic_energy`), on first use."""
         return diagnostics.kinetic_energy(self.model, self.qd, self.arm_terms, self.object_twist)
 
     @cached_property
     def warnings(self) -> tuple[RunWarning, ...]:
+        """Every RunWarning of the run, events first (`diagnostics.collect`), on first use."""
         return diagnostics.collect(self, self.arm_terms)
 
 
@@ -128,9 +134,21 @@ def initial_state(model: Model, engine: str = "compiled") -> Projection:
 
 
 def choose_engine(model: Model, engine: str) -> str:
-    """The engine that runs `model` when `engine` is asked for: an in-the-loop controller runs on
-    'compiled' unless it needs Python (then 'stages'); other Python torque functions run on
-    'reference' ('stages' when asked)."""
+    """The engine that runs `model` when `engine` is asked for.
+
+    An in-the-loop controller runs on 'compiled' unless it needs Python (then 'stages'); other Python
+    torque functions run on 'reference' ('stages' when asked).
+
+    Args:
+        model: the Model (its torque source).
+        engine: the engine asked for: 'compiled', 'reference' or 'stages'.
+
+    Returns:
+        str: the engine that runs: 'compiled', 'reference' or 'stages'.
+
+    Raises:
+        ValueError: an unknown engine.
+    """
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     if isinstance(model.torques, TorqueFeedback) and engine == "compiled":
@@ -151,7 +169,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
             such as a closed loop, `coopsim.control.controller.closed_loop`).
         duration: s, in place of the model's.
         settings: integrator settings in place of the model's.
-        progress: called with the fraction done (0..1) as the run advances.
+        progress: called with the fraction done (0..1) as the run advances; None: no reports.
         engine: 'compiled', 'reference' or 'stages' (module docstring). An in-the-loop controller runs
             on the compiled engine unless it needs Python (then 'stages'); other Python torque
             functions run on 'reference' ('stages' for feedback).
@@ -165,6 +183,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
 
     Raises:
         CoopsimError: the model has a `control:` section that is not in the loop.
+        ValueError: an unknown engine, or fixed_step with an engine other than 'compiled'.
         SimulationError: the run failed; the message gives the time, the configuration and the reason.
     """
     if settings is not None:

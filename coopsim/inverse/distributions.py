@@ -50,11 +50,20 @@ import numpy as np
 from coopsim.inverse.qp import solve_qps
 from coopsim.forward.diagnostics import describe_state
 from coopsim.inverse.stress import grasp_line_axes, line_frame
-from coopsim.inverse.problem import InverseProblem, InverseRankWarning, Resolution, SampleFailure, SampleFailureWarning, failure_text
+from coopsim.inverse.problem import (InverseProblem, InverseRankWarning, Resolution, SampleFailure,
+                                     SampleFailureWarning, failure_text)
 
 
 def paper_distribution(prob: InverseProblem, y: np.ndarray) -> np.ndarray:
-    """Zero internal force with the paper's W⁺ (eqs. 8, 30): f_m = S W_m⁻¹ Sᵀ y / r, W_m⁻¹ = W(−s_m)."""
+    """Zero internal force with the paper's W⁺ (eqs. 8, 30): f_m = S W_m⁻¹ Sᵀ y / r, W_m⁻¹ = W(−s_m).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        y: (N, k) [N; N·m], the net object wrench S Y at C in the rows S, world axes.
+
+    Returns:
+        np.ndarray: (N, rk) the grasp wrenches f = [f_1; …; f_r] in the rows S (N, N·m), world axes.
+    """
     S, r = prob.rows, prob.r
     Winv = 2 * np.eye(6) - prob.W                                  # W(−s) (N, r, 6, 6), exactly
     f = (S @ Winv @ (y @ S)[:, None, :, None])[..., 0] / r
@@ -62,13 +71,24 @@ def paper_distribution(prob: InverseProblem, y: np.ndarray) -> np.ndarray:
 
 
 def virtual_masses(grasp_pos: np.ndarray, mass: float, ratios: np.ndarray | None = None):
-    """Virtual masses m_i* (r,) kg of the non-squeezing distribution and the offset (3,) m of their
-    centroid from C (object frame). Given `ratios`, m_i* = m_o ratios_i / Σ ratios. Otherwise the masses
-    closest to equal shares m_o/r with Σ m_i* = m_o and Σ m_i* g_i = 0 (g_i the grasp positions, so the
-    centroid is C; least squares when C is off the grasps' affine hull); when that needs a mass below 1 %
-    of an equal share (C on, near or outside the border of the grasps' hull: an arm would be left idle)
-    equal shares are used. A non-zero offset means the distribution is non-squeezing for a virtual body
-    whose centre is not the object's."""
+    """Virtual masses m_i* of the non-squeezing distribution and the offset of their centroid from C.
+
+    Given `ratios`, m_i* = m_o ratios_i / Σ ratios. Otherwise the masses closest to equal shares m_o/r
+    with Σ m_i* = m_o and Σ m_i* g_i = 0 (g_i the grasp positions, so the centroid is C; least squares
+    when C is off the grasps' affine hull); when that needs a mass below 1 % of an equal share (C on,
+    near or outside the border of the grasps' hull: an arm would be left idle) equal shares are used.
+    A non-zero offset means the distribution is non-squeezing for a virtual body whose centre is not
+    the object's.
+
+    Args:
+        grasp_pos: (r, 3) m, the grasp positions g_i relative to C, object frame.
+        mass: kg, the object's mass m_o.
+        ratios: (r,) the shares of the mass (any positive scale); None: from the grasp geometry.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: the virtual masses m_i* (r,) kg and the offset (3,) m of their
+        centroid from C, object frame.
+    """
     r = len(grasp_pos)
     if ratios is not None:
         m = mass * np.asarray(ratios, dtype=float) / np.sum(ratios)
@@ -83,12 +103,30 @@ def virtual_masses(grasp_pos: np.ndarray, mass: float, ratios: np.ndarray | None
 
 
 def virtual_inertias(masses: np.ndarray, mass: float, inertia: np.ndarray) -> np.ndarray:
-    """J_i* (r, 3, 3) = (m_i*/m_o) K_o, object frame: the object's own inertia shared like the mass."""
+    """Virtual inertias J_i* = (m_i*/m_o) K_o: the object's own inertia shared like the mass.
+
+    Args:
+        masses: (r,) kg, the virtual masses m_i* (`virtual_masses`).
+        mass: kg, the object's mass m_o.
+        inertia: (3, 3) kg·m², the object's inertia K_o about C, object frame.
+
+    Returns:
+        np.ndarray: (r, 3, 3) kg·m², J_i*, object frame.
+    """
     return masses[:, None, None] / mass * inertia[None]
 
 
 def nonsqueezing_metric(prob: InverseProblem, masses: np.ndarray, inertias: np.ndarray) -> np.ndarray:
-    """M* (N, rk, rk) = blockdiag(S diag(m_i* I₃, R_o J_i* R_oᵀ) Sᵀ), world axes, in the rows S."""
+    """The non-squeezing metric M* = blockdiag(S diag(m_i* I₃, R_o J_i* R_oᵀ) Sᵀ), world axes, rows S.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        masses: (r,) kg, the virtual masses m_i*.
+        inertias: (r, 3, 3) kg·m², the virtual inertias J_i*, object frame.
+
+    Returns:
+        np.ndarray: (N, rk, rk) M* at every sample (kg and kg·m² blocks).
+    """
     N, r, k, S = len(prob.t), prob.r, prob.k, prob.rows
     M = np.zeros((N, r * k, r * k))
     for i in range(r):
@@ -100,26 +138,53 @@ def nonsqueezing_metric(prob: InverseProblem, masses: np.ndarray, inertias: np.n
 
 
 def nonsqueezing_inverse(prob: InverseProblem, Mstar: np.ndarray) -> np.ndarray:
-    """G⁺ᴹ (N, rk, k) = M* Aᵀ (A M* Aᵀ)⁻¹ (Erhart & Hirche's weighted generalized inverse)."""
+    """G⁺ᴹ = M* Aᵀ (A M* Aᵀ)⁻¹ (Erhart & Hirche's weighted generalized inverse).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        Mstar: (N, rk, rk) the non-squeezing metric M* (`nonsqueezing_metric`).
+
+    Returns:
+        np.ndarray: (N, rk, k) G⁺ᴹ at every sample.
+    """
     MAt = Mstar @ np.swapaxes(prob.A, 1, 2)
     return MAt @ np.linalg.inv(prob.A @ MAt)
 
 
 def nonsqueezing_distribution(prob: InverseProblem, y: np.ndarray, Mstar: np.ndarray) -> np.ndarray:
-    """f = G⁺ᴹ y: every virtual body carries its own rigid-body load (zero non-squeezing internal wrench)."""
+    """f = G⁺ᴹ y: every virtual body carries its own rigid-body load (zero non-squeezing internal wrench).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        y: (N, k) [N; N·m], the net object wrench S Y at C in the rows S, world axes.
+        Mstar: (N, rk, rk) the non-squeezing metric M* (`nonsqueezing_metric`).
+
+    Returns:
+        np.ndarray: (N, rk) the grasp wrenches f in the rows S (N, N·m), world axes.
+    """
     return np.einsum("nij,nj->ni", nonsqueezing_inverse(prob, Mstar), y)
 
 
 class MinEnergySetup(NamedTuple):
-    """The weight-independent part of the minimum-energy distributions of s net wrenches along a
-    trajectory (N samples, n joints, m = rk unknowns, c = k + #passive constraints C f = b with
-    C = [A; P Jᵀ], b = [y; −P τ_arms], d = m − c free directions): every solution of C f = b is
-    f = f_p + Z z. Sample axis last (vectorized over samples): ys (s, N, k) the net wrenches;
-    fp (m, s, N) = C⁺b (minimum norm); Z (m, d, N) an orthonormal basis of null(C); with D = Jᵀ Z and
-    u = τ_arms + Jᵀf_p (the torques of f_p), per joint j DD (n, d, d, N) = d_j d_jᵀ and
-    Du (n, d, s, N) = d_j u_j (d_j: row j of D); regular (N,) bool: C has full row rank by the
-    forward model's rule (`has_full_rank`, the problem's rank_tol); passive (n,) bool; D (n, d, N) and
-    u (n, s, N) themselves."""
+    """The weight-independent part of the minimum-energy distributions of s net wrenches along a trajectory.
+
+    N samples, n joints, m = rk unknowns, c = k + #passive constraints C f = b with C = [A; P Jᵀ],
+    b = [y; −P τ_arms], d = m − c free directions: every solution of C f = b is f = f_p + Z z. With
+    D = Jᵀ Z and u = τ_arms + Jᵀf_p (the torques of f_p), d_j is row j of D. Sample axis last
+    (vectorized over samples) except in ys.
+
+    Attributes:
+        ys: (s, N, k) [N; N·m] the net wrenches, rows S.
+        fp: (m, s, N) f_p = C⁺b (minimum norm), N, N·m.
+        Z: (m, d, N) an orthonormal basis of null(C).
+        DD: (n, d, d, N) d_j d_jᵀ per joint j.
+        Du: (n, d, s, N) d_j u_j per joint j.
+        regular: (N,) bool: C has full row rank by the forward model's rule (`gram_rank`, the
+            problem's rank_tol).
+        passive: (n,) bool, the passive joints (τ_j = 0).
+        D: (n, d, N) D = Jᵀ Z itself.
+        u: (n, s, N) N·m (N on a prismatic joint), u = τ_arms + Jᵀf_p itself.
+    """
 
     ys: np.ndarray
     fp: np.ndarray
@@ -133,8 +198,17 @@ class MinEnergySetup(NamedTuple):
 
 
 def gram_rank(sv: np.ndarray, rank_tol: float) -> np.ndarray:
-    """Numerical rank (…,) of matrices with singular values sv (…, p) (descending): the forward model's
-    rule for Λ𝐈⁻¹Λᵀ applied to the Gram matrix — eigenvalues σ² above rank_tol·σ_max² count."""
+    """Numerical rank of matrices from their singular values, by the forward model's rule.
+
+    The rule for Λ𝐈⁻¹Λᵀ applied to the Gram matrix — eigenvalues σ² above rank_tol·σ_max² count.
+
+    Args:
+        sv: (…, p) the singular values of each matrix, descending.
+        rank_tol: the relative eigenvalue threshold (the scenario's integrator.rank_tol).
+
+    Returns:
+        np.ndarray: (…,) int, the numerical ranks.
+    """
     sq = np.asarray(sv, dtype=float) ** 2
     return np.sum(sq > rank_tol * sq[..., :1], axis=-1) if sq.shape[-1] else np.zeros(sq.shape[:-1], int)
 
@@ -150,8 +224,18 @@ def _constraints_of(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray, i
 
 
 def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) -> MinEnergySetup:
-    """The parts of the minimum-energy problem that do not depend on the weights, for the net wrenches
-    ys (s, N, k): the particular solutions and null spaces of C f = b (an SVD of C per sample)."""
+    """The parts of the minimum-energy problem that do not depend on the weights.
+
+    The particular solutions and null spaces of C f = b (an SVD of C per sample).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        ys: (s, N, k) [N; N·m], s net object wrenches at C in the rows S, world axes.
+        passive: (n,) bool, the passive joints (τ_j = 0 enforced).
+
+    Returns:
+        MinEnergySetup: f_p, Z and the per-joint products, samples on the last axis.
+    """
     JT, ta = prob.JT, prob.tau_arms
     C, b = _constraints_of(prob, ys, passive)
     N, c, m = C.shape
@@ -169,12 +253,22 @@ def min_energy_setup(prob: InverseProblem, ys: np.ndarray, passive: np.ndarray) 
 
 
 def min_energy_solve(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray) -> np.ndarray:
-    """Minimum-energy distributions f (s, N, m) of setup.ys for the weights (n,): f = f_p + Z z with
-    (DᵀQD) z = −DᵀQu (the KKT system of eqs. 33–35 reduced to null(C)), by Cholesky where it is
-    certified well-conditioned. Where C or DᵀQD lost rank by the forward model's rule (the problem's
-    rank_tol on the Gram matrices' relative eigenvalues) the minimum-norm solution is used — least
-    squares on C's numerical range, then the minimum-norm minimiser of the energy (`_min_energy_min_norm`)
-    — and an InverseRankWarning names the first samples' times and configurations."""
+    """Minimum-energy distributions of setup.ys: f = f_p + Z z with (DᵀQD) z = −DᵀQu.
+
+    The KKT system of eqs. 33–35 reduced to null(C), solved by Cholesky where it is certified
+    well-conditioned. Where C or DᵀQD lost rank by the forward model's rule (the problem's rank_tol on
+    the Gram matrices' relative eigenvalues) the minimum-norm solution is used — least squares on C's
+    numerical range, then the minimum-norm minimiser of the energy (`_min_energy_min_norm`) — and an
+    InverseRankWarning names the first samples' times and configurations.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        setup: the MinEnergySetup (`min_energy_setup`).
+        weights: (n,) the diagonal of Q (passive joints' entries ignored).
+
+    Returns:
+        np.ndarray: (s, N, m) the grasp wrenches f (m = rk) in the rows S (N, N·m), world axes.
+    """
     Q = np.where(setup.passive, 0.0, weights)
     z, ok = _spd_solve(_weighted_sum(Q, setup.DD), -_weighted_sum(Q, setup.Du), prob.rank_tol)
     f = setup.fp + sum(setup.Z[:, a, None] * z[a] for a in range(len(z)))
@@ -205,9 +299,20 @@ def _weighted_sum(Q: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 def min_energy_distribution(prob: InverseProblem, y: np.ndarray, weights: np.ndarray,
                             passive: np.ndarray) -> np.ndarray:
-    """argmin_f ½ τᵀQτ, τ = τ_arms + Jᵀf, s.t. A f = y and τ_j = 0 (passive j) — eqs. 33–35 in the grasp
-    wrenches: [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms], solved in
-    the null space of C (`min_energy_solve`). Minimum norm where the equations lost rank."""
+    """argmin_f ½ τᵀQτ, τ = τ_arms + Jᵀf, s.t. A f = y and τ_j = 0 (passive j) — eqs. 33–35.
+
+    In the grasp wrenches: [J Q Jᵀ, Cᵀ; C, 0][f; λ] = [−J Q τ_arms; b], C = [A; P Jᵀ], b = [y; −P τ_arms],
+    solved in the null space of C (`min_energy_solve`). Minimum norm where the equations lost rank.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        y: (N, k) [N; N·m], the net object wrench S Y at C in the rows S, world axes.
+        weights: (n,) the diagonal of Q.
+        passive: (n,) bool, the passive joints (τ_j = 0 enforced).
+
+    Returns:
+        np.ndarray: (N, rk) the grasp wrenches f in the rows S (N, N·m), world axes.
+    """
     return min_energy_solve(prob, min_energy_setup(prob, y[None], passive), weights)[0]
 
 
@@ -275,8 +380,18 @@ def _spd_solve(H: np.ndarray, r: np.ndarray, rank_tol: float) -> tuple[np.ndarra
 
 
 def min_energy_torques_jacobian_form(prob: InverseProblem, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """The paper's own form of eqs. 33–35 (square, non-singular S J_m only): with 𝒜 = A J⁻ᵀ,
-    τ = Q⁻¹𝒜ᵀλ, λ = (𝒜 Q⁻¹ 𝒜ᵀ)⁻¹ (𝒜 τ_arms + y) — the sign of Y that eqs. 10, 11 and 31 imply."""
+    """The paper's own form of eqs. 33–35 (square, non-singular S J_m only): τ = Q⁻¹𝒜ᵀλ, 𝒜 = A J⁻ᵀ.
+
+    λ = (𝒜 Q⁻¹ 𝒜ᵀ)⁻¹ (𝒜 τ_arms + y) — the sign of Y that eqs. 10, 11 and 31 imply.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        y: (N, k) [N; N·m], the net object wrench S Y at C in the rows S, world axes.
+        weights: (n,) the diagonal of Q (positive).
+
+    Returns:
+        np.ndarray: (N, n) N·m (N on a prismatic joint), the joint torques τ.
+    """
     Acal = prob.A @ np.linalg.inv(prob.JT)
     Qi = 1.0 / weights
     AQ = Acal * Qi[None, None, :]
@@ -286,10 +401,21 @@ def min_energy_torques_jacobian_form(prob: InverseProblem, y: np.ndarray, weight
 
 
 def distribution_of_torques(prob: InverseProblem, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Grasp wrenches f (N, rk) that given torques imply ([Jᵀ; A] f = [τ − τ_arms; y] in least squares)
-    and the residual (N,) of that system (zero when τ moves the chain along the trajectory). Where
-    [Jᵀ; A] lost column rank by the forward model's rule (`gram_rank`, the problem's rank_tol) f is the
-    minimum-norm solution and an InverseRankWarning names the first samples' times and configurations."""
+    """Grasp wrenches that given torques imply: [Jᵀ; A] f = [τ − τ_arms; y] in least squares.
+
+    Where [Jᵀ; A] lost column rank by the forward model's rule (`gram_rank`, the problem's rank_tol) f
+    is the minimum-norm solution and an InverseRankWarning names the first samples' times and
+    configurations.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        tau: (N, n) N·m (N on a prismatic joint), the joint torques.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: f (N, rk) in the rows S (N, N·m), world axes, and the residual
+        (N,) max |[Jᵀ; A] f − [τ − τ_arms; y]| of that system (N·m or N; zero when τ moves the chain
+        along the trajectory).
+    """
     M = np.concatenate([prob.JT, prob.A], axis=1)
     rhs = np.concatenate([tau - prob.tau_arms, prob.y], axis=1)
     U, s, Vt = np.linalg.svd(M, full_matrices=False)
@@ -303,9 +429,22 @@ def distribution_of_torques(prob: InverseProblem, tau: np.ndarray) -> tuple[np.n
 
 
 def internal_operator(prob: InverseProblem, definition: str, Mstar: np.ndarray | None = None) -> np.ndarray:
-    """L (N, 6r, rk): the stacked internal wrenches at C, F_I = L f, projected on the modelled rows.
-    'paper':         F_I^m = W_m Sᵀ f_m − (1/r) Σ_j W_j Sᵀ f_j;
-    'nonsqueezing':  F_I^m = W_m Sᵀ [(I − G⁺ᴹ A) f]_m."""
+    """The internal-wrench operator L: the stacked internal wrenches at C, F_I = L f, on the modelled rows.
+
+        'paper':         F_I^m = W_m Sᵀ f_m − (1/r) Σ_j W_j Sᵀ f_j;
+        'nonsqueezing':  F_I^m = W_m Sᵀ [(I − G⁺ᴹ A) f]_m.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        definition: 'paper' or 'nonsqueezing'.
+        Mstar: (N, rk, rk) the non-squeezing metric M* (needed by 'nonsqueezing'; None for 'paper').
+
+    Returns:
+        np.ndarray: (N, 6r, rk) L, world axes (arm m's [f; n] at rows 6m…6m+5).
+
+    Raises:
+        ValueError: an unknown definition.
+    """
     N, r, k, S = len(prob.t), prob.r, prob.k, prob.rows
     Wb = np.zeros((N, 6 * r, r * k))
     for m in range(r):
@@ -321,21 +460,48 @@ def internal_operator(prob: InverseProblem, definition: str, Mstar: np.ndarray |
     return P[None] @ L
 
 
-def internal_wrench(prob: InverseProblem, f: np.ndarray, definition: str, Mstar: np.ndarray | None = None) -> np.ndarray:
-    """Internal wrench (N, r, 6) at C of the distribution f by `definition` (see internal_operator)."""
+def internal_wrench(prob: InverseProblem, f: np.ndarray, definition: str,
+                    Mstar: np.ndarray | None = None) -> np.ndarray:
+    """Internal wrench at C of the distribution f by `definition` (see internal_operator).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        f: (N, rk) the grasp wrenches in the rows S (N, N·m).
+        definition: 'paper' or 'nonsqueezing'.
+        Mstar: (N, rk, rk) the non-squeezing metric M* (needed by 'nonsqueezing'; None for 'paper').
+
+    Returns:
+        np.ndarray: (N, r, 6) [f; n] N, N·m, the internal wrench of each arm at C, world axes.
+
+    Raises:
+        ValueError: an unknown definition.
+    """
     L = internal_operator(prob, definition, Mstar)
     return np.einsum("nij,nj->ni", L, f).reshape(len(f), prob.r, 6)
 
 
 def bounded_min_energy_distribution(prob: InverseProblem, y: np.ndarray, res: Resolution, Mstar: np.ndarray,
                                     failures: list | None = None) -> np.ndarray:
-    """Minimum energy with a bounded internal wrench (a QP per sample, all solved together by
-    `coopsim.inverse.qp.solve_qps`: HiGHS, polished to the exact minimiser): min ½τᵀQτ s.t. A f = y, τ_j = 0
-    (passive), and for every arm m every component of its internal wrench at C (definition
-    res.bound_definition) in its grasp-line frame (axial, 2 shear | torsion, 2 bending) within
-    ± res.force_bound (N) | ± res.moment_bound (N·m). A sample whose QP has no solution (infeasible:
-    a bound that passive joints cannot meet; or not solved) is nan, named in a SampleFailureWarning
-    and appended to `failures` (SampleFailure) — the other samples are unaffected."""
+    """Minimum energy with a bounded internal wrench: a QP per sample, all solved together.
+
+    Solved by `coopsim.inverse.qp.solve_qps` (HiGHS, polished to the exact minimiser): min ½τᵀQτ
+    s.t. A f = y, τ_j = 0 (passive), and for every arm m every component of its internal wrench at C
+    (definition res.bound_definition) in its grasp-line frame (axial, 2 shear | torsion, 2 bending)
+    within ± res.force_bound (N) | ± res.moment_bound (N·m). A sample whose QP has no solution
+    (infeasible: a bound that passive joints cannot meet; or not solved) is nan, named in a
+    SampleFailureWarning and appended to `failures` (SampleFailure) — the other samples are unaffected.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        y: (N, k) [N; N·m], the net object wrench S Y at C in the rows S, world axes.
+        res: the Resolution (weights, passive joints, force_bound, moment_bound, bound_definition).
+        Mstar: (N, rk, rk) the non-squeezing metric M* (used by the 'nonsqueezing' bound definition).
+        failures: a list the failed samples (SampleFailure) are appended to (written); None: not kept.
+
+    Returns:
+        np.ndarray: (N, rk) the grasp wrenches f in the rows S (N, N·m), world axes; nan rows where
+        a sample has no solution.
+    """
     rows = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, res.bound_definition, Mstar),
                                      res.force_bound, res.moment_bound)
     hi = np.where(rows.keep, rows.bound, np.inf)
@@ -365,8 +531,14 @@ ARM_ROW_KINDS = np.array([RowKind.FORCE] * 3 + [RowKind.MOMENT] * 3, dtype=np.in
 
 
 class BoundRows(NamedTuple):
-    """Internal-wrench component rows (`internal_bound_components`): C (N, 6r, rk) rows of f; kind (6r,)
-    RowKind values; bound (6r,) N or N·m by kind; keep (N, 6r) bool: the rows to bound."""
+    """Internal-wrench component rows (`internal_bound_components`).
+
+    Attributes:
+        C: (N, 6r, rk) the components as rows of f (axial, two shear, torsion, two bending per arm).
+        kind: (6r,) RowKind values.
+        bound: (6r,) N or N·m by kind.
+        keep: (N, 6r) bool: the rows to bound.
+    """
 
     C: np.ndarray
     kind: np.ndarray
@@ -376,12 +548,22 @@ class BoundRows(NamedTuple):
 
 def internal_bound_components(frames: np.ndarray, L: np.ndarray, force_bound: float = np.inf,
                               moment_bound: float = np.inf) -> BoundRows:
-    """Every internal-wrench component in the grasp-line frames (N, r, 3, 3) (`grasp_line_frames`) as
-    rows of f: C (N, 6r, rk) — arm m's axial, two shear, torsion and two bending components at rows
-    6m…6m+5, from L (N, 6r, rk) of `internal_operator` — their kinds (6r,) (RowKind, explicit: the
-    kind never has to be told from a bound value), their bounds (6r,) (force_bound N, moment_bound N·m)
-    and keep (N, 6r) bool: the rows that neither vanish (out-of-plane) nor repeat an earlier kept row of
-    the same kind (parallel and of the same length: for r = 2 the two arms' are opposite)."""
+    """Every internal-wrench component in the grasp-line frames as rows of f, with kinds, bounds and keep.
+
+    C (N, 6r, rk) holds arm m's axial, two shear, torsion and two bending components at rows 6m…6m+5;
+    the kinds (6r,) are explicit (RowKind: the kind never has to be told from a bound value); keep
+    (N, 6r) marks the rows that neither vanish (out-of-plane) nor repeat an earlier kept row of the
+    same kind (parallel and of the same length: for r = 2 the two arms' are opposite).
+
+    Args:
+        frames: (N, r, 3, 3) the grasp-line frames, rows the axes in world axes (`grasp_line_frames`).
+        L: (N, 6r, rk) the internal-wrench operator (`internal_operator`).
+        force_bound: N, the bound of the force components.
+        moment_bound: N·m, the bound of the moment components.
+
+    Returns:
+        BoundRows: C, kind, bound (force_bound N, moment_bound N·m) and keep.
+    """
     N, r = frames.shape[:2]
     C = (frames[:, :, None] @ L.reshape(N, r, 2, 3, -1)).reshape(N, 6 * r, -1)
     kind = np.tile(ARM_ROW_KINDS, r)
@@ -401,14 +583,36 @@ def internal_bound_components(frames: np.ndarray, L: np.ndarray, force_bound: fl
 
 
 def internal_bound_rows(prob: InverseProblem, i: int, L: np.ndarray, res: Resolution):
-    """Rows C (m, rk) of the internal-wrench components at sample i in the grasp-line frames and their
-    bounds (m,) — those `internal_bound_components` keeps. L (6r, rk): sample i's internal operator."""
+    """Rows of the internal-wrench components at sample i in the grasp-line frames, and their bounds.
+
+    Those `internal_bound_components` keeps.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        i: sample index, 0-based.
+        L: (6r, rk) sample i's internal operator (`internal_operator`).
+        res: the Resolution (its force_bound N and moment_bound N·m).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: the rows C (m, rk) of f and their bounds (m,) N or N·m, m the
+        rows kept.
+    """
     frames = line_frame(grasp_line_axes(prob.grasp_offset[i:i + 1]), prob.normal)
     rows = internal_bound_components(frames, L[None], res.force_bound, res.moment_bound)
     return rows.C[0, rows.keep[0]], rows.bound[rows.keep[0]]
 
 
 def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
-    """Rows (N, r, 3, 3) of every arm's grasp-line frame along the problem's trajectory
-    (`coopsim.inverse.stress.line_frame` of `coopsim.inverse.stress.grasp_line_axes` of the grasp offsets from C)."""
+    """Every arm's grasp-line frame along the problem's trajectory.
+
+    `coopsim.inverse.stress.line_frame` of `coopsim.inverse.stress.grasp_line_axes` of the grasp
+    offsets from C.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+
+    Returns:
+        np.ndarray: (N, r, 3, 3) the frames' rows: axial axis (towards grasp m), shear axis, third
+        axis (the plane normal in a planar scene), world axes.
+    """
     return line_frame(grasp_line_axes(prob.grasp_offset), prob.normal)

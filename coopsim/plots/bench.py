@@ -45,7 +45,16 @@ def _draw_pareto(ax, runs: list[dict]) -> None:
 
 
 def work_precision_plot(scenario: dict) -> Figure:
-    """The work-precision figure of one `bench_scenario` dict (module docstring); legend beside it."""
+    """The work-precision figure of one `bench_scenario` dict (module docstring); legend beside it.
+
+    Args:
+        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, reference
+            (self_convergence_rad, rad) and runs (family, method, label, max_error rad, wall_s s,
+            loop_s s or None, pareto).
+
+    Returns:
+        Figure: the matplotlib figure (not yet written).
+    """
     series = _series(scenario["runs"])
     sc = scenario["reference"]["self_convergence_rad"]
     labels = [f"{family} {method}" for family, method in series] + [
@@ -77,14 +86,35 @@ def work_precision_plot(scenario: dict) -> Figure:
 
 
 def work_precision_figure(scenario: dict, path: Path) -> Path:
-    """Work-precision plot of one `bench_scenario` dict, written to `path` (PNG, atomically)."""
+    """Work-precision plot of one `bench_scenario` dict, written to `path` (PNG, atomically).
+
+    Args:
+        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, reference
+            (self_convergence_rad, rad) and runs (family, method, label, max_error rad, wall_s s,
+            loop_s s or None, pareto).
+        path: the PNG file to write.
+
+    Returns:
+        Path: `path`, written.
+    """
     return save_figure(work_precision_plot(scenario), path)
 
 
 def scaling_figure(scaling: dict, path: Path) -> Path:
-    """Native amortised µs per evaluation against total joints (log–log), one colour per r (dots:
-    default; crosses: the Cholesky path forced), with the per-r power-law fits of the default;
-    written to `path` (PNG, atomically)."""
+    """Native amortised µs per evaluation against total joints (log–log), one colour per r.
+
+    Dots: default; crosses: the Cholesky path forced; with the per-r power-law fits of the default;
+    written to `path` (PNG, atomically).
+
+    Args:
+        scaling: the `scaling_study` dict (`coopsim.apps.bench`): points (each with r, n_total,
+            native_amortised_us µs and native_cholesky_us µs) and fits (in_total_joints: per r as a
+            string, coefficient and exponent).
+        path: the PNG file to write.
+
+    Returns:
+        Path: `path`, written.
+    """
     pts = scaling["points"]
     fig = Figure()
     ax = panel_grid(fig, 1, 1, (5.0, 3.6), legend=legend_width(["r = 4, Cholesky forced", "fit: N^0.00"]),
