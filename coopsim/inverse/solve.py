@@ -11,7 +11,9 @@ import numpy as np
 
 from coopsim.core.model import Model
 from coopsim.inverse.resolutions import resolution_method
-from coopsim.inverse.distributions import RowKind, grasp_line_frames, internal_bound_components, internal_operator, internal_wrench, min_energy_distribution, nonsqueezing_metric, virtual_inertias, virtual_masses
+from coopsim.inverse.distributions import (RowKind, grasp_line_frames, internal_bound_components, internal_operator,
+                                           internal_wrench, min_energy_distribution, nonsqueezing_metric,
+                                           virtual_inertias, virtual_masses)
 from coopsim.inverse.problem import InverseProblem, InverseResult, Resolution, SampleFailure, grasp_wrenches, torques_of
 
 
@@ -39,8 +41,21 @@ def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
 
 
 def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None) -> np.ndarray:
-    """Grasp wrenches f (N, rk) of resolution `res` (its registered function) for the net object wrenches
-    y (N, k); nan at the samples it cannot solve ('bounded' only), which are appended to `failures`."""
+    """Grasp wrenches f (N, rk) of resolution `res` for the net object wrenches y (N, k).
+
+    The resolution's registered function distributes them; f is nan at the samples it cannot solve
+    ('bounded' only), which are appended to `failures`.
+
+    Args:
+        prob: the InverseProblem (N samples, k rows, r arms).
+        y: (N, k) [N; N·m], the net object wrenches S Y to distribute (e.g. prob.y), world axes.
+        res: the Resolution.
+        failures: a list the SampleFailures of the unsolved samples are appended to (written); None:
+            not reported.
+
+    Returns:
+        np.ndarray: (N, rk) [N; N·m] grasp wrenches in the rows S, arm after arm, world axes.
+    """
     f, bad = resolution_method(res.method).distribute(prob, y, res)
     if failures is not None:
         failures.extend(bad)
@@ -48,12 +63,33 @@ def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: l
 
 
 def cost_of(tau: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """½ τᵀQτ (N,) with Q = diag(weights) (the paper's L, eq. 33)."""
+    """½ τᵀQτ (N,) with Q = diag(weights) (the paper's L, eq. 33).
+
+    Args:
+        tau: (N, n) N·m (N on a prismatic joint), the joint torques of N samples.
+        weights: (n,) the diagonal of Q.
+
+    Returns:
+        np.ndarray: (N,) the cost per sample (N²·m² for unit weights).
+    """
     return 0.5 * np.einsum("ni,i,ni->n", tau, weights, tau)
 
 
 def result_of(prob: InverseProblem, method: str, f: np.ndarray, res: Resolution, failures=()) -> InverseResult:
-    """Torques, grasp wrenches, both internal wrenches and cost of the distribution f."""
+    """Torques, grasp wrenches, both internal wrenches and cost of the distribution f.
+
+    Args:
+        prob: the InverseProblem (N samples).
+        method: the resolution's name, stored in the result.
+        f: (N, rk) [N; N·m] grasp wrenches in the rows S (nan at unsolved samples).
+        res: the Resolution (its weights for the cost, its virtual bodies for the non-squeezing internal
+            wrench).
+        failures: the SampleFailures of the unsolved samples.
+
+    Returns:
+        InverseResult: τ (N, n) N·m, grasp wrenches F_e (N, r, 6), the internal wrench (N, r, 6) at C by
+        both definitions, the cost ½ τᵀQτ (N,), f and the failures.
+    """
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
     tau = torques_of(prob, f)
     return InverseResult(method, prob.t, tau, grasp_wrenches(prob, f), internal_wrench(prob, f, "paper"),
@@ -78,8 +114,20 @@ def resolve(prob: InverseProblem, res: Resolution) -> InverseResult:
 
 
 def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5) -> tuple[float, float]:
-    """(force N, moment N·m): `fraction` of the peak internal-wrench components (grasp-line frames,
-    res.bound_definition) of the minimum-energy distribution — a bound that halves its peak stress."""
+    """The default internal-wrench bounds of the 'bounded' resolution, (force N, moment N·m).
+
+    They are `fraction` of the peak internal-wrench components (grasp-line frames, res.bound_definition)
+    of the minimum-energy distribution — at the default 0.5, a bound that halves its peak stress.
+
+    Args:
+        prob: the InverseProblem (N samples).
+        res: the Resolution (its weights, passive joints, virtual bodies and bound_definition).
+        fraction: the share of the peaks taken (0.5: half).
+
+    Returns:
+        tuple[float, float]: the force bound N and the moment bound N·m of the 'bounded' resolution (0
+        where the internal wrench has no component of that kind).
+    """
     f = min_energy_distribution(prob, prob.y, res.weights, res.passive)
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
     rows = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, res.bound_definition, Mstar))
@@ -90,12 +138,27 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
 
 
 def nan_peak(a: np.ndarray, axis=None):
-    """np.max leaving out nan (the samples a resolution could not solve); nan where nothing is left."""
+    """np.max leaving out nan (the samples a resolution could not solve); nan where nothing is left.
+
+    Args:
+        a: the array, any shape and units.
+        axis: the axis (or axes) reduced, as for np.nanmax; None: all.
+
+    Returns:
+        np.ndarray | float: the peaks, in a's units, without a warning for all-nan slices.
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmax(a, axis=axis)
 
 
 def energy(result: InverseResult) -> float:
-    """∫ ½τᵀQτ dt over the trajectory (trapezoidal rule), N²·m²·s."""
+    """∫ ½τᵀQτ dt over the trajectory (trapezoidal rule), N²·m²·s.
+
+    Args:
+        result: the InverseResult (its cost (N,) and times t (N,) s).
+
+    Returns:
+        float: the energy, N²·m²·s for unit weights (nan if any sample's cost is nan).
+    """
     return float(np.trapezoid(result.cost, result.t))

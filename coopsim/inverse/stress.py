@@ -24,11 +24,19 @@ from coopsim.core.spatial import box_inertia, cross, rigid_acceleration
 
 
 class SectionLoads(NamedTuple):
-    """Section resultants at the cuts xi (c,) m (object-frame coordinate along the box axis `axis`),
-    per sample (N, c): axial N (N, tension > 0), shear V (N, magnitude), torsion T (N·m, signed,
-    about the axis), bending M (N·m, magnitude); peak_normal, peak_shear (N,) Pa: the largest over
-    the cuts of |N|/A + |M₁|/Z₁ + |M₂|/Z₂ and 1.5|V|/A + |T|(3b + 1.8c)/(b²c²) (b ≥ c the section's
-    sides; Roark's torsion formula)."""
+    """Section resultants at the cuts of a box object along its grasp axis, per sample (N samples, c cuts).
+
+    Attributes:
+        xi: (c,) m, the cuts' object-frame coordinate along the box axis `axis`.
+        axis: the box axis (0, 1 or 2, object frame) the cuts are across.
+        axial: (N, c) N, the axial force N (tension > 0).
+        shear: (N, c) N, the shear force V (magnitude).
+        torsion: (N, c) N·m, the torsion T (signed, about the axis).
+        bending: (N, c) N·m, the bending moment M (magnitude).
+        peak_normal: (N,) Pa, the largest over the cuts of |N|/A + |M₁|/Z₁ + |M₂|/Z₂.
+        peak_shear: (N,) Pa, the largest over the cuts of 1.5|V|/A + |T|(3b + 1.8c)/(b²c²) (b ≥ c the
+            section's sides; Roark's torsion formula).
+    """
 
     xi: np.ndarray
     axis: int
@@ -41,11 +49,19 @@ class SectionLoads(NamedTuple):
 
 
 def grasp_line_axes(rho: np.ndarray) -> np.ndarray:
-    """Unit axis e_m (…, r, 3) of each arm's grasp line, pointing from the object's inside towards grasp
-    m, for the grasp points relative to the centre of mass, ρ_m = p_grasp,m − p_C (…, r, 3): for r = 2
-    the line through both grasp points (e₂ = −e₁ = (ρ₂ − ρ₁)/|ρ₂ − ρ₁|); for r > 2 the line from C to
-    the grasp point (e_m = ρ_m/|ρ_m|). A force of the arm along +e_m stretches the object. Relative
-    positions: no world position (rounded far from the origin) enters the axes."""
+    """Unit axis e_m of each arm's grasp line, pointing from the object's inside towards grasp m.
+
+    For r = 2 the line through both grasp points (e₂ = −e₁ = (ρ₂ − ρ₁)/|ρ₂ − ρ₁|); for r > 2 the line
+    from C to the grasp point (e_m = ρ_m/|ρ_m|). A force of the arm along +e_m stretches the object.
+    Relative positions: no world position (rounded far from the origin) enters the axes.
+
+    Args:
+        rho: (…, r, 3) m, the grasp points relative to the centre of mass, ρ_m = p_grasp,m − p_C, world
+            axes.
+
+    Returns:
+        np.ndarray: (…, r, 3) the unit axes e_m, world axes.
+    """
     rho = np.asarray(rho, dtype=float)
     if rho.shape[-2] == 2:
         d = rho[..., 1, :] - rho[..., 0, :]
@@ -55,9 +71,19 @@ def grasp_line_axes(rho: np.ndarray) -> np.ndarray:
 
 
 def line_frame(e: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
-    """Rows (…, 3, 3) of a right-handed frame whose first axis is e (…, 3): in a planar scene (normal
-    given) the second axis is normal × e (in-plane shear direction) and the third the normal; otherwise
-    the second is perpendicular to e and to the world axis least aligned with it."""
+    """Rows (…, 3, 3) of a right-handed frame whose first axis is e.
+
+    In a planar scene (normal given) the second axis is normal × e (in-plane shear direction) and the
+    third the normal; otherwise the second is perpendicular to e and to the world axis least aligned
+    with it.
+
+    Args:
+        e: (…, 3) unit axes (e.g. `grasp_line_axes`), world axes.
+        normal: (3,) the unit plane normal of a planar scene, world axes; None: spatial.
+
+    Returns:
+        np.ndarray: (…, 3, 3) the frames' axes as rows, world axes.
+    """
     e = np.asarray(e, dtype=float)
     ref = normal if normal is not None else np.eye(3)[np.argmin(np.abs(e), axis=-1)]
     e2 = np.cross(ref, e)
@@ -66,9 +92,16 @@ def line_frame(e: np.ndarray, normal: np.ndarray | None) -> np.ndarray:
 
 
 def decompose_internal(F_I: np.ndarray, axes: np.ndarray) -> dict[str, np.ndarray]:
-    """Internal wrench F_I (…, r, 6) [f; n] at C resolved along the grasp-line axes (…, r, 3):
-    axial = f·e (N; > 0 stretch, < 0 squeeze), shear = |f − (f·e)e| (N), torsion = n·e (N·m),
-    bending = |n − (n·e)e| (N·m). Returns arrays of shape (…, r)."""
+    """Internal wrench F_I [f; n] at C resolved along the grasp-line axes.
+
+    Args:
+        F_I: (…, r, 6) [f; n] N, N·m, the internal wrench of each arm at C, world axes.
+        axes: (…, r, 3) the unit grasp-line axes e (`grasp_line_axes`), world axes.
+
+    Returns:
+        dict[str, np.ndarray]: arrays of shape (…, r): "axial" = f·e (N; > 0 stretch, < 0 squeeze),
+        "shear" = |f − (f·e)e| (N), "torsion" = n·e (N·m), "bending" = |n − (n·e)e| (N·m).
+    """
     f, n = F_I[..., :3], F_I[..., 3:]
     axial = np.einsum("...i,...i->...", f, axes)
     torsion = np.einsum("...i,...i->...", n, axes)
@@ -78,7 +111,17 @@ def decompose_internal(F_I: np.ndarray, axes: np.ndarray) -> dict[str, np.ndarra
 
 
 def grasp_axis(box: np.ndarray, grasp_pos: np.ndarray) -> int:
-    """Index of the box axis (object frame) along which the grasp points lie farthest apart."""
+    """Index of the box axis (object frame) along which the grasp points lie farthest apart.
+
+    The spread of the grasp points along each axis is measured relative to the box's edge along it.
+
+    Args:
+        box: (3,) m, the box's edges.
+        grasp_pos: (r, 3) m, the grasp points, object frame.
+
+    Returns:
+        int: 0, 1 or 2, the axis whose grasp spread divided by the edge is largest.
+    """
     spread = grasp_pos.max(axis=0) - grasp_pos.min(axis=0)
     return int(np.argmax(spread / np.maximum(box, 1e-300)))
 
@@ -86,9 +129,9 @@ def grasp_axis(box: np.ndarray, grasp_pos: np.ndarray) -> int:
 def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.ndarray, twist: np.ndarray,
                   acc: np.ndarray, gravity: np.ndarray, F_e: np.ndarray, rows: np.ndarray,
                   cuts: int = 81) -> SectionLoads:
-    """Section loads of a uniform box object (mass kg, size box (3,) m, frame at its centre) along the
-    box axis a holding the grasps, at `cuts` planes evenly inside (−L/2, L/2), over N samples.
+    """Section loads of a uniform box object along the box axis a holding the grasps, over N samples.
 
+    The axis a is `grasp_axis`'s, of length L; the cuts are `cuts` planes evenly inside (−L/2, L/2).
     For the part x_a < ξ (mass m_p = m(ξ + L/2)/L, centre c at ((ξ − L/2)/2) e_a, inertia K_p), with
     ρ = R_o c, a_c = a_C + ω̇ × ρ + ω × (ω × ρ) and the grasp wrenches F_e^m (at the grasp points p_m)
     of the grasps on that part, the wrench the other part exerts on it at the section centre
@@ -96,10 +139,26 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
         F_cut = m_p (a_c − g) − Σ f_m,
         N_cut = K_p ω̇ + ω × K_p ω + (ρ − p_s) × m_p (a_c − g) − Σ [n_m + (p_m − p_s) × f_m].
     Resolved in the section frame (e_a and the two other box axes): axial = F_cut·e_a (tension > 0),
-    shear, torsion = N_cut·e_a, bending. Inputs per sample: R_o (N, 3, 3), twist [v; ω] and acc
-    [a_C; ω̇] (N, 6), F_e (N, r, 6) world axes; grasp_pos (r, 3) object frame; rows S (k, 6, world
-    axes) restrict loads to the modelled rows (planar: in-plane force, moment about the normal). Every
-    sample and cut at once, in the object frame (where K_p is diagonal and c, p_s, p_m are constant)."""
+    shear, torsion = N_cut·e_a, bending. Every sample and cut at once, in the object frame (where K_p is
+    diagonal and c, p_s, p_m are constant).
+
+    Args:
+        mass: kg, the object's mass (uniform density).
+        box: (3,) m, the box's edges, object frame at its centre.
+        grasp_pos: (r, 3) m, the grasp points p_m, object frame.
+        R_o: (N, 3, 3) the object's orientation, world axes.
+        twist: (N, 6) [v_C; ω] m/s, rad/s, world axes.
+        acc: (N, 6) [a_C; ω̇] m/s², rad/s², world axes.
+        gravity: (3,) m/s², g, world axes.
+        F_e: (N, r, 6) [f_m; n_m] N, N·m, the grasp wrenches each arm applies at its grasp point, world
+            axes.
+        rows: (k, 6) the row selector S (world axes), restricting the loads to the modelled rows (planar:
+            in-plane force, moment about the normal).
+        cuts: the number of section planes c.
+
+    Returns:
+        SectionLoads: the cuts xi (c,), the axis, the resultants (N, c) and the peak stresses (N,).
+    """
     a = grasp_axis(box, grasp_pos)
     others = [i for i in range(3) if i != a]
     L = box[a]

@@ -21,7 +21,16 @@ MAX_MAGNITUDE = 1e9             # |x| of any number in a scenario or a torque CS
 
 
 def show_value(v, limit: int = 60) -> str:
-    """repr(v), cut to about `limit` characters (a value in an error line may be a whole list)."""
+    """repr(v), cut to about `limit` characters (a value in an error line may be a whole list).
+
+    Args:
+        v: any value read from a scenario (a list or mapping longer than `limit` is cut before its repr
+            is built).
+        limit: the most characters shown; a longer repr ends in "…".
+
+    Returns:
+        str: the repr, at most `limit` characters.
+    """
     if isinstance(v, (list, dict)) and len(v) > limit:   # never build the repr of a huge value
         v = v[:limit] if isinstance(v, list) else dict(list(v.items())[:limit])
     text = repr(v)
@@ -57,7 +66,24 @@ def _first_big_int(v):
 
 
 class Section:
-    """A mapping being read: typed getters that record which keys were used, `done()` rejects the rest."""
+    """A mapping being read: typed getters that record which keys were used, `done()` rejects the rest.
+
+    Every getter that refuses a value raises ScenarioError with one line "WHERE: FIELD: reason".
+
+    Args:
+        data: the mapping (a dict of the parsed scenario data) this section reads.
+        path: the dotted field path of the mapping, e.g. `arms[0].links[1]` ("" for the whole scenario).
+        where: the source named at the start of every error line (e.g. the scenario file).
+
+    Attributes:
+        data: the mapping read.
+        path: its dotted field path ("" at the top).
+        where: the error lines' source.
+        used: set of the keys read so far (what `done` accepts).
+
+    Raises:
+        ScenarioError: `data` is not a mapping.
+    """
 
     def __init__(self, data, path: str, where: str):
         if not isinstance(data, dict):
@@ -65,15 +91,52 @@ class Section:
         self.data, self.path, self.where, self.used = data, path, where, set()
 
     def field(self, key: str) -> str:
+        """The dotted path of `key` in this section, as the error lines name it.
+
+        Args:
+            key: a key of this mapping.
+
+        Returns:
+            str: `path.key`, or `key` at the top level.
+        """
         return f"{self.path}.{key}" if self.path else key
 
     def fail(self, key: str, reason: str):
+        """Refuse the value under `key`: raise the one-line error "WHERE: FIELD: reason".
+
+        Args:
+            key: the key refused.
+            reason: why, e.g. "must be positive, got -1.0".
+
+        Raises:
+            ScenarioError: always.
+        """
         raise ScenarioError(f"{self.where}: {self.field(key)}: {reason}")
 
     def has(self, key: str) -> bool:
+        """Whether the mapping holds `key` (not marked as used).
+
+        Args:
+            key: the key looked up.
+
+        Returns:
+            bool: True when `key` is present (even with a null value).
+        """
         return key in self.data
 
     def raw(self, key: str, default=REQUIRED):
+        """The value under `key` as parsed, unchecked; `key` is marked as used.
+
+        Args:
+            key: the key read.
+            default: the value of an absent or null key; REQUIRED: the key must be given.
+
+        Returns:
+            Any: the value, or `default`.
+
+        Raises:
+            ScenarioError: a required key is absent or null.
+        """
         self.used.add(key)
         if key not in self.data or self.data[key] is None:
             if default is REQUIRED:
@@ -82,8 +145,21 @@ class Section:
         return self.data[key]
 
     def number(self, key, default=REQUIRED, positive=False, nonneg=False) -> float | None:
-        """A real number (an int or a float: not a boolean, not quoted text), finite and at most
-        MAX_MAGNITUDE in size."""
+        """A real number: an int or a float (not a boolean, not quoted text), finite, at most MAX_MAGNITUDE.
+
+        Args:
+            key: the key read.
+            default: the value of an absent or null key (None: optional, returned as None); REQUIRED: the
+                key must be given.
+            positive: refuse values that are not > 0.
+            nonneg: refuse values < 0.
+
+        Returns:
+            float | None: the number as a float, or None for an absent optional key.
+
+        Raises:
+            ScenarioError: the value is missing, not a real number, not finite, too large, or out of sign.
+        """
         v = self.raw(key, default)
         if v is None and default is None:   # optional key, absent
             return None
@@ -103,8 +179,24 @@ class Section:
         return v
 
     def whole(self, key, default=REQUIRED, positive=False, nonneg=False, maximum=None) -> int | None:
-        """A whole number: an integer, or a float without a fractional part (10.0); 10.5 is refused,
-        never truncated; at most `maximum` when given."""
+        """A whole number: an integer, or a float without a fractional part (10.0).
+
+        10.5 is refused, never truncated; at most `maximum` when given.
+
+        Args:
+            key: the key read.
+            default: the value of an absent or null key (None: optional, returned as None); REQUIRED: the
+                key must be given.
+            positive: refuse values that are not > 0.
+            nonneg: refuse values < 0.
+            maximum: the largest value accepted; None: MAX_MAGNITUDE only.
+
+        Returns:
+            int | None: the number, or None for an absent optional key.
+
+        Raises:
+            ScenarioError: the value is refused as by `number`, has a fractional part or exceeds `maximum`.
+        """
         v = self.number(key, default, positive=positive, nonneg=nonneg)
         if v is None:
             return None
@@ -115,6 +207,19 @@ class Section:
         return int(v)
 
     def string(self, key, choices=None, default=REQUIRED) -> str:
+        """A string, one of `choices` when given.
+
+        Args:
+            key: the key read.
+            choices: the strings accepted; None: any string.
+            default: the value of an absent or null key; REQUIRED: the key must be given.
+
+        Returns:
+            str: the string.
+
+        Raises:
+            ScenarioError: the value is missing, not a string, or not one of `choices`.
+        """
         v = self.raw(key, default)
         if not isinstance(v, str):
             self.fail(key, f"expected a string, got {show_value(v)}")
@@ -123,13 +228,31 @@ class Section:
         return v
 
     def array(self, key, shape=None, default=REQUIRED, positive=False, nonneg=False, allow_inf=False) -> np.ndarray:
-        """Numbers (nested lists) of `shape` (None: any length); every value a real number as in
-        `number` (allow_inf: +-inf allowed, e.g. "no limit")."""
+        """Numbers (nested lists) of `shape` (None: any length); every value a real number as in `number`.
+
+        Args:
+            key: the key read.
+            shape: tuple of the expected dimensions, None in a dimension for any length there; None: a list
+                of any length.
+            default: the value of an absent or null key (trusted, not checked for numbers); REQUIRED: the
+                key must be given.
+            positive: refuse any value that is not > 0.
+            nonneg: refuse any value < 0.
+            allow_inf: +-inf allowed, e.g. "no limit" (nan never is).
+
+        Returns:
+            np.ndarray: float array of the given shape, in the units the field is given in.
+
+        Raises:
+            ScenarioError: a value is not a real number, the rows differ in length or the shape is wrong, a
+                value is not finite (unless allowed), too large, or out of sign.
+        """
         v = self.raw(key, default)
         if self.data.get(key) is not None:   # from the file (defaults are trusted)
             bad = _first_non_number(v)
             if bad is not _ALL_NUMBERS:
-                self.fail(key, f"expected numbers, got {show_value(bad)}" + ("" if bad is v else f" in {show_value(v)}"))
+                self.fail(key, f"expected numbers, got {show_value(bad)}"
+                          + ("" if bad is v else f" in {show_value(v)}"))
             big = _first_big_int(v)
             if big is not None:   # before float(): 10**400 overflows it
                 self.fail(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {show_value(big, 24)}")
@@ -154,8 +277,21 @@ class Section:
         return a
 
     def rad_or_deg(self, key, shape, default=REQUIRED) -> np.ndarray:
-        """Values under `key` (rad, or rad/s) or `key_deg` (deg, deg/s), in radians; both at once are
-        rejected."""
+        """Values under `key` (rad, or rad/s) or `key_deg` (deg, deg/s), in radians.
+
+        Both keys at once are rejected.
+
+        Args:
+            key: the key in radians; `key_deg` is the same quantity in degrees.
+            shape: the expected shape, as for `array`.
+            default: the value when neither key is given (rad); REQUIRED: one of them must be given.
+
+        Returns:
+            np.ndarray: the values of `shape`, rad (or rad/s).
+
+        Raises:
+            ScenarioError: both keys are given, or the value is refused as by `array`.
+        """
         deg = f"{key}_deg"
         if self.has(key) and self.has(deg):
             self.fail(key, f"give either {key} (rad) or {deg} (deg), not both")
@@ -164,10 +300,26 @@ class Section:
         return self.array(key, shape, default=default)
 
     def angles(self, key, shape, default=REQUIRED, is_angle=None) -> np.ndarray:
-        """Angles under `key` (rad) or `key_deg` (deg); both at once, or rad values that look like
-        degrees (|x| > 2π), are rejected (`rad_or_deg` for quantities that are not angles, such as
-        rates, which may exceed a turn). is_angle (bool, shape): which values are angles (the others,
-        prismatic joints' coordinates in m, are not checked); default all."""
+        """Angles under `key` (rad) or `key_deg` (deg), in radians.
+
+        Both keys at once, or rad values that look like degrees (|x| > 2π), are rejected.
+
+        `rad_or_deg` is for quantities that are not angles, such as rates, which may exceed a turn.
+
+        Args:
+            key: the key in radians; `key_deg` is the same angles in degrees.
+            shape: the expected shape, as for `array`.
+            default: the value when neither key is given (rad); REQUIRED: one of them must be given.
+            is_angle: bool array of `shape`: which values are angles (the others, prismatic joints'
+                coordinates in m, are not checked against a turn); None: all.
+
+        Returns:
+            np.ndarray: the values of `shape`, rad (m where is_angle is False).
+
+        Raises:
+            ScenarioError: both keys are given, a value under `key` exceeds a turn, or the value is refused
+                as by `array`.
+        """
         deg = f"{key}_deg"
         a = self.rad_or_deg(key, shape, default)
         big = np.abs(a) > 2 * np.pi + 1e-9
@@ -178,16 +330,47 @@ class Section:
         return a
 
     def section(self, key, default=REQUIRED) -> "Section | None":
+        """The nested mapping under `key` as a Section of its own (its path `path.key`).
+
+        Args:
+            key: the key read.
+            default: the value of an absent or null key (None: optional, returned as None); REQUIRED: the
+                key must be given.
+
+        Returns:
+            Section | None: the nested section, or None for an absent optional key.
+
+        Raises:
+            ScenarioError: the key is missing, or its value is not a mapping.
+        """
         v = self.raw(key, default)
         return None if v is None else Section(v, self.field(key), self.where)
 
     def items(self, key, min_len=0) -> list["Section"]:
+        """The list under `key`, each entry a Section of its own (its path `path.key[i]`).
+
+        Args:
+            key: the key read (required).
+            min_len: the fewest entries accepted.
+
+        Returns:
+            list[Section]: one section per entry, in order.
+
+        Raises:
+            ScenarioError: the key is missing, not a list, shorter than `min_len`, or an entry is not a
+                mapping.
+        """
         v = self.raw(key)
         if not isinstance(v, list) or len(v) < min_len:
             self.fail(key, f"expected a list of at least {min_len} entries")
         return [Section(x, f"{self.field(key)}[{i}]", self.where) for i, x in enumerate(v)]
 
     def done(self):
+        """Reject the keys of the mapping that no getter read (misspelt or unknown fields).
+
+        Raises:
+            ScenarioError: naming the first unknown key and the keys known here.
+        """
         extra = sorted(set(self.data) - self.used, key=str)   # keys need not be strings (7:, null:)
         if extra:
             self.fail(show_value(extra[0]) if not isinstance(extra[0], str) else extra[0],

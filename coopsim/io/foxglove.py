@@ -136,7 +136,15 @@ MUJOCO_COLOR = {"r": 0.95, "g": 0.55, "b": 0.1, "a": 0.5}
 
 
 def link_frame_names(model: Model, root: str) -> list[str]:
-    """Frame names of every link, arm after arm: f"{root}/{arm.name}/l{i}" (joints stacked as q)."""
+    """Frame names of every link, arm after arm: f"{root}/{arm.name}/l{i}" (joints stacked as q).
+
+    Args:
+        model: the Model.
+        root: the frames' root name, "native" or "mujoco".
+
+    Returns:
+        list[str]: (n,) one name per link (joint), i counting from 0 in each arm.
+    """
     return [f"{root}/{arm.name}/l{i}" for arm in model.arms for i in range(arm.n)]
 
 
@@ -148,8 +156,16 @@ def _transform(ns: int, child: str, p, quat_wxyz) -> dict:
 
 
 def native_link_poses(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Link frame poses of the native model over samples: q (N, n) → positions (N, n, 3) m and
-    quaternions (N, n, 4) [w, x, y, z], world, joints stacked as q."""
+    """Link frame poses of the native model over samples (`coopsim.dynamics.kinematics.arm_frames`).
+
+    Args:
+        model: the Model.
+        q: (N, n) rad or m, the stacked joint coordinates of N samples.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: positions (N, n, 3) m of the link frames' origins (the joint
+        origins) and orientations (N, n, 4) quaternions [w, x, y, z], world axes, joints stacked as q.
+    """
     frames = [arm_frames(arm, q[:, sl]) for arm, sl in zip(model.arms, model.dof_slices)]
     return np.concatenate([p for p, _ in frames], axis=1), rots_to_quats(np.concatenate([R for _, R in frames], axis=1))
 
@@ -166,9 +182,21 @@ def _model_frames(model: Model, root: str, t, link_pos, link_quat, obj_pos, obj_
 
 
 def frame_transforms(model: Model, native=None, twin=None, topic: str = "/tf") -> JsonTopic:
-    """foxglove.FrameTransforms on `topic`: per sample, every link frame and the object frame of each
-    model given ("native/…" from the link frames of the native q, "mujoco/…" from the twin's link poses),
-    children of "world". Samples at the same time (to the ns) share one message."""
+    """foxglove.FrameTransforms on `topic`: every link and object frame of each model given, per sample.
+
+    The frames are children of "world": "native/…" frames come from the link frames of the native q,
+    "mujoco/…" from the twin's link poses; the object frames from each result's object pose (centre of
+    mass C). Samples at the same time (to the ns) share one message.
+
+    Args:
+        model: the Model.
+        native: the native SimResult, or None.
+        twin: the MuJoCo TwinResult, or None.
+        topic: the topic name.
+
+    Returns:
+        JsonTopic: one message {"transforms": [...]} per distinct sample time, times (M,) s ascending.
+    """
     by_time: dict[int, list[dict]] = {}
     if native is not None:
         pos, quat = native_link_poses(model, native.q)
@@ -208,9 +236,22 @@ def _model_entities(model: Model, root: str, color: dict) -> list[dict]:
 
 
 def scene_update(model: Model, native: bool, twin: bool, topic: str = "/scene") -> JsonTopic:
-    """foxglove.SceneUpdate on `topic`, once at t = 0: a cube per link (ArmModel.link_box centred at
-    box_pos, axes box_rot, in the link frame) and for the object (ObjectModel.box), locked to its frame, lifetime 0
-    (forever); native in blue, mujoco in translucent orange."""
+    """foxglove.SceneUpdate on `topic`, once at t = 0: a cube per link and one for the object.
+
+    Each cube is locked to its frame. A link's cube is ArmModel.link_box (m) centred at box_pos, axes
+    box_rot, in the link frame; the object's is ObjectModel.box centred at the object frame's origin;
+    links and objects without a box (all sizes 0) get none. Lifetime 0 (forever); native in blue,
+    mujoco in translucent orange.
+
+    Args:
+        model: the Model.
+        native: draw the native model's cubes (frames "native/…").
+        twin: draw the twin's cubes (frames "mujoco/…").
+        topic: the topic name.
+
+    Returns:
+        JsonTopic: one message {"deletions": [], "entities": [...]} at t = 0.
+    """
     entities = (_model_entities(model, "native", NATIVE_COLOR) if native else []) + \
                (_model_entities(model, "mujoco", MUJOCO_COLOR) if twin else [])
     return JsonTopic(topic, "foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA, np.zeros(1),

@@ -36,10 +36,22 @@ _RUN_LOG_CONSTRAINT = {"/native": "residual_pos", "/mujoco": "weld_violation"}
 
 
 def read_run_log(path: str | Path) -> LogData:
-    """A `coopsim run` log (`read_mcap`), checked to hold what its comparison plots draw: the native
-    model's joint_state (angle, rate (N, n)), object (position (N, 3), twist (N, 6)) and constraint
-    (residual_pos (N,)) series, N >= 1 finite sample times, and the twin's (weld_violation) if any of
-    its series is there; UnreadableLogError naming the file otherwise."""
+    """A `coopsim run` log (`read_mcap`), checked to hold what its comparison plots draw.
+
+    That is the native model's joint_state (angle, rate (N, n)), object (position (N, 3), twist (N, 6))
+    and constraint (residual_pos (N,)) series, N >= 1 finite sample times, and the twin's (weld_violation)
+    if any of its series is there.
+
+    Args:
+        path: the MCAP file.
+
+    Returns:
+        LogData: the whole log as `read_mcap` reads it.
+
+    Raises:
+        UnreadableLogError: naming the file, when it is not a readable MCAP log or lacks one of those
+            series or fields (or a field has the wrong shape or is not floating point).
+    """
     log = read_mcap(path)
 
     def fail(reason: str):
@@ -80,11 +92,20 @@ def _object_state(prefix: str, t, pos, quat, twist) -> Series:
 
 
 def simulation_series(res, prefix: str = "/native") -> list[Series]:
-    """Series of a native SimResult: {prefix}/joint_state (angle, rate, acceleration, torque (N, n)
-    rad, rad/s, rad/s², N·m); {prefix}/object (position (N, 3) m, quaternion (N, 4) [w, x, y, z],
-    twist (N, 6) [v_C; ω] world axes); {prefix}/grasp_wrench and {prefix}/internal_wrench (wrench
-    (N, r, 6) [f; n]); {prefix}/constraint (residual_pos, residual_vel, cond (N,) and manipulability
-    (N, r): each arm's √det(A Aᵀ), A its end-effector Jacobian in the scene's rows)."""
+    """The log series of a native SimResult, on its sample times t (N,) s.
+
+    Args:
+        res: the SimResult (N samples, n joints, r arms).
+        prefix: the topics' prefix.
+
+    Returns:
+        list[Series]: {prefix}/joint_state (angle, rate, acceleration, torque (N, n) rad, rad/s, rad/s²,
+        N·m; m, m/s, m/s², N on a prismatic joint); {prefix}/object (position (N, 3) m of the centre of
+        mass C, quaternion (N, 4) [w, x, y, z], twist (N, 6) [v_C; ω] m/s, rad/s, world axes);
+        {prefix}/grasp_wrench and {prefix}/internal_wrench (wrench (N, r, 6) [f; n] N, N·m, world axes);
+        {prefix}/constraint (residual_pos, residual_vel, cond (N,) and manipulability (N, r): each arm's
+        √det(A Aᵀ), A its end-effector Jacobian in the scene's rows).
+    """
     t = res.t
     return [
         _joint_state(prefix, t, res.q, res.qd, res.qdd, res.tau),
@@ -98,8 +119,16 @@ def simulation_series(res, prefix: str = "/native") -> list[Series]:
 
 
 def twin_series(tw, prefix: str = "/mujoco") -> list[Series]:
-    """Series of a MuJoCo TwinResult: {prefix}/joint_state and {prefix}/object as for the native model,
-    {prefix}/constraint (weld_violation (N,) m or rad)."""
+    """The log series of a MuJoCo TwinResult, on its sample times t (N,) s.
+
+    Args:
+        tw: the TwinResult (N samples, n joints in coopsim's order).
+        prefix: the topics' prefix.
+
+    Returns:
+        list[Series]: {prefix}/joint_state and {prefix}/object as for the native model
+        (`simulation_series`), {prefix}/constraint (weld_violation (N,) m or rad).
+    """
     t = tw.t
     return [
         _joint_state(prefix, t, tw.q, tw.qd, tw.qdd, tw.tau),
@@ -109,11 +138,20 @@ def twin_series(tw, prefix: str = "/mujoco") -> list[Series]:
 
 
 def control_series(rec, t, prefix: str, law: str) -> Series:
-    """{prefix}/control of a controller along a run (`coopsim.control.controller.Command` along the run): joint_pd
-    (coopsim.JointControl): reference_angle, reference_rate (N, n) rad, rad/s, angle_error (N, n) rad;
-    computed_torque (coopsim.ObjectControl): pose_error (N, 6) [m; rad], twist_error (N, 6) [m/s; rad/s]
-    world axes; both: command (N, n) N·m before saturation, torque (N, n) N·m applied, saturated (N, n)
-    bool."""
+    """The {prefix}/control series of a controller along a run.
+
+    Args:
+        rec: the controller's `coopsim.control.controller.Command` along the run ((N, …) arrays).
+        t: (N,) s, the run's sample times.
+        prefix: the topic's prefix ("/native" or "/mujoco").
+        law: the control law, 'joint_pd' or 'computed_torque'.
+
+    Returns:
+        Series: joint_pd (coopsim.JointControl): reference_angle, reference_rate (N, n) rad, rad/s,
+        angle_error (N, n) rad (m, m/s on a prismatic joint); computed_torque (coopsim.ObjectControl):
+        pose_error (N, 6) [m; rad], twist_error (N, 6) [m/s; rad/s] world axes; both: command (N, n) N·m
+        before saturation, torque (N, n) N·m applied (N on a prismatic joint), saturated (N, n) bool.
+    """
     common = {"command": rec.raw, "torque": rec.tau, "saturated": rec.saturated}
     if law == "joint_pd":
         return Series(f"{prefix}/control", "coopsim.JointControl", t,
@@ -146,19 +184,36 @@ def _version(dist: str) -> str:
 
 
 def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
+    """Hex SHA-256 of a file's bytes.
+
+    Args:
+        path: the file.
+
+    Returns:
+        str: 64 hex digits.
+    """
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str, dict[str, str]]:
-    """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact):
-    scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model (arm names,
-    joints per arm, joint names, joint types (revolute / prismatic)), native.integrator, mujoco, validation,
-    and for a native result native.initial_projection (dq, dqd, residual before/after, iterations),
-    native.integrator_stats and native.warnings (count; "1", "2", …: each warning as JSON,
-    `coopsim.forward.diagnostics.RunWarning.as_dict`).
-    Other `extra` entries: a dict value is merged into the record of that name (e.g. {"scenario":
-    {"file": …, "sha256": …}} adds to the scenario record), anything else goes to record "extra"."""
+    """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact).
+
+    The records: scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model
+    (arm names, joints per arm, joint names, joint types (revolute / prismatic)), native.integrator,
+    mujoco, validation, and for a native result native.initial_projection (dq, dqd, residual
+    before/after, iterations), native.integrator_stats and native.warnings (count; "1", "2", …: each
+    warning as JSON, `coopsim.forward.diagnostics.RunWarning.as_dict`).
+
+    Args:
+        model: the Model that ran.
+        res: the native SimResult, or None (no native.* result records).
+        extra: more entries: "scenario_file" (the scenario's path, read to hash it); a dict value is
+            merged into the record of that name (e.g. {"scenario": {"file": …, "sha256": …}} adds to the
+            scenario record), anything else goes to record "extra". Not changed.
+
+    Returns:
+        dict[str, dict[str, str]]: record name → {key: value}.
+    """
     extra = dict(extra or {})
     scenario = {"name": model.name}
     file = extra.pop("scenario_file", None)
@@ -197,14 +252,38 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
 
 def write_run_log(path: str | Path, model: Model, native=None, twin=None, extra_series: Sequence = (),
                   metadata_extra: dict | None = None) -> Path:
-    """Write a run's MCAP log (`run_log`). Returns the path."""
+    """Write a run's MCAP log (`run_log`), atomically.
+
+    Args:
+        path: the MCAP file written.
+        model: the Model that ran.
+        native: the native SimResult, or None.
+        twin: the MuJoCo TwinResult, or None.
+        extra_series: more Series / JsonTopic streams (e.g. `control_series`).
+        metadata_extra: `run_metadata`'s `extra`.
+
+    Returns:
+        Path: the path written.
+    """
     return write_mcap(path, *run_log(model, native, twin, extra_series, metadata_extra))
 
 
 def run_log(model: Model, native=None, twin=None, extra_series: Sequence = (),
             metadata_extra: dict | None = None) -> tuple[list, dict[str, dict[str, str]]]:
-    """(streams, metadata) of a run's log: native series (/native/…), twin series (/mujoco/…),
-    `extra_series`, /tf and /scene for Foxglove, and the run's metadata (see :func:`run_metadata`)."""
+    """(streams, metadata) of a run's log, as `write_run_log` writes it.
+
+    Args:
+        model: the Model that ran.
+        native: the native SimResult, or None.
+        twin: the MuJoCo TwinResult, or None.
+        extra_series: more Series / JsonTopic streams, appended after the native and twin series.
+        metadata_extra: `run_metadata`'s `extra`.
+
+    Returns:
+        tuple[list, dict[str, dict[str, str]]]: the streams — native series (/native/…), twin series
+        (/mujoco/…), `extra_series`, and /tf and /scene for Foxglove when either result is given — and the
+        run's metadata records (see :func:`run_metadata`).
+    """
     streams: list = []
     if native is not None:
         streams += simulation_series(native)

@@ -30,8 +30,20 @@ class OverrideError(CoopsimError):
 
 
 def parse_path(path: str, where: str = "--set") -> tuple[str | int, ...]:
-    """The keys (str) and list indices (int) of PATH, e.g. 'arms[1].motors.stall_torque[0]' →
-    ('arms', 1, 'motors', 'stall_torque', 0); OverrideError naming `where` and PATH otherwise."""
+    """The keys (str) and list indices (int) of PATH.
+
+    E.g. 'arms[1].motors.stall_torque[0]' → ('arms', 1, 'motors', 'stall_torque', 0).
+
+    Args:
+        path: the field path (keys joined by '.', list items as [INDEX]).
+        where: what the error line names first (the option, e.g. "--set").
+
+    Returns:
+        tuple[str | int, ...]: the keys and indices in order.
+
+    Raises:
+        OverrideError: naming `where`, PATH and the character where it is malformed.
+    """
     parts: list[str | int] = []
     pos = 0
     while True:
@@ -53,7 +65,14 @@ def parse_path(path: str, where: str = "--set") -> tuple[str | int, ...]:
 
 
 def format_path(parts: Iterable[str | int]) -> str:
-    """The inverse of `parse_path`: ('arms', 1, 'name') → 'arms[1].name'."""
+    """The inverse of `parse_path`: ('arms', 1, 'name') → 'arms[1].name'.
+
+    Args:
+        parts: keys (str) and list indices (int).
+
+    Returns:
+        str: the path ("" for no parts).
+    """
     text = ""
     for p in parts:
         text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else p)
@@ -61,7 +80,20 @@ def format_path(parts: Iterable[str | int]) -> str:
 
 
 def parse_assignment(text: str, where: str = "--set") -> tuple[str, Any]:
-    """'PATH=VALUE' → (PATH, the YAML value); OverrideError naming `where` otherwise."""
+    """'PATH=VALUE' → (PATH, the YAML value).
+
+    Args:
+        text: the assignment; PATH is stripped of surrounding blanks, VALUE is YAML read with the scenario
+            file's rules.
+        where: what the error line names first (the option, e.g. "--set").
+
+    Returns:
+        tuple[str, Any]: PATH (checked with `parse_path`) and the parsed value.
+
+    Raises:
+        OverrideError: naming `where`, when there is no '=' or no PATH, PATH is malformed, or VALUE is
+            not valid YAML by those rules.
+    """
     path, eq, value = text.partition("=")
     path = path.strip()
     if not eq or not path:
@@ -75,9 +107,22 @@ def parse_assignment(text: str, where: str = "--set") -> tuple[str, Any]:
 
 
 def apply_overrides(data: Any, overrides: Iterable[tuple[str, Any]], where: str = "--set") -> Any:
-    """A copy of scenario data `data` with each (PATH, value) of `overrides` set in turn (a later one
-    wins); `data` itself is not changed. OverrideError naming `where`, PATH and the first key or index
-    that is missing (with the keys or the length there) when a path does not lead to a field."""
+    """A copy of scenario data `data` with each (PATH, value) of `overrides` set in turn.
+
+    A later override of the same field wins; `data` itself is not changed.
+
+    Args:
+        data: the parsed scenario data (nested dicts and lists, as `load_yaml` returns).
+        overrides: (PATH, value) pairs, e.g. from `parse_assignment`; each value is copied in.
+        where: what the error line names first (the option, e.g. "--set").
+
+    Returns:
+        Any: the overridden deep copy of `data`.
+
+    Raises:
+        OverrideError: naming `where`, PATH and the first key or index that is missing (with the keys or
+            the length there) when a path does not lead to a field, or a malformed PATH.
+    """
     data = copy.deepcopy(data)
     for path, value in overrides:
         parts = parse_path(path, where)
