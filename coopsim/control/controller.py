@@ -46,7 +46,7 @@ from coopsim.control.laws import (
     squeeze_wrenches,
 )
 from coopsim.core.errors import ConstraintError, CoopsimError
-from coopsim.core.model import Model, TorqueFeedback, torque_at
+from coopsim.core.model import COMPENSATIONS, COMPILED_DISTRIBUTIONS, LAWS, REFERENCES, Model, TorqueFeedback, torque_at
 from coopsim.core.spatial import rot_log
 from coopsim.forward.diagnostics import describe_state, run_warning
 from coopsim.inverse.problem import SampleFailureWarning, inverse_problem, torques_of
@@ -57,11 +57,6 @@ from coopsim.inverse.trajectory import JointTrajectory, object_motion_at, object
 # DEFERRED): load_scenario imports this module for the control vocabulary, and most runs have no controller.
 
 
-LAWS = ("joint_pd", "computed_torque")
-COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
-FALLBACKS = COMPILED_DISTRIBUTIONS + ("error",)                     # where 'bounded' has no solution
-COMPENSATIONS = ("none", "gravity", "bias")
-REFERENCES = ("setpoint", "object_motion")
 
 
 class ControlError(CoopsimError):

@@ -226,6 +226,14 @@ def loop_controller(model: "Model") -> LoopController | None:
     return fn if isinstance(fn, LoopController) else None
 
 
+# the control vocabulary (ControlSettings' choices), read by the scenario and the controller
+LAWS = ("joint_pd", "computed_torque")
+COMPILED_DISTRIBUTIONS = ("paper", "nonsqueezing", "min_energy")    # the linear ones: `coopsim.compiled.control`
+FALLBACKS = COMPILED_DISTRIBUTIONS + ("error",)                     # where 'bounded' has no solution
+COMPENSATIONS = ("none", "gravity", "bias")
+REFERENCES = ("setpoint", "object_motion")
+
+
 @dataclass(frozen=True, eq=False)
 class ControlSettings:
     """A controller in the loop (scenario `control:`), added to the scenario's torque tables.

@@ -24,25 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from coopsim.control.controller import COMPENSATIONS, FALLBACKS, LAWS, REFERENCES
 from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
-from coopsim.core.model import (
-    JOINT_TYPES,
-    PRISMATIC,
-    REVOLUTE,
-    ArmModel,
-    ControlSettings,
-    IntegratorSettings,
-    InverseSettings,
-    Model,
-    Motors,
-    MujocoSettings,
-    ObjectModel,
-    ObjectMotion,
-    TorqueTable,
-    ValidationThresholds,
-)
+from coopsim.core.model import (COMPENSATIONS, FALLBACKS, JOINT_TYPES, LAWS, PRISMATIC, REFERENCES, REVOLUTE, ArmModel,
+                                ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
+                                ObjectModel, ObjectMotion, TorqueTable, ValidationThresholds)
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
 from coopsim.inverse.resolutions import METHODS
