@@ -11,6 +11,7 @@ import copy
 import io
 import subprocess
 import sys
+import textwrap
 import warnings
 from pathlib import Path
 
@@ -18,7 +19,6 @@ import mujoco
 import numpy as np
 
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
-
 
 ROOT = Path(__file__).resolve().parents[1]   # the repository (this file is tests/helpers.py)
 SCENARIOS = ROOT / "scenarios"
@@ -224,3 +224,30 @@ def assert_compiled_terms_match_the_reference(scene, count: int):
         assert ev.status == 0
     bad = {k: v for k, v in worst.items() if (v[0] > v[1] if k == "qdd" else v > TERMS_RTOL)}
     assert not bad, f"compiled terms differ from the reference (qdd: (error, bound)): {bad}"
+
+
+# a module compiled with coopsim's decorators: a kernel (axpy) and two entries calling it (tests/compiled)
+LINKING_MODULE = textwrap.dedent('''
+    import numpy as np
+    from coopsim.compiled.toolchain.jit import entry, kernel
+
+
+    @kernel
+    def axpy(a, x, y):
+        """y ← a x + y; returns the sum of y."""
+        s = 0.0
+        for i in range(x.shape[0]):
+            y[i] += a * x[i]
+            s += y[i]
+        return s
+
+
+    @entry
+    def first(a, x, y):
+        return axpy(a, x, y)
+
+
+    @entry
+    def second(a, x, y):
+        return 2.0 * axpy(a, x, y)
+''')

@@ -15,40 +15,14 @@ import textwrap
 
 import numba
 import pytest
+from helpers import LINKING_MODULE as MODULE
+from helpers import ROOT
 from numba import types
 from numba.core import errors
 from numba.core.registry import cpu_target
 from numba.core.types import functions
 
-from coopsim.compiled.toolchain import linking
-from coopsim.compiled.toolchain import numba_range
-from coopsim.compiled.toolchain import resolution
-from helpers import ROOT
-
-MODULE = textwrap.dedent('''
-    import numpy as np
-    from coopsim.compiled.toolchain.jit import entry, kernel
-
-
-    @kernel
-    def axpy(a, x, y):
-        """y ← a x + y; returns the sum of y."""
-        s = 0.0
-        for i in range(x.shape[0]):
-            y[i] += a * x[i]
-            s += y[i]
-        return s
-
-
-    @entry
-    def first(a, x, y):
-        return axpy(a, x, y)
-
-
-    @entry
-    def second(a, x, y):
-        return 2.0 * axpy(a, x, y)
-''')
+from coopsim.compiled.toolchain import linking, numba_range, resolution
 
 PROBE = textwrap.dedent('''
     import json, sys

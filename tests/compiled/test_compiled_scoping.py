@@ -15,11 +15,11 @@ import sys
 import textwrap
 
 import numpy as np
+from helpers import LINKING_MODULE as MODULE
+from helpers import SCENARIOS
 
 from coopsim.compiled import api
 from coopsim.compiled.toolchain import resolution
-from helpers import SCENARIOS
-from test_compiled_linking import MODULE
 
 PAPER = str(SCENARIOS / "paper_planar_2x3.yaml")
 

@@ -37,7 +37,7 @@ from coopsim.core.errors import ScenarioError
 from coopsim.core.spatial import quat_to_rot
 from helpers import ROOT, SCENARIOS, mutated
 from independent.pinocchio_urdf import RobotScene
-from test_independent import Report, check_arm_dynamics, check_chain, check_poses, consistent_states, random_states
+from independent.checks import Report, check_arm_dynamics, check_chain, check_poses, consistent_states, random_states
 
 DATA = ROOT / "tests" / "data" / "robots"
 ROBOT_SCENARIOS = sorted((SCENARIOS / "robots").glob("*.yaml"))
