@@ -65,11 +65,22 @@ class ControlError(CoopsimError):
 
 @dataclass(frozen=True, eq=False)
 class Command:
-    """A controller's evaluation at one state (arrays as below) or along a run (each with a leading
-    sample axis N, `record`): reference q_ref, qd_ref (n,) rad, rad/s and angle_error = q_ref − q (n,)
-    rad (joint_pd; nan for computed_torque); object pose error (6,) [m; rad] and twist error (6,)
-    [m/s; rad/s] against the reference (computed_torque; nan for joint_pd); raw (n,) N·m the command
-    before saturation (disturbance tables included); tau (n,) N·m what the motors apply."""
+    """A controller's evaluation at one state, or along a run with a leading sample axis N (`record`).
+
+    Joint vectors are stacked arm after arm (n = n_total); rad and N·m on revolute joints, m and N on
+    prismatic ones.
+
+    Attributes:
+        q_ref, qd_ref: (n,) rad, rad/s, the joint reference (joint_pd; nan for computed_torque).
+        angle_error: (n,) rad, q_ref − q (joint_pd; nan for computed_torque).
+        object_error: (6,) [m; rad], the object pose error against the reference, world axes
+            (computed_torque; nan for joint_pd).
+        object_rate_error: (6,) [m/s; rad/s], the object twist error, world axes (computed_torque;
+            nan for joint_pd).
+        raw: (n,) N·m, the command before saturation (the scenario's torque tables included).
+        tau: (n,) N·m, what the motors apply (raw clipped to the motor lines of eq. 36 when
+            control.saturate).
+    """
 
     q_ref: np.ndarray
     qd_ref: np.ndarray
@@ -91,9 +102,23 @@ class Command:
 
 
 class Controller:
-    """The controller of `settings` over the controller's own model `plant` (the scene, its object mass
-    scaled by settings.mass_scale), with the scene's torque tables added. Built lazily: the set-point
-    projection and the reference trajectory are computed on first use. Call it as u(t, q, qd) -> τ."""
+    """The controller of a scenario's `control:` section, called as u(t, q, qd) -> τ (n,) N·m.
+
+    It acts on its own model `plant` (the scene, its object mass and inertia scaled by
+    control.mass_scale), with the scene's torque tables added to its command. Built lazily: the
+    set-point projection and the reference trajectory are computed on first use.
+
+    Args:
+        model: the scene, with `control` set (ControlSettings).
+
+    Attributes:
+        model: the scene as given.
+        settings: model.control.
+        plant: the model the controller believes in (`_controller_model`).
+
+    Raises:
+        ControlError: computed_torque on an arm with more or fewer joints than constrained rows.
+    """
 
     def __init__(self, model: Model):
         self.model, self.settings = model, model.control
@@ -155,10 +180,19 @@ class Controller:
 
     @cached_property
     def trajectory(self):
+        """The joint trajectory of inverse.object_motion (`coopsim.inverse.trajectory.JointTrajectory`)."""
         return object_motion_trajectory(self.model, self.model.inverse.object_motion)
 
     def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(θ_r, θ̇_r) (n,) of joint_pd at time t."""
+        """The joint reference of joint_pd at time t.
+
+        Args:
+            t: s, from the start of the run.
+
+        Returns:
+            tuple: θ_r (n,) rad and θ̇_r (n,) rad/s: the set-point and zero, or the joint trajectory of
+            inverse.object_motion at t.
+        """
         if self.settings.reference == "setpoint":
             return self.setpoint, np.zeros_like(self.setpoint)
 
@@ -166,9 +200,22 @@ class Controller:
         return q, qd
 
     def inverse_dynamics(self, q, qd, qdd, squeeze: float = 0.0, t: float = 0.0):
-        """(τ (n,), problem) of the closed-chain inverse dynamics at one state (at time t s, for the
-        messages), the object's wrench distributed by the resolution (`_distribute`), a squeeze added in
-        the null space of the grasp matrix."""
+        """The closed-chain inverse dynamics at one state, on the controller's model.
+
+        The object's net wrench is distributed by the resolution (`_distribute`, eqs. 28–35), a squeeze
+        added in the null space of the grasp matrix.
+
+        Args:
+            q, qd, qdd: (n,) rad, rad/s, rad/s², the joint state and accelerations.
+            squeeze: N, the squeeze force along each grasp line (`coopsim.control.laws.squeeze_wrenches`).
+            t: s, the time, for the messages.
+
+        Returns:
+            tuple: τ (n,) N·m and the InverseProblem of that state (`coopsim.inverse.problem`).
+
+        Raises:
+            ControlError: 'bounded' has no solution there and control.fallback is 'error'.
+        """
         traj = JointTrajectory(np.zeros(1), q[None], qd[None], qdd[None], "control")
         prob = inverse_problem(self.plant, traj, terms=self._terms(traj.q, traj.qd, traj.qdd))
         f = self._distribute(prob, t)
@@ -197,7 +244,15 @@ class Controller:
         return out
 
     def command(self, t: float, q: np.ndarray, qd: np.ndarray) -> Command:
-        """The whole evaluation at (t, q, qd) (`Command`)."""
+        """The whole evaluation of the law at one state.
+
+        Args:
+            t: s, from the start of the run.
+            q, qd: (n,) rad, rad/s, the joint state.
+
+        Returns:
+            Command: the references, errors, raw command and applied torques (n,) at (t, q, qd).
+        """
         s, n = self.settings, len(q)
         nan6, nan_n = np.full(6, np.nan), np.full(n, np.nan)
         if s.law == "joint_pd":
@@ -239,8 +294,16 @@ class Controller:
                             W.p_ee, W.R_ee, ee_twist)
 
     def grasp_errors_at(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every arm's grasp error e and its rate ė (r, 6) at (q, qd) (`grasp_errors`), the object pose
-        and twist those of the carrier arm's grasp (as the native model's)."""
+        """Every arm's grasp error and its rate at one state (`coopsim.control.laws.grasp_errors`).
+
+        The object pose and twist are those of the carrier arm's grasp, as the native model's.
+
+        Args:
+            q, qd: (n,) rad, rad/s, the joint state.
+
+        Returns:
+            tuple: e (r, 6) [m; rad] and ė (r, 6) [m/s; rad/s], world axes.
+        """
         state = self._terms(q[None], qd[None], np.zeros((1, len(q))))
         return self._grasp_errors(q, qd, state)
 
@@ -290,21 +353,41 @@ class Controller:
         return api.compiled(self.plant).Ps, api.fresh_workspace(P), control_struct(self.packed)
 
     def loop_record(self) -> tuple:
-        """`compiled_loop`, its evaluation counters reset for a new run (`coopsim.core.model.LoopController`)."""
+        """`compiled_loop`, its evaluation counters reset for a new run (`coopsim.core.model.LoopController`).
+
+        Returns:
+            tuple: (Pc, Wc, C), the StructRefs the compiled time loop takes.
+        """
         self.packed.count[:] = 0
         return self.compiled_loop
 
     def loop_counts(self) -> tuple:
-        """The compiled laws' evaluation counters since `loop_record` (`coopsim.compiled.control`)."""
+        """The compiled laws' evaluation counters since `loop_record` (`coopsim.compiled.control`).
+
+        Returns:
+            tuple: one int per counter of PackedControl.count.
+        """
         return tuple(int(c) for c in self.packed.count)
 
     def loop_torques(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """τ (N, n) N·m of the compiled controller at the samples t (N,) s, q, qd (N, n)."""
+        """The compiled controller's torques at many samples (`coopsim.core.model.LoopController`).
+
+        Args:
+            t: (N,) s, the sample times.
+            q, qd: (N, n) rad, rad/s, the joint states.
+
+        Returns:
+            np.ndarray: τ (N, n) N·m.
+        """
         return self.compiled_commands(t, q, qd).tau
 
     def run_warnings(self) -> list:
-        """A `distribution_fallback` RunWarning when the controller fell back from 'bounded' (at its
-        first evaluation that did, with their count), else none."""
+        """The warnings of the run so far: a `distribution_fallback` RunWarning when the controller fell
+        back from 'bounded' (at its first evaluation that did, with their count).
+
+        Returns:
+            list: none or one RunWarning (`coopsim.forward.diagnostics.run_warning`).
+        """
         if not self.fallbacks:
             return []
         t, q, reason = self.fallbacks[0]
@@ -314,7 +397,18 @@ class Controller:
                             f"evaluations (control.fallback)", fallbacks=count)]
 
     def compiled_call(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """τ (n,) N·m at (t, q, qd) from the compiled controller (as `__call__`)."""
+        """The compiled controller at one state (as `__call__`).
+
+        Args:
+            t: s, from the start of the run.
+            q, qd: (n,) rad, rad/s, the joint state.
+
+        Returns:
+            np.ndarray: τ (n,) N·m.
+
+        Raises:
+            ControlError: the law's equations are singular at that state.
+        """
         from coopsim.compiled import api
         from coopsim.compiled.control import evaluate
 
@@ -331,8 +425,18 @@ class Controller:
         return self.compiled_call if self.compiled_reason is None else self
 
     def compiled_commands(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
-        """The compiled controller at every sample (t (N,), q, qd (N, n)): a Command of (N, …) arrays, as
-        `record` gives (CoopsimError where its equations are singular)."""
+        """The compiled controller at every sample of a run, as `record` gives.
+
+        Args:
+            t: (N,) s, the sample times.
+            q, qd: (N, n) rad, rad/s, the joint states.
+
+        Returns:
+            Command: (N, …) arrays.
+
+        Raises:
+            ControlError: the law's equations are singular at a sample (the first one named).
+        """
         from coopsim.compiled import api
         from coopsim.compiled.control import commands
         from coopsim.compiled.packing import tabulated_torques
@@ -355,6 +459,7 @@ def _packed_motion(motion) -> dict:
     """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
     and R_a φ of `coopsim.inverse.trajectory.object_motion_at`)."""
     from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
+
     R = motion.rotations
     phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])
     angle = np.linalg.norm(phi, axis=1)
@@ -388,8 +493,16 @@ def closed_loop(model: Model) -> Model:
 
 
 def record(controller: Controller, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> Command:
-    """The controller evaluated at every sample (t (N,), q, qd (N, n)) of a run: a Command of (N, …)
-    arrays."""
+    """The controller evaluated at every sample of a run (compiled where it can be).
+
+    Args:
+        controller: the Controller.
+        t: (N,) s, the sample times.
+        q, qd: (N, n) rad, rad/s, the joint states.
+
+    Returns:
+        Command: (N, …) arrays.
+    """
     if controller.compiled_reason is None:
         return controller.compiled_commands(t, q, qd)
     cmds = [controller.command(float(ti), qi, qdi) for ti, qi, qdi in zip(t, q, qd)]

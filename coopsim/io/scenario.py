@@ -556,14 +556,23 @@ def _check_work(where: str, duration: float, field: str, s: IntegratorSettings, 
     if om is not None:
         samples = (om.times[-1] - om.times[0]) / om.output_dt + 1
         if samples > MAX_OUTPUT_SAMPLES:
-            raise ScenarioError(f"{where}: inverse.object_motion.output_dt: waypoints over {om.times[-1] - om.times[0]:g} "
+            span = om.times[-1] - om.times[0]
+            raise ScenarioError(f"{where}: inverse.object_motion.output_dt: waypoints over {span:g} "
                                 f"s every {om.output_dt:g} s are {samples:.3g} samples, more than the "
                                 f"{MAX_OUTPUT_SAMPLES:,} a run may ask for")
 
 
 def require_motor_limits(model: Model, where: str) -> None:
-    """The load capacity needs a limit to reach: a finite `motors.stall_torque` on some joint that is
-    not passive (without one every capacity is unbounded); ScenarioError otherwise."""
+    """Check that the load capacity has a limit to reach: a finite `motors.stall_torque` on some joint
+    that is not passive (without one every capacity is unbounded).
+
+    Args:
+        model: the Model.
+        where: the name the error message starts with (the scenario file).
+
+    Raises:
+        ScenarioError: no joint has a motor limit.
+    """
     m = model.motors
     if not np.any(np.isfinite(m.stall_torque) & ~m.passive):
         raise ScenarioError(f"{where}: arms[].motors: the load capacity needs motor limits (stall_torque, "
@@ -599,8 +608,19 @@ def load_scenario(path: str | Path, duration: float | None = None, overrides=())
 
 
 def check_duration(duration, option: str = "--duration") -> float:
-    """A duration given on the command line: a positive, finite number of seconds of at most
-    MAX_MAGNITUDE (the rule of the file's `duration`); ScenarioError naming the option otherwise."""
+    """Check a duration given on the command line by the rule of the file's `duration`.
+
+    Args:
+        duration: s, the value given.
+        option: the option's name, for the message.
+
+    Returns:
+        float: the duration, s.
+
+    Raises:
+        ScenarioError: naming the option, unless it is a positive, finite number of seconds of at most
+            MAX_MAGNITUDE.
+    """
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
             or not 0 < duration <= MAX_MAGNITUDE:
         raise ScenarioError(f"{option}: must be a positive, finite number of seconds of at most "
@@ -609,8 +629,15 @@ def check_duration(duration, option: str = "--duration") -> float:
 
 
 def safe_name(stem: str) -> str:
-    """A file stem made a valid `name` (for a scenario without one): characters other than letters,
-    digits, '_', '-' and '.' become '_', leading dots go, at most MAX_NAME characters."""
+    """A file stem made a valid `name`, for a scenario without one.
+
+    Args:
+        stem: the file name without its suffix.
+
+    Returns:
+        str: characters other than letters, digits, '_', '-' and '.' become '_', leading dots go, at
+        most MAX_NAME characters ('scenario' when nothing is left).
+    """
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip(".")[:MAX_NAME]
     return name or "scenario"
 
