@@ -29,7 +29,7 @@ SCALING_FIELDS = ("r", "n", "n_total", "rows", "planar", "native_amortised_us", 
 
 
 def _num(x, fmt: str = ".4g") -> str:
-    """A number as text ('' for None, 'NaN' / 'inf' as Python writes them)."""
+    """A number as text ('' for None, 'nan' / 'inf' as Python formats them, booleans as 'true' / 'false')."""
     if x is None:
         return ""
     if isinstance(x, (bool, np.bool_)):
@@ -46,7 +46,15 @@ def _csv(rows: list[list]) -> str:
 
 
 def csv_text(report: dict) -> str:
-    """Every run of every scenario as CSV, one row per run (columns CSV_FIELDS)."""
+    """Every run of every scenario as CSV, one row per run (columns CSV_FIELDS).
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        str: the CSV text, header first: param rtol or step s, wall_s and loop_s s, max_error_rad rad,
+        final_violation m or rad, weld_factor (MuJoCo rows only), pareto 0 / 1.
+    """
     rows = [list(CSV_FIELDS)]
     for sc in report["scenarios"]:
         for r in sc["runs"]:
@@ -57,15 +65,32 @@ def csv_text(report: dict) -> str:
 
 
 def scaling_csv_text(report: dict) -> str:
-    """The scaling points as CSV (columns SCALING_FIELDS)."""
+    """The scaling points as CSV (columns SCALING_FIELDS).
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        str: the CSV text, header first, one row per scaling point (the µs columns in µs per evaluation,
+        '' where a point lacks the field).
+    """
     rows = [list(SCALING_FIELDS)]
     rows += [[_num(p.get(k)) for k in SCALING_FIELDS] for p in report["scaling"]["points"]]
     return _csv(rows)
 
 
 def json_safe(obj):
-    """A copy strict JSON can carry: non-finite floats become "NaN", "Infinity", "-Infinity" (as in
-    coopsim.io.log), numpy scalars plain Python ones."""
+    """A copy strict JSON can carry.
+
+    Non-finite floats become "NaN", "Infinity", "-Infinity" (as in coopsim.io.log), numpy scalars plain
+    Python ones.
+
+    Args:
+        obj: a report or any part of it (dicts, lists, tuples, numbers, strings, None).
+
+    Returns:
+        object: the copy (dict keys as str, tuples as lists); any other object as it is.
+    """
     if isinstance(obj, dict):
         return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -80,7 +105,14 @@ def json_safe(obj):
 
 
 def json_text(report: dict) -> str:
-    """The report as indented strict JSON."""
+    """The report as indented strict JSON.
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        str: the JSON text (`json_safe`), ending in a newline.
+    """
     return json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n"
 
 
@@ -109,8 +141,17 @@ def _ratio(x, fmt=".1f") -> str:
 
 
 def headline_lines(report: dict) -> list[str]:
-    """The headline table: per scenario and error target, the fastest native and MuJoCo runs
-    reaching it and MuJoCo ÷ native."""
+    """The headline table: per scenario and error target, the fastest native and MuJoCo runs reaching it.
+
+    With MuJoCo ÷ native for native simulate() and for its time loop alone, and whether a required ratio
+    is met.
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        list[str]: the Markdown table lines (times in ms, errors in rad).
+    """
     rows = []
     for sc in report["scenarios"]:
         for h in sc["headline"]:
@@ -139,7 +180,15 @@ def _met(h: dict, kind: str) -> str:
 
 
 def eval_lines(report: dict) -> list[str]:
-    """µs per dynamics evaluation per scenario."""
+    """µs per dynamics evaluation per scenario.
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        list[str]: the Markdown table lines, with native amortised ÷ constraintDynamics checked against
+        EVAL_RATIO_TARGET on EVAL_RATIO_SCENES.
+    """
     rows = []
     for sc in report["scenarios"]:
         c = sc["eval_us"]
@@ -157,7 +206,15 @@ def eval_lines(report: dict) -> list[str]:
 
 
 def scaling_lines(report: dict) -> list[str]:
-    """Scaling points and fits."""
+    """Scaling points and fits.
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        list[str]: Markdown lines: the table of points (µs per evaluation), then one bullet per power-law
+        fit, and those of the forced-Cholesky diagnostic where the report has them.
+    """
     sc = report["scaling"]
     f = lambda x: "—" if x is None else f"{x:.3g}"
     rows = [[str(p["r"]), str(p["n"]), str(p["n_total"]), f"{p['rows']}{' (planar)' if p['planar'] else ''}",
@@ -195,7 +252,14 @@ def _fit_lines(fits: dict) -> list[str]:
 
 
 def runs_lines(sc: dict) -> list[str]:
-    """Every run of one scenario, Pareto-front runs marked ★."""
+    """Every run of one scenario, Pareto-front runs marked ★.
+
+    Args:
+        sc: one scenario of the report (`coopsim.apps.bench.bench_scenario`).
+
+    Returns:
+        list[str]: the Markdown table lines (times in ms, errors in rad, violations in m or rad).
+    """
     rows = []
     for r in sc["runs"]:
         extra = r["extra"]
@@ -209,7 +273,14 @@ def runs_lines(sc: dict) -> list[str]:
 
 
 def reference_line(sc: dict) -> str:
-    """One sentence on the reference and its self-convergence."""
+    """One sentence on the reference and its self-convergence.
+
+    Args:
+        sc: one scenario of the report (`coopsim.apps.bench.bench_scenario`).
+
+    Returns:
+        str: the sentence (tolerances, evaluations, self-convergence and smallest measured error in rad).
+    """
     ref = sc["reference"]
     verdict = "far below every target" if ref["far_below_targets"] else "NOT far below the targets"
     small = ref["smallest_measured_error_rad"]
@@ -220,7 +291,14 @@ def reference_line(sc: dict) -> str:
 
 
 def startup_line(st: dict) -> str:
-    """One sentence on the compile and cached start-up times (`bench.startup_times`)."""
+    """One sentence on the compile and cached start-up times (`bench.startup_times`).
+
+    Args:
+        st: the `bench.startup_times` dict (s).
+
+    Returns:
+        str: the sentence (times in s).
+    """
     text = (f"First run with an empty numba cache (fresh process compiling every kernel on two processes, as the "
             f"CLI's first run): {st['compile_s']:.1f} s; the same with the cache filled: {st['cached_s']:.2f} s "
             f"(of which imports and a 0.05 s run: {st['cached_inside_s']:.2f} s")
@@ -234,7 +312,14 @@ def startup_line(st: dict) -> str:
 
 
 def command_lines(commands: dict | None) -> list[str]:
-    """A table of the commands' wall times against their targets (`bench.command_times`)."""
+    """A table of the commands' wall times against their targets (`bench.command_times`).
+
+    Args:
+        commands: the `bench.command_times` dict (s), or None.
+
+    Returns:
+        list[str]: the Markdown table lines; ["not measured"] without commands.
+    """
     if not commands:
         return ["not measured"]
     lines = ["| command | wall s | target s | met |", "|---|---|---|---|"]
@@ -250,7 +335,15 @@ def _load(env: dict) -> str:
 
 
 def markdown_report(report: dict) -> str:
-    """The whole report as Markdown."""
+    """The whole report as Markdown.
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+
+    Returns:
+        str: the Markdown text: machine and method, headline, µs per evaluation, start-up, commands,
+        scaling, then every scenario's reference and runs; ending in a newline.
+    """
     env, st = report["environment"], report.get("startup")
     lines = ["# Work-precision benchmark", "",
              f"Machine: {env['cpus']} CPUs, {env['platform']}; Python {env['python']}, numba {env['numba']}, "
@@ -276,8 +369,18 @@ def markdown_report(report: dict) -> str:
 
 
 def write_outputs(report: dict, out: str | Path) -> list[Path]:
-    """Write bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and
-    scaling.png into `out`, each atomically; returns the paths."""
+    """Write the report's files into `out`, each atomically.
+
+    bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and scaling.png
+    (only with scaling points).
+
+    Args:
+        report: the benchmark report (`coopsim.apps.bench.run_bench`).
+        out: the folder (created if missing).
+
+    Returns:
+        list[Path]: the paths, in that order.
+    """
 
     out = Path(out)
     paths = [write_text_atomic(out / "bench.json", json_text(report)),

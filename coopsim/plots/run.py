@@ -132,7 +132,8 @@ def _joint_figure(log: LogData, key: str, quantity: str, kind: int, labels: list
     styles = list(STYLES[:1 + (y is not None)])
     fig = Figure()
     axes = panel_grid(fig, 1 if y is None else 2, len(groups), PANEL,
-                      legend=max(legend_width(labels[sl] + styles) for _, sl in groups), legend_after=range(len(groups)))
+                      legend=max(legend_width(labels[sl] + styles) for _, sl in groups),
+                      legend_after=range(len(groups)))
     for col, (arm, sl) in enumerate(groups):
         unit = units_of(types[sl], kind)
         unwrapped = ", unwrapped" if key == "angle" and "revolute" in types[sl] else ""
@@ -197,11 +198,26 @@ def _constraint_figure(log: LogData) -> Figure:
 
 
 def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None) -> list[tuple]:
-    """The figures of `comparison_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE); a closed
-    loop's log adds `coopsim.plots.control`'s tracking_error.png and internal_force.png."""
+    """The figures of `comparison_plots` as `coopsim.plots.render` jobs.
+
+    A closed loop's log adds `coopsim.plots.control`'s tracking_error.png and internal_force.png.
+
+    Args:
+        log: the run log (`LogData`).
+        out_dir: the folder the figures are to be written into.
+        joint_names: (n,) labels of the stacked joints (default: `coopsim.core.labels` of the log's model
+            metadata, else joint 1, joint 2, …).
+
+    Returns:
+        list[tuple]: (builder, args, out_dir/FILE) per figure, FILES first.
+
+    Raises:
+        ValueError: joint_names does not hold one name per joint.
+    """
     n = log.topics[NATIVE + "/joint_state"]["angle"].shape[1]
     labels = _joint_labels(log, n, joint_names)
-    jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)), (_joint_figure, (log, "rate", "rate", RATE, labels)),
+    jobs = [(_joint_figure, (log, "angle", "angle", COORDINATE, labels)),
+            (_joint_figure, (log, "rate", "rate", RATE, labels)),
             (_object_figure, (log,)), (_constraint_figure, (log,))]
     out = Path(out_dir)
     return [(fn, args, out / name) for (fn, args), name in zip(jobs, FILES)] + \
@@ -210,11 +226,26 @@ def comparison_jobs(log: LogData, out_dir: str | Path, joint_names: list[str] | 
 
 def comparison_plots(log: LogData, out_dir: str | Path, joint_names: list[str] | None = None,
                      workers: FigureWorkers | None = None) -> list[Path]:
-    """Write joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for
-    a closed loop, `coopsim.plots.control`'s tracking_error.png and internal_force.png) into out_dir
-    (created if missing; each file replaced atomically) and return their paths. joint_names
-    (n,) labels the joints (default: `coopsim.core.labels` of the log's model metadata, else joint 1, joint 2,
-    …); workers: where to draw (`coopsim.plots.render`; default: processes started for this call)."""
+    """Write the comparison figures of a run log into out_dir and return their paths.
+
+    The files: joint_angles.png, joint_rates.png, object_motion.png and constraint_violation.png (and, for a
+    closed loop, `coopsim.plots.control`'s tracking_error.png and internal_force.png); out_dir is created if
+    missing, each file replaced atomically.
+
+    Args:
+        log: the run log (`LogData`).
+        out_dir: the folder written.
+        joint_names: (n,) labels of the stacked joints (default: `coopsim.core.labels` of the log's model
+            metadata, else joint 1, joint 2, …).
+        workers: where to draw (`coopsim.plots.render`; default: processes started for this call).
+
+    Returns:
+        list[Path]: the PNG files written, in job order.
+
+    Raises:
+        ValueError: joint_names does not hold one name per joint.
+    """
     jobs = comparison_jobs(log, out_dir, joint_names)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
-    return render_figures(jobs, workers, first=(FILES.index("object_motion.png"),))   # six panels: twice the others' time
+    return render_figures(jobs, workers,
+                          first=(FILES.index("object_motion.png"),))   # six panels: twice the others' time
