@@ -46,12 +46,22 @@ MODES = ("scaled", "payload")
 
 @dataclass(frozen=True)
 class Capacity:
-    """Dynamic load carrying capacity along a trajectory. mass kg: the largest carried mass (the whole
-    object's for 'scaled', the payload's for 'payload'; inf: unbounded); lower kg: the smallest (0
-    unless the motors cannot move a lighter load); feasible: lower <= mass; joint: stacked index of the
-    motor that saturates first (at `mass`); sample, time s: when; side: 'upper' (τ_max line) or
-    'lower' (τ_min line); note: why it is infeasible, if so; per_sample (N,) kg: the largest mass
-    each sample alone allows (the capacity is their minimum when every sample allows 0)."""
+    """Dynamic load carrying capacity (DLCC) along a trajectory, and the motor that saturates first.
+
+    Attributes:
+        mass: kg, the largest carried mass (the whole object's for 'scaled', the payload's for
+            'payload'; inf: unbounded).
+        lower: kg, the smallest carried mass (0 unless the motors cannot move a lighter load).
+        feasible: lower <= mass.
+        joint: stacked index of the motor that saturates first (at `mass`); None where the mass is not
+            finite (or, for the LP bound, no motor line binds).
+        sample: index of the sample at which it saturates; None likewise.
+        time: s, the time of that sample; None likewise.
+        side: 'upper' (the τ_max line) or 'lower' (the τ_min line); None likewise.
+        note: why it is infeasible, if so ("" otherwise).
+        per_sample: (N,) kg, the largest mass each sample alone allows (the capacity is their minimum
+            when every sample allows 0); not compared, not in the repr.
+    """
 
     mass: float
     lower: float
@@ -65,7 +75,23 @@ class Capacity:
 
 
 def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """(y₀, y₁) (N, k): the net object wrench is y₀ + μ y₁ for carried mass μ."""
+    """(y₀, y₁) (N, k): the net object wrench is y₀ + μ y₁ for carried mass μ.
+
+    'scaled': y₀ = 0, y₁ = y per kg of object mass (the object scaled at constant geometry);
+    'payload': y₀ = the nominal object's y, y₁ = y per kg of point payload.
+
+    Args:
+        prob: the InverseProblem (N samples, k rows S); 'payload' needs it built with a payload
+            position.
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: y₀ (N, k) [N; N·m] and y₁ (N, k) [N; N·m] per kg, net object
+        wrenches at C in the rows S, world axes.
+
+    Raises:
+        ValueError: an unknown mode, or 'payload' on a problem without a payload position.
+    """
     if mode == "scaled":
         return np.zeros_like(prob.y), prob.y_unit
     if mode == "payload":
@@ -76,16 +102,37 @@ def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def affine_torques(prob: InverseProblem, res: Resolution, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """(a, b) (N, n): τ(μ) = a + μ b for resolution `res` (two evaluations, exact for linear ones)."""
+    """(a, b) (N, n): τ(μ) = a + μ b for resolution `res` (two evaluations, exact for linear ones).
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        res: the Resolution (linear in the net object wrench for the result to be exact).
+        mode: 'scaled' or 'payload' (`mass_line`).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: a (N, n) N·m, the torques at μ = 0, and b (N, n) N·m per kg (N
+        and N per kg on a prismatic joint).
+    """
     y0, y1 = mass_line(prob, mode)
     a = torques_of(prob, distribute(prob, y0, res))
     return a, torques_of(prob, distribute(prob, y0 + y1, res)) - a
 
 
 def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi (all (N, n)) the largest and smallest μ.
+    """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi the largest and smallest μ.
+
     b > 0 gives (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs
-    lo <= a <= hi (up = −inf where it does not hold); nan (0/0, ∞/∞) counts as no limit."""
+    lo <= a <= hi (up = −inf where it does not hold); nan (0/0, ∞/∞) counts as no limit.
+
+    Args:
+        a: (N, n) N·m (N on a prismatic joint), the torques at μ = 0.
+        b: (N, n) N·m per kg, the torques' rate with the carried mass.
+        lo, hi: (N, n) N·m, the lower and upper torque limits (±inf: none).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: up (N, n) kg, the largest μ per constraint (+inf: no upper limit,
+        −inf: none feasible), and dn (N, n) kg, the smallest (−inf: no lower limit).
+    """
     with np.errstate(divide="ignore", invalid="ignore"):
         to_hi, to_lo = (hi - a) / b, (lo - a) / b
     pos, neg = b > 0, b < 0
@@ -96,16 +143,37 @@ def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) ->
 
 
 def mass_interval(up: np.ndarray, dn: np.ndarray) -> tuple[float, float, bool]:
-    """(mass, lower, feasible) of the per-constraint limits (N, n): the largest mass min(up), the
-    smallest max(0, max(dn)), feasible: lower <= mass (an infinite mass: feasible when +inf)."""
+    """(mass, lower, feasible) of the per-constraint limits (N, n).
+
+    The largest mass is min(up), the smallest max(0, max(dn)); feasible: lower <= mass (an infinite
+    mass: feasible when +inf).
+
+    Args:
+        up: (N, n) kg, the largest μ per constraint (`mass_limits`).
+        dn: (N, n) kg, the smallest μ per constraint.
+
+    Returns:
+        tuple[float, float, bool]: mass kg, lower kg and feasible.
+    """
     mass, lower = float(np.min(up)), max(0.0, float(np.max(dn)))
     return mass, lower, (lower <= mass) if np.isfinite(mass) else mass > 0
 
 
 def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, t: np.ndarray,
                     joints: np.ndarray | None = None) -> Capacity:
-    """Closed-form capacity of τ(μ) = a + μ b (N, n) within lo <= τ <= hi (N, n), μ >= 0, over the
-    joints selected by the boolean mask `joints` (default all), from `mass_limits`."""
+    """Closed-form capacity of τ(μ) = a + μ b within lo <= τ <= hi, μ >= 0, from `mass_limits`.
+
+    Args:
+        a: (N, n) N·m (N on a prismatic joint), the torques at μ = 0.
+        b: (N, n) N·m per kg, the torques' rate with the carried mass.
+        lo, hi: (N, n) N·m, the motor lines τ_min, τ_max at the samples (eq. 36).
+        t: (N,) s, the sample times.
+        joints: (n,) bool, the joints whose limits count; None: all.
+
+    Returns:
+        Capacity: the mass interval, the first motor to saturate (stacked index, sample, time, side)
+        and the per-sample largest masses (N,) kg.
+    """
     sel = np.ones(a.shape[1], bool) if joints is None else joints
     idx = np.flatnonzero(sel)
     up, dn = mass_limits(a[:, sel], b[:, sel], lo[:, sel], hi[:, sel])
@@ -122,11 +190,29 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
 
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                     passive_tol: float = 1e-9) -> Capacity:
-    """DLCC of resolution `res` (closed form), for the resolutions the registry marks linear in the net
-    object wrench (`coopsim.inverse.resolutions.LINEAR_METHODS`); any other ('bounded') is refused (ValueError, with
-    the registry's reason): its torques are a nonlinear function of the carried mass, which the two-point
-    affine fit would silently get wrong. Passive joints must carry no torque: 'min_energy' enforces it;
-    for the others a passive torque above passive_tol N·m makes it infeasible."""
+    """DLCC of resolution `res` in closed form (eq. 36), for the resolutions linear in the net object wrench.
+
+    Those are the ones the registry marks linear (`coopsim.inverse.resolutions.LINEAR_METHODS`); any
+    other ('bounded') is refused with the registry's reason: its torques are a nonlinear function of the
+    carried mass, which the two-point affine fit would silently get wrong. Passive joints must carry no
+    torque: 'min_energy' enforces it; for the others a passive torque above passive_tol makes it
+    infeasible.
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        res: the Resolution (its method, weights, passive joints and virtual bodies).
+        motors: the Motors (stall torques τ_s and no-load speeds ω_s of eq. 36).
+        mode: 'scaled' (object mass) or 'payload' (point payload mass).
+        passive_tol: N·m (N on a prismatic joint), the largest passive-joint torque (or its rate per kg)
+            tolerated.
+
+    Returns:
+        Capacity: over the active joints; infeasible (note says why) when a resolution other than
+        'min_energy' puts torque on passive joints.
+
+    Raises:
+        ValueError: a resolution that is not linear in the net object wrench, or an unknown mode.
+    """
     method = resolution_method(res.method)
     if not method.linear:
         raise ValueError(f"method_capacity: resolution {res.method!r} has no closed-form capacity: "
@@ -149,14 +235,36 @@ def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode:
 def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: str = "scaled",
                 internal_bound: tuple[float, float] | None = None, Mstar: np.ndarray | None = None,
                 definition: str = "nonsqueezing", zero_feasible: bool = False) -> Capacity:
-    """Capacity over all distributions: per sample the LP max μ s.t. A f − μ y₁ = y₀,
-    τ_min <= τ_arms + Jᵀ f <= τ_max (active joints), Jᵀf = −τ_arms (passive rows), μ >= 0, and with
-    `internal_bound` = (N, N·m) every internal-wrench component (grasp-line frames, `definition`)
-    within ±bound; the capacity is the smallest per-sample maximum. The per-sample feasible sets are
-    intervals, so their intersection is [max lower, min upper]: the lower ends are 0 when
-    `zero_feasible` (a resolution is known to be feasible at μ = 0), else found by a second LP. All
-    samples' LPs are solved together (`coopsim.inverse.qp.solve_lps`). The motor reported is the one whose
-    line has the largest dual value at the binding sample (its LP solved alone)."""
+    """Capacity over all distributions: per sample the largest μ for which some f keeps every torque within its lines.
+
+    Per sample the LP max μ s.t. A f − μ y₁ = y₀, τ_min <= τ_arms + Jᵀ f <= τ_max (active joints),
+    Jᵀf = −τ_arms (passive rows), μ >= 0, and with `internal_bound` every internal-wrench component
+    (grasp-line frames, `definition`) within ±bound; the capacity is the smallest per-sample maximum.
+    The per-sample feasible sets are intervals, so their intersection is [max lower, min upper]: the
+    lower ends are 0 when `zero_feasible`, else found by a second LP. All samples' LPs are solved
+    together (`coopsim.inverse.qp.solve_lps`). The motor reported is the one whose line has the largest
+    dual value at the binding sample (its LP solved alone).
+
+    Args:
+        prob: the InverseProblem (N samples, n joints, r arms, k rows S).
+        motors: the Motors (eq. 36 lines).
+        passive: (n,) bool, the passive joints (zero torque enforced).
+        mode: 'scaled' or 'payload' (`mass_line`).
+        internal_bound: (force N, moment N·m) bounds of the internal-wrench components; None: no bound.
+        Mstar: (N, rk, rk) the non-squeezing metric M* (`nonsqueezing_metric`), needed with
+            internal_bound and definition 'nonsqueezing'.
+        definition: the internal wrench the bounds apply to, 'nonsqueezing' or 'paper'.
+        zero_feasible: a resolution is known to be feasible at μ = 0 (the lower ends are then 0, no
+            second LP).
+
+    Returns:
+        Capacity: mass and lower kg, the binding sample and time, the motor with the largest dual value
+        (None when no motor line binds) and per_sample (N,) kg the per-sample maxima (inf: unbounded,
+        −inf: infeasible).
+
+    Raises:
+        QPError: HiGHS fails on a sample (neither optimal, infeasible nor unbounded).
+    """
     A_ub, b_ub, A_eq, b_eq = _lp_rows(prob, motors, passive, mode, internal_bound, Mstar, definition)
     N, m = len(prob.t), prob.r * prob.k
     bounds = [(None, None)] * m + [(0, None)]
@@ -219,8 +327,18 @@ def _binding_motor(lp: LPBatch, act: np.ndarray) -> tuple[int | None, str | None
 
 
 def min_energy_affine_torques(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray):
-    """(a, b) (N, n): the minimum-energy torques τ(μ) = a + μ b for the weights (n,), from a setup of the
-    two net wrenches y₀ and y₀ + y₁ of `mass_line` (`min_energy_setup`)."""
+    """(a, b) (N, n): the minimum-energy torques τ(μ) = a + μ b for the weights.
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        setup: the MinEnergySetup of the two net wrenches y₀ and y₀ + y₁ of `mass_line`
+            (`min_energy_setup`).
+        weights: (n,) the diagonal of Q.
+
+    Returns:
+        tuple: a (N, n) N·m, the torques at μ = 0, and b (N, n) N·m per kg (N, N per kg on a prismatic
+        joint).
+    """
     f0, f1 = min_energy_solve(prob, setup, weights)
     a = torques_of(prob, f0)
     return a, torques_of(prob, f1) - a
@@ -228,10 +346,22 @@ def min_energy_affine_torques(prob: InverseProblem, setup: MinEnergySetup, weigh
 
 def min_energy_interval(prob: InverseProblem, setup: MinEnergySetup, weights: np.ndarray, lo: np.ndarray,
                         hi: np.ndarray, act: np.ndarray) -> tuple[float, float, bool]:
-    """`mass_interval` (mass, lower, feasible) of the minimum-energy torques for the weights (n,) within
-    lo <= τ <= hi (N, n) on the joints act (n,) bool: compiled (`coopsim.compiled.capacity`, one pass
-    over the samples), or through `min_energy_affine_torques` where that is not certified (rank lost
-    or an ill-conditioned energy Hessian somewhere)."""
+    """`mass_interval` (mass, lower, feasible) of the minimum-energy torques for the weights.
+
+    Compiled (`coopsim.compiled.capacity`, one pass over the samples), or through
+    `min_energy_affine_torques` where that is not certified (rank lost or an ill-conditioned energy
+    Hessian somewhere).
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        setup: the MinEnergySetup of the two net wrenches y₀ and y₀ + y₁ of `mass_line`.
+        weights: (n,) the diagonal of Q (passive joints' entries ignored).
+        lo, hi: (N, n) N·m, the motor lines τ_min, τ_max at the samples.
+        act: (n,) bool, the joints whose limits count.
+
+    Returns:
+        tuple[float, float, bool]: mass kg, lower kg and feasible.
+    """
     from coopsim.compiled.api import announce_compile
     from coopsim.compiled.capacity import min_energy_mass_interval
 
@@ -246,13 +376,26 @@ def min_energy_interval(prob: InverseProblem, setup: MinEnergySetup, weights: np
 
 def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
                      max_evals: int = 400) -> tuple[np.ndarray, Capacity]:
-    """Energy weights (n,) maximising the minimum-energy capacity (weights are scale-free: normalised
-    to a geometric mean of 1 over the active joints), with that capacity. Nelder–Mead on log-weights
-    (clipped to ±ln 10⁴) from equal weights, from the paper's suggestion (weight ×10 on the motor
-    that saturates first) and from `res.weights` when they are not all equal (the scenario's
-    `energy_weights`); the best is kept. The weight-independent part of the
-    minimum-energy problem (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once;
-    each evaluation is one compiled pass over the samples (`min_energy_interval`)."""
+    """Energy weights (n,) maximising the minimum-energy capacity, with that capacity.
+
+    Weights are scale-free: normalised to a geometric mean of 1 over the active joints. Nelder–Mead on
+    log-weights (clipped to ±ln 10⁴) from equal weights, from the paper's suggestion (weight ×10 on the
+    motor that saturates first) and from `res.weights` when they are not all equal (the scenario's
+    `energy_weights`); the best is kept. The weight-independent part of the minimum-energy problem
+    (`min_energy_setup`, both net wrenches y₀ and y₀ + y₁) is set up once; each evaluation is one
+    compiled pass over the samples (`min_energy_interval`).
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        res: the Resolution (its passive joints and its weights as a starting point).
+        motors: the Motors (eq. 36 lines).
+        mode: 'scaled' or 'payload' (`mass_line`).
+        max_evals: the most objective evaluations of each Nelder–Mead run.
+
+    Returns:
+        tuple[np.ndarray, Capacity]: the weights (n,) (1 on passive joints) and the minimum-energy
+        Capacity with them.
+    """
     from scipy.optimize import minimize
 
     act = ~res.passive
@@ -296,11 +439,21 @@ def optimise_weights(prob: InverseProblem, res: Resolution, motors: Motors, mode
 
 def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float, float],
                         fractions=(1.0, 0.75, 0.5, 0.25, 0.1, 0.0)) -> list[dict]:
-    """Energy of the bounded minimum-energy resolution for bounds = fraction × peak (peak = the
-    minimum-energy distribution's peak internal-wrench components, N and N·m): a list of
-    {fraction, force_bound_N, moment_bound_Nm, energy, max_internal_force_N, max_internal_moment_Nm,
-    failed_samples} — failed_samples: how many samples have no solution (then energy is nan and the
-    maxima leave them out)."""
+    """Energy of the bounded minimum-energy resolution against its internal-wrench bound (fraction × peak).
+
+    Args:
+        prob: the InverseProblem (N samples).
+        res: the Resolution whose weights, passive joints, virtual bodies and bound_definition are used
+            (its method is replaced by 'bounded').
+        peak: (force N, moment N·m), the minimum-energy distribution's peak internal-wrench components.
+        fractions: the fractions of the peak taken as bounds.
+
+    Returns:
+        list[dict]: one per fraction: fraction, force_bound_N, moment_bound_Nm, energy (N²·m²·s for
+        unit weights), max_internal_force_N, max_internal_moment_Nm (of res.bound_definition's internal
+        wrench) and failed_samples (how many samples have no solution; then energy is nan and the maxima
+        leave them out).
+    """
     out = []
     for frac in fractions:
         r = replace(res, method="bounded", force_bound=frac * peak[0], moment_bound=frac * peak[1])
@@ -319,14 +472,33 @@ def energy_stress_curve(prob: InverseProblem, res: Resolution, peak: tuple[float
 # ------------------------------------------------------------------------------------------------
 
 def scaled_model(model: Model, mass: float) -> Model:
-    """The model with its object scaled to `mass` kg at constant geometry (inertia ∝ mass)."""
+    """The model with its object scaled to `mass` kg at constant geometry (inertia ∝ mass).
+
+    Args:
+        model: the Model.
+        mass: kg, the object's new mass.
+
+    Returns:
+        Model: a copy with the object's mass and inertia scaled.
+    """
     obj = model.object
     return replace(model, object=replace(obj, mass=float(mass), inertia=obj.inertia * (mass / obj.mass)))
 
 
 def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
-    """The model whose object also carries a point mass `mass` kg at `position` (object frame, m): the
-    composite's frame sits at the new centre of mass (same axes), inertia by the parallel-axis rule."""
+    """The model whose object also carries a point mass `mass` kg at `position`.
+
+    The composite's frame sits at the new centre of mass (same axes), inertia by the parallel-axis rule;
+    the grasp positions are shifted to it.
+
+    Args:
+        model: the Model.
+        position: (3,) m, the payload's position, object frame (relative to the nominal C).
+        mass: kg, the payload's mass.
+
+    Returns:
+        Model: a copy with the composite object's mass, inertia about the new C and grasp positions.
+    """
     obj = model.object
     total = obj.mass + mass
     shift = mass * np.asarray(position, dtype=float) / total          # new centre, old object frame
@@ -341,10 +513,25 @@ def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
 
 def brute_force_check(model: Model, traj, res: Resolution, mode: str, capacity: Capacity,
                       payload_position: np.ndarray | None = None, rel: float = 1e-6) -> dict:
-    """Independent check of a closed-form capacity: rebuild the model with the object scaled to (or
-    carrying a payload of) capacity·(1 ∓ rel), rerun the inverse dynamics from scratch with the same
-    resolution, and measure the largest excess of a torque over its motor line (N·m; < 0: within).
-    Returns {below_excess, above_excess, above_joint, above_time, ok} (ok: below < 0 < above)."""
+    """Independent check of a closed-form capacity, by rerunning the inverse dynamics just below and above it.
+
+    The model is rebuilt with the object scaled to (or carrying a payload of) capacity·(1 ∓ rel), the
+    inverse dynamics rerun from scratch with the same resolution, and the largest excess of a torque over
+    its motor line measured (< 0: within).
+
+    Args:
+        model: the Model (nominal object).
+        traj: the JointTrajectory the capacity was computed on.
+        res: the Resolution.
+        mode: 'scaled' or 'payload'.
+        capacity: the Capacity checked (finite mass).
+        payload_position: (3,) m, object frame, the payload's position (needed for 'payload').
+        rel: the relative step below and above the capacity.
+
+    Returns:
+        dict: below_excess and above_excess N·m (N on a prismatic joint), above_joint (stacked index)
+        and above_time s of the largest excess above, and ok: below < 0 < above.
+    """
     lo, hi = torque_limits(model.motors, traj.qd)
     out = {}
     for key, factor in (("below", 1 - rel), ("above", 1 + rel)):

@@ -57,9 +57,18 @@ class QPError(CoopsimError):
 
 
 class QPResult(NamedTuple):
-    """One solved QP: x (n,) the minimiser; active (m,) int8 per row of C: +1 held at hi (also rows
-    with lo = hi), −1 held at lo, 0 not in the working set; eq_mult (q,) and mult (m,) the multipliers:
-    Hx + g = Eᵀ eq_mult + Cᵀ mult (H = RᵀR, g = −Rᵀd), mult >= 0 at lo, <= 0 at hi, 0 off the set."""
+    """One solved QP: the minimiser, its working set and multipliers.
+
+    The multipliers satisfy Hx + g = Eᵀ eq_mult + Cᵀ mult (H = RᵀR, g = −Rᵀd), with mult >= 0 at lo,
+    <= 0 at hi and 0 off the working set.
+
+    Attributes:
+        x: (n,) the minimiser.
+        active: (m,) int8 per row of C: +1 held at hi (also rows with lo = hi), −1 held at lo, 0 not in
+            the working set.
+        eq_mult: (q,) the multipliers of the rows E x = e.
+        mult: (m,) the multipliers of the rows of C.
+    """
 
     x: np.ndarray
     active: np.ndarray
@@ -68,9 +77,17 @@ class QPResult(NamedTuple):
 
 
 class QPBatch(NamedTuple):
-    """Solutions of a batch of N QPs: ok (N,) bool: a verified minimiser; x (N, n) (nan where not ok);
-    active (N, m), eq_mult (N, q), mult (N, m) as in QPResult (0 where not ok); messages: N strings
-    ('optimal', or why not: 'infeasible', or HiGHS's status and what the polish found)."""
+    """Solutions of a batch of N QPs, as QPResult's fields stacked over the problems.
+
+    Attributes:
+        ok: (N,) bool, a verified minimiser was found.
+        x: (N, n) the minimisers (nan where not ok).
+        active: (N, m) int8 the working sets as in QPResult (0 where not ok).
+        eq_mult: (N, q) the equality rows' multipliers as in QPResult (0 where not ok).
+        mult: (N, m) the multipliers of the rows of C as in QPResult (0 where not ok).
+        messages: N strings: 'optimal', or why not: 'infeasible', or HiGHS's status and what the polish
+            found.
+    """
 
     ok: np.ndarray
     x: np.ndarray
@@ -80,16 +97,33 @@ class QPBatch(NamedTuple):
     messages: list
 
     def result(self, i: int) -> QPResult:
-        """Problem i as a QPResult; raises QPError with its message when it was not solved."""
+        """Problem i as a QPResult.
+
+        Args:
+            i: the problem's index in the batch.
+
+        Returns:
+            QPResult: its minimiser, working set and multipliers.
+
+        Raises:
+            QPError: with its message, when it was not solved.
+        """
         if not self.ok[i]:
             raise QPError(f"QP not solved: {self.messages[i]}")
         return QPResult(self.x[i], self.active[i], self.eq_mult[i], self.mult[i])
 
 
 class LPBatch(NamedTuple):
-    """Solutions of a batch of N LPs: status (N,) int (linprog's: 0 optimal, 2 infeasible, 3 unbounded,
-    other: failed); x (N, v) (nan where not optimal); marginals (N, mu): duals of the inequality rows
-    (0 for rows left out, and where not optimal); messages: N strings."""
+    """Solutions of a batch of N LPs.
+
+    Attributes:
+        status: (N,) int, linprog's status: 0 optimal, 2 infeasible, 3 unbounded, other: failed (−1: not
+            solved).
+        x: (N, v) the solutions (nan where not optimal).
+        marginals: (N, mu) the duals of the inequality rows (0 for rows left out, and where not
+            optimal).
+        messages: N strings, HiGHS's message for each problem.
+    """
 
     status: np.ndarray
     x: np.ndarray
@@ -125,13 +159,25 @@ def _linprog_blocks(c, A_ub, b_ub, keep, A_eq, b_eq, bounds):
 
 def solve_lps(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarray, b_eq: np.ndarray,
               bounds, cap: float = 1e9) -> LPBatch:
-    """N independent LPs  min cᵀx  s.t.  A_ub[i] x <= b_ub[i] (rows with non-finite b_ub left out),
-    A_eq[i] x = b_eq[i], bounds: c (v,), A_ub (N, mu, v), b_ub (N, mu), A_eq (N, me, v), b_eq (N, me),
-    bounds: v pairs (lo, hi), None for none (shared). Solved as one block-diagonal HiGHS LP (each block
-    is then optimal on its own: the objective is separable) in which the variables the objective
-    drives towards an infinite bound stop at ±cap; the problems that reach it are solved alone, which
-    gives their own status (unbounded; cap = inf: no cap); when the combined LP has no optimum, its
-    halves are solved in turn down to single problems."""
+    """N independent LPs  min cᵀx  s.t.  A_ub[i] x <= b_ub[i],  A_eq[i] x = b_eq[i],  bounds on x.
+
+    Solved as one block-diagonal HiGHS LP (each block is then optimal on its own: the objective is
+    separable) in which the variables the objective drives towards an infinite bound stop at ±cap; the
+    problems that reach it are solved alone, which gives their own status (unbounded; cap = inf: no cap);
+    when the combined LP has no optimum, its halves are solved in turn down to single problems.
+
+    Args:
+        c: (v,) the objective, shared.
+        A_ub: (N, mu, v) the inequality rows.
+        b_ub: (N, mu) their bounds; rows with a non-finite b_ub are left out.
+        A_eq: (N, me, v) the equality rows (me may be 0).
+        b_eq: (N, me) their right-hand sides.
+        bounds: v pairs (lo, hi), None for none, shared by the problems.
+        cap: the artificial bound of the variables driven towards an infinite bound (inf: none).
+
+    Returns:
+        LPBatch: status, x (N, v), inequality duals (N, mu) and messages of each problem.
+    """
     N, v = A_eq.shape[0], A_eq.shape[2]
     keep = np.isfinite(b_ub)
     out = LPBatch(np.full(N, -1), np.full((N, v), np.nan), np.zeros(b_ub.shape), [""] * N)
@@ -177,9 +223,22 @@ def _store(out: LPBatch, idx: np.ndarray, sol, keep: np.ndarray) -> None:
 
 def solve_qp(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.ndarray, lo: np.ndarray,
              hi: np.ndarray) -> QPResult:
-    """Minimise ½|R x − d|² subject to E x = e and lo <= C x <= hi (shapes: R (p, n), d (p,), E (q, n),
-    e (q,), C (m, n), lo/hi (m,), ±inf allowed). Raises QPError when it is infeasible or no verified
-    minimiser is found."""
+    """Minimise ½|R x − d|² subject to E x = e and lo <= C x <= hi (one problem; `solve_qps`).
+
+    Args:
+        R: (p, n) the objective's matrix.
+        d: (p,) the objective's target.
+        E: (q, n) the equality rows (q may be 0).
+        e: (q,) their right-hand sides.
+        C: (m, n) the inequality rows.
+        lo, hi: (m,) their bounds, ±inf allowed (lo = hi: an equality).
+
+    Returns:
+        QPResult: the verified minimiser, its working set and multipliers.
+
+    Raises:
+        QPError: the problem is infeasible or no verified minimiser is found.
+    """
     n = np.shape(R)[1]
     one = lambda a: np.asarray(a, dtype=float).reshape(1, -1)          # noqa: E731
     batch = solve_qps(np.asarray(R, dtype=float)[None], one(d), np.reshape(E, (1, -1, n)), one(e),
@@ -189,9 +248,21 @@ def solve_qp(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.n
 
 def solve_qps(R: np.ndarray, d: np.ndarray, E: np.ndarray, e: np.ndarray, C: np.ndarray, lo: np.ndarray,
               hi: np.ndarray) -> QPBatch:
-    """`solve_qp` for a batch of N problems: R (N, p, n), d (N, p), E (N, q, n), e (N, q), C (N, m, n),
-    lo/hi (N, m). A problem that fails is reported in the QPBatch (ok False, x nan, message), never
-    raised. The steps are in the module docstring."""
+    """`solve_qp` for a batch of N problems; one that fails is reported in the QPBatch, never raised.
+
+    A failed problem has ok False, x nan and a message. The steps are in the module docstring.
+
+    Args:
+        R: (N, p, n) the objectives' matrices.
+        d: (N, p) the objectives' targets.
+        E: (N, q, n) the equality rows (q may be 0).
+        e: (N, q) their right-hand sides.
+        C: (N, m, n) the inequality rows.
+        lo, hi: (N, m) their bounds, ±inf allowed (lo = hi: an equality).
+
+    Returns:
+        QPBatch: per problem ok, the minimiser, working set, multipliers and message.
+    """
     P = _Scaled.of(*(np.asarray(a, dtype=float) for a in (R, d, E, e, C, lo, hi)))
     N, n = P.g.shape
     q, r = np.shape(E)[1], P.B.shape[1]

@@ -42,8 +42,16 @@ class SingularJacobian(ConstraintError):
 
 @dataclass(frozen=True, eq=False)
 class JointTrajectory:
-    """Joint motion of the closed chain sampled at t (N,) s: q (N, n) rad, qd (N, n) rad/s, qdd (N, n)
-    rad/s², stacked arm after arm and mutually consistent; source: 'forward' | 'object_motion'."""
+    """Joint motion of the closed chain sampled at N times, stacked arm after arm and mutually consistent.
+
+    Attributes:
+        t: (N,) s, the sample times, increasing.
+        q: (N, n) rad (m on a prismatic joint), the joint coordinates θ.
+        qd: (N, n) rad/s (m/s), the joint rates θ̇.
+        qdd: (N, n) rad/s² (m/s²), the joint accelerations θ̈.
+        source: 'forward' (a forward run) or 'object_motion' (closed-chain inverse kinematics of a
+            prescribed object motion).
+    """
 
     t: np.ndarray
     q: np.ndarray
@@ -53,20 +61,46 @@ class JointTrajectory:
 
 
 def from_simulation(res) -> JointTrajectory:
-    """The trajectory of a forward run (`coopsim.forward.simulate.SimResult`): its samples as they are."""
+    """The trajectory of a forward run: its samples as they are.
+
+    Args:
+        res: the forward run (`coopsim.forward.simulate.SimResult`); its t, q, qd and qdd are copied.
+
+    Returns:
+        JointTrajectory: t (N,) s and q, qd, qdd (N, n) of the run, source 'forward'.
+    """
     return JointTrajectory(res.t.copy(), res.q.copy(), res.qd.copy(), res.qdd.copy(), "forward")
 
 
 def trajectory_at(traj: JointTrajectory, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(θ, θ̇, θ̈) (n,) at time t (clamped to the sampled span); see `trajectory_at_times`."""
+    """(θ, θ̇, θ̈) (n,) at time t (clamped to the sampled span); see `trajectory_at_times`.
+
+    Args:
+        traj: the JointTrajectory.
+        t: s, the time.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, np.ndarray]: θ (n,) rad (m), θ̇ (n,) rad/s (m/s) and θ̈ (n,)
+        rad/s² (m/s²), stacked arm after arm.
+    """
     q, qd, qdd = trajectory_at_times(traj, np.array([float(t)]))
     return q[0], qd[0], qdd[0]
 
 
 def trajectory_at_times(traj: JointTrajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(θ, θ̇, θ̈) (M, n) at times t (M,) (clamped to the sampled span): the quintic Hermite polynomial
-    through (θ, θ̇, θ̈) at the ends of the sample interval holding each t, evaluated from the nearer end
-    (so the sample values come back to rounding)."""
+    """(θ, θ̇, θ̈) (M, n) at times t (M,), clamped to the sampled span.
+
+    The quintic Hermite polynomial through (θ, θ̇, θ̈) at the ends of the sample interval holding each t,
+    evaluated from the nearer end (so the sample values come back to rounding).
+
+    Args:
+        traj: the JointTrajectory (at least two samples).
+        t: (M,) s, the times.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, np.ndarray]: θ (M, n) rad (m), θ̇ (M, n) rad/s (m/s) and θ̈ (M, n)
+        rad/s² (m/s²), stacked arm after arm.
+    """
     ts = traj.t
     t = np.clip(np.asarray(t, dtype=float), ts[0], ts[-1])
     i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
@@ -80,10 +114,27 @@ def trajectory_at_times(traj: JointTrajectory, t: np.ndarray) -> tuple[np.ndarra
 
 
 def hermite_quintic(start, end, u: float, h: float):
-    """Quintic Hermite polynomial through start = (θ₀, θ̇₀, θ̈₀) at u = 0 and end = (θ₁, θ̇₁, θ̈₁) at u = 1
-    on an interval of h s: (θ, θ̇, θ̈) at u. With Δ = θ₁ − θ₀ and θ = Σ c_k uᵏ: c₀ = θ₀, c₁ = hθ̇₀,
-    c₂ = h²θ̈₀/2, c₃ = 10Δ − 6hθ̇₀ − 4hθ̇₁ − 3h²θ̈₀/2 + h²θ̈₁/2, c₄ = −15Δ + 8hθ̇₀ + 7hθ̇₁ + 3h²θ̈₀/2 − h²θ̈₁,
-    c₅ = 6Δ − 3hθ̇₀ − 3hθ̇₁ − h²θ̈₀/2 + h²θ̈₁/2."""
+    """Quintic Hermite polynomial through start at u = 0 and end at u = 1 on an interval of h s: (θ, θ̇, θ̈) at u.
+
+    With Δ = θ₁ − θ₀ and θ = Σ c_k uᵏ:
+
+        c₀ = θ₀,  c₁ = hθ̇₀,  c₂ = h²θ̈₀/2,
+        c₃ = 10Δ − 6hθ̇₀ − 4hθ̇₁ − 3h²θ̈₀/2 + h²θ̈₁/2,
+        c₄ = −15Δ + 8hθ̇₀ + 7hθ̇₁ + 3h²θ̈₀/2 − h²θ̈₁,
+        c₅ = 6Δ − 3hθ̇₀ − 3hθ̇₁ − h²θ̈₀/2 + h²θ̈₁/2.
+
+    Args:
+        start: (θ₀, θ̇₀, θ̈₀) at u = 0, arrays of one shape (e.g. (M, n)) in rad, rad/s, rad/s² (m, m/s,
+            m/s² on a prismatic joint).
+        end: (θ₁, θ̇₁, θ̈₁) at u = 1, likewise.
+        u: the normalised time (t − t₀)/h in [0, 1], a float or an array broadcasting with start's
+            (e.g. (M, 1)).
+        h: s, the interval's length, a float or an array broadcasting likewise.
+
+    Returns:
+        tuple: (θ, θ̇, θ̈) at u, shaped like start's arrays broadcast with u, in their units (θ̇ and θ̈ per
+        second, not per unit u).
+    """
     p0, v0, a0 = start[0], h * start[1], h * h * start[2]
     p1, v1, a1 = end[0], h * end[1], h * h * end[2]
     d = p1 - p0
@@ -98,8 +149,21 @@ def hermite_quintic(start, end, u: float, h: float):
 
 
 def time_law(kind: str, u: float) -> tuple[float, float, float]:
-    """(s, ds/du, d²s/du²) of the normalised time law on u ∈ [0, 1]: 'quintic' s = 10u³ − 15u⁴ + 6u⁵
-    (rest-to-rest with zero acceleration at the ends), 'cubic' s = 3u² − 2u³ (zero rate at the ends)."""
+    """(s, ds/du, d²s/du²) of the normalised time law on u ∈ [0, 1].
+
+    'quintic': s = 10u³ − 15u⁴ + 6u⁵ (rest-to-rest with zero acceleration at the ends); 'cubic':
+    s = 3u² − 2u³ (zero rate at the ends).
+
+    Args:
+        kind: 'quintic' or 'cubic'.
+        u: the normalised time in [0, 1] (dimensionless).
+
+    Returns:
+        tuple[float, float, float]: s, ds/du and d²s/du² at u (dimensionless).
+
+    Raises:
+        ValueError: an unknown time law.
+    """
     if kind == "quintic":
         return (10 * u**3 - 15 * u**4 + 6 * u**5, 30 * u**2 - 60 * u**3 + 30 * u**4,
                 60 * u - 180 * u**2 + 120 * u**3)
@@ -109,11 +173,22 @@ def time_law(kind: str, u: float) -> tuple[float, float, float]:
 
 
 def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None = None):
-    """Object state at time t (clamped to the waypoint span): p_C (3,) (relative to `origin`, world, when
-    given: (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded), R_o (3, 3), twist [v_C; ω]
-    (6,) and acceleration [a_C; ω̇] (6,). On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a:
-    p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ) with φ = log(R_aᵀ R_b) (one fixed axis), so
-    v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ, a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ."""
+    """Object state at time t (clamped to the waypoint span): p_C, R_o, twist [v_C; ω] and acceleration [a_C; ω̇].
+
+    On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a: p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ)
+    with φ = log(R_aᵀ R_b) (one fixed axis), so v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ,
+    a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ (ṡ = ds/du, s̈ = d²s/du², `time_law`). With `origin`, p_C is
+    (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded.
+
+    Args:
+        motion: the ObjectMotion (waypoints, world axes, and time law).
+        t: s, the time.
+        origin: (3,) m, world: the point p_C is given relative to; None: the world origin.
+
+    Returns:
+        tuple: p_C (3,) m, relative to `origin`, world axes; R_o (3, 3) world ← object; twist [v_C; ω]
+        (6,) [m/s; rad/s] and acceleration [a_C; ω̇] (6,) [m/s²; rad/s²], world axes.
+    """
     ts = motion.times
     t = min(max(float(t), ts[0]), ts[-1])
     i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
@@ -133,10 +208,25 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
 
 def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndarray, acc: np.ndarray,
                   origin: np.ndarray | None = None):
-    """End-effector targets of every arm for an object state (p_C relative to `origin`, world, default the
-    world origin): lists of p_EE (3,) relative to the arm's base point, ((origin − o_m) + p_C) + ρ,
-    R_EE (3, 3), twist [v_EE; ω] (6,) and acceleration [a_EE; ω̇] (6,), with ρ = p_EE − p_C:
-    v_EE = v_C + ω × ρ, a_EE = a_C + ω̇ × ρ + ω × (ω × ρ) (eq. 3 and its derivative)."""
+    """End-effector targets of every arm for an object state: p_EE, R_EE, twist and acceleration per arm.
+
+    With ρ = p_EE − p_C = R_o ρ_m (ρ_m the grasp position, object frame): p_EE relative to the arm's base
+    point o_m is ((origin − o_m) + p_C) + ρ, R_EE = R_o R_grasp, v_EE = v_C + ω × ρ and
+    a_EE = a_C + ω̇ × ρ + ω × (ω × ρ) (eq. 3 and its derivative).
+
+    Args:
+        model: the Model (its arms' base points and the object's grasps).
+        p_C: (3,) m, the object's centre of mass C relative to `origin`, world axes.
+        R_o: (3, 3) the object's orientation, world ← object.
+        twist: (6,) [v_C; ω] m/s, rad/s, world axes.
+        acc: (6,) [a_C; ω̇] m/s², rad/s², world axes.
+        origin: (3,) m, world: the point p_C is relative to; None: the world origin.
+
+    Returns:
+        list[tuple]: one (p_EE, R_EE, twist, acceleration) per arm: p_EE (3,) m relative to the arm's
+        base point, world axes; R_EE (3, 3) world ← end-effector; twist [v_EE; ω] (6,) and acceleration
+        [a_EE; ω̇] (6,), world axes.
+    """
     obj, w, dw = model.object, twist[3:], acc[3:]
     o = np.zeros(3) if origin is None else np.asarray(origin, dtype=float)
     out = []
@@ -150,22 +240,61 @@ def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndar
 
 
 def pose_error(arm: ArmModel, q: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """[p_EE(θ) − p; log(R_EE(θ) Rᵀ)] (6,), m and rad, world axes, with the target p (3,) and p_EE both
-    relative to the arm's base point (ArmPose.p_ee_rel): no world position enters the error."""
+    """Pose error [p_EE(θ) − p; log(R_EE(θ) Rᵀ)] of one arm's end-effector frame against a target.
+
+    The target p and p_EE are both relative to the arm's base point (ArmPose.p_ee_rel): no world
+    position enters the error.
+
+    Args:
+        arm: the ArmModel.
+        q: (n,) rad (m on a prismatic joint), the arm's joint coordinates.
+        p: (3,) m, the target position relative to the arm's base point, world axes.
+        R: (3, 3) the target orientation, world axes.
+
+    Returns:
+        np.ndarray: (6,) [m; rad] the position error and rotation vector, world axes.
+    """
     return pose_error_at(arm_pose(arm, q), p, R)
 
 
 def pose_error_at(pose, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """`pose_error` of an ArmPose already computed."""
+    """`pose_error` of an ArmPose already computed.
+
+    Args:
+        pose: the arm's ArmPose (`coopsim.dynamics.kinematics.arm_pose`).
+        p: (3,) m, the target position relative to the arm's base point, world axes.
+        R: (3, 3) the target orientation, world axes.
+
+    Returns:
+        np.ndarray: (6,) [m; rad] [p_EE − p; log(R_EE Rᵀ)], world axes.
+    """
     return np.concatenate([pose.p_ee_rel - p, rot_log(pose.R_ee @ R.T)])
 
 
 def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
            tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7) -> np.ndarray:
-    """Joint angles (n,) putting the end-effector frame at (p, R) (p relative to the arm's base point)
-    in the rows S (k × 6, k = n): Newton
-    steps Δθ = −(S J)⁻¹ S e(θ) from `guess` (which picks the branch) until max |S e| <= tol.
-    Raises ConstraintError when S J is singular (σ_min/σ_max < sing_tol) or Newton does not converge."""
+    """Joint angles (n,) putting the end-effector frame at (p, R) in the rows S, by Newton's method.
+
+    Newton steps Δθ = −(S J)⁻¹ S e(θ) (e: `pose_error`) from `guess` (which picks the branch) until
+    max |S e| <= tol.
+
+    Args:
+        arm: the ArmModel (n joints).
+        S: (k, 6) row selector of the pose rows solved, k = n.
+        p: (3,) m, the target position relative to the arm's base point, world axes.
+        R: (3, 3) the target orientation, world axes.
+        guess: (n,) rad (m on a prismatic joint), the starting joint coordinates (not changed).
+        tol: m or rad, the tolerance on max |S e|.
+        max_iter: the most Newton steps.
+        sing_tol: S J counts as singular when σ_min/σ_max < sing_tol.
+
+    Returns:
+        np.ndarray: (n,) rad (m) the joint coordinates.
+
+    Raises:
+        SingularJacobian: S J is singular (a ConstraintError).
+        ConstraintError: Newton does not converge in max_iter steps.
+    """
     q = guess.astype(float).copy()
     for _ in range(max_iter):
         e = S @ pose_error(arm, q, p, R)
@@ -180,8 +309,20 @@ def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np
 
 
 def arm_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray):
-    """(θ̇, θ̈, det S J) of one arm from its end-effector twist and acceleration (differential
-    kinematics in the rows S): S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇)."""
+    """(θ̇, θ̈, det S J) of one arm from its end-effector twist and acceleration.
+
+    Differential kinematics in the rows S: S J θ̇ = S v_EE, S J θ̈ = S (a_EE − J̇θ̇).
+
+    Args:
+        arm: the ArmModel (n joints).
+        S: (k, 6) row selector, k = n.
+        q: (n,) rad (m on a prismatic joint), the arm's joint coordinates.
+        twist: (6,) [v_EE; ω] m/s, rad/s, the end-effector twist, world axes.
+        acc: (6,) [a_EE; ω̇] m/s², rad/s², the end-effector acceleration, world axes.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, float]: θ̇ (n,) rad/s (m/s), θ̈ (n,) rad/s² (m/s²) and det S J.
+    """
     pose = arm_pose(arm, q)
     SJ = S @ ee_jacobian(pose)
     qd = np.linalg.solve(SJ, S @ twist)
@@ -264,14 +405,28 @@ def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
 
 def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray | None,
                     rest: np.ndarray, gain: float):
-    """Redundancy resolution of one arm with n joints for k < n rows S (k × 6), A = S J_m (k × n) of
-    full row rank: θ̇ = A⁺ S v_EE + (I − A⁺A) z, z = gain (θ_rest − θ), A⁺ = Aᵀ(AAᵀ)⁻¹ — the joint
-    velocity nearest z (least |θ̇ − z|) among those that move the end-effector as prescribed, i.e. least
-    |θ̇| plus a null-space pull toward the rest posture that does not move the end-effector. Written
-    θ̇ = z + Aᵀλ, AAᵀλ = b − Az (b = S v_EE). Its exact time derivative (for `acc` [a_EE; ω̇] (6,)):
+    """Redundancy resolution of one arm with n joints for k < n rows S: θ̇ (and θ̈) of least |θ̇ − z|.
+
+    With A = S J_m (k × n) of full row rank: θ̇ = A⁺ S v_EE + (I − A⁺A) z, z = gain (θ_rest − θ),
+    A⁺ = Aᵀ(AAᵀ)⁻¹ — the joint velocity nearest z (least |θ̇ − z|) among those that move the end-effector
+    as prescribed, i.e. least |θ̇| plus a null-space pull toward the rest posture that does not move the
+    end-effector. Written θ̇ = z + Aᵀλ, AAᵀλ = b − Az (b = S v_EE). Its exact time derivative:
     θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = −gain θ̇, AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ (so A θ̈ = S a_EE − Ȧθ̇, the
     differential kinematics of the square arms); Ȧ = S J̇ (`point_jacobian_rate`).
-    Returns (θ̇, θ̈ or None when acc is None, A)."""
+
+    Args:
+        arm: the ArmModel (n joints).
+        S: (k, 6) row selector, k < n.
+        q: (n,) rad (m on a prismatic joint), the arm's joint coordinates.
+        twist: (6,) [v_EE; ω] m/s, rad/s, the end-effector twist, world axes.
+        acc: (6,) [a_EE; ω̇] m/s², rad/s², the end-effector acceleration, world axes; None: θ̈ not
+            computed.
+        rest: (n,) rad (m), the rest posture θ_rest.
+        gain: 1/s, the gain of the null-space pull toward the rest posture.
+
+    Returns:
+        tuple: θ̇ (n,) rad/s (m/s); θ̈ (n,) rad/s² (m/s²), or None when acc is None; A = S J_m (k, n).
+    """
     pose = arm_pose(arm, q)
     A = S @ ee_jacobian(pose)
     AAt = A @ A.T
@@ -288,9 +443,26 @@ def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarr
 
 def min_norm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
                 tol: float = 1e-13, max_iter: int = 50) -> np.ndarray:
-    """Joint angles (n,) of a redundant arm putting its end-effector frame at (p, R) (p relative to its
-    base point) in the rows S (k × 6, k < n): least-norm Newton steps Δθ = −A⁺ S e(θ), A = S J, from
-    `guess` until max |S e| <= tol (the solution nearest the guess to first order)."""
+    """Joint angles (n,) of a redundant arm putting its end-effector frame at (p, R) in the rows S (k < n).
+
+    Least-norm Newton steps Δθ = −A⁺ S e(θ), A = S J, from `guess` until max |S e| <= tol (the solution
+    nearest the guess to first order).
+
+    Args:
+        arm: the ArmModel (n joints).
+        S: (k, 6) row selector, k < n.
+        p: (3,) m, the target position relative to the arm's base point, world axes.
+        R: (3, 3) the target orientation, world axes.
+        guess: (n,) rad (m on a prismatic joint), the starting joint coordinates (not changed).
+        tol: m or rad, the tolerance on max |S e|.
+        max_iter: the most Newton steps.
+
+    Returns:
+        np.ndarray: (n,) rad (m) the joint coordinates.
+
+    Raises:
+        ConstraintError: Newton does not converge in max_iter steps.
+    """
     q = guess.astype(float).copy()
     for _ in range(max_iter):
         pose = arm_pose(arm, q)
@@ -308,14 +480,33 @@ REDUNDANT_ATOL = 1e-12
 
 def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, guess: np.ndarray,
                      arms: list[int], plane_tol: float, sing_tol: float = 1e-7):
-    """(θ, θ̇, θ̈) (N, n_total) at the times t_out (N,) of the redundant arms `arms` (zeros elsewhere):
+    """(θ, θ̇, θ̈) (N, n_total) of the redundant arms `arms` at the times t_out (N,) (zeros elsewhere).
+
     θ(t) solves the ODE θ̇ = `redundant_rates` (rest posture and gain from `motion`, default the
     scenario's initial angles and 1/s) from the least-norm IK solution nearest `guess` at the first
     sample, integrated by DOP853 (rtol = atol = 1e-12) segment by segment between waypoints (the time
     law is smooth inside each). At every sample θ is then put exactly on the grasp by least-norm Newton
     (`min_norm_ik`, a correction of the integration error only) and θ̇, θ̈ are evaluated there, so the
-    three are consistent as for the square arms. TrajectoryError when an arm nears a singularity
-    (σ_min/σ_max of S J below sing_tol), leaves its reach or the plane of motion."""
+    three are consistent as for the square arms.
+
+    Args:
+        model: the Model.
+        motion: the prescribed ObjectMotion.
+        t_out: (N,) s, the sample times, within the waypoint span.
+        guess: (n_total,) rad (m), stacked joint coordinates; the redundant arms' rows start the
+            least-norm IK at the first sample.
+        arms: the indices of the redundant arms.
+        plane_tol: m or rad, how far a grasp may leave the plane of motion of a planar scene.
+        sing_tol: an arm counts as singular when σ_min/σ_max of S J is below it.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, np.ndarray]: θ (N, n_total) rad (m), θ̇ (N, n_total) rad/s (m/s)
+        and θ̈ (N, n_total) rad/s² (m/s²), stacked arm after arm; zero in the other arms' columns.
+
+    Raises:
+        TrajectoryError: an arm nears a singularity (σ_min/σ_max of S J below sing_tol), leaves its
+            reach or the plane of motion.
+    """
     from scipy.integrate import solve_ivp
 
     S, origin = model.rows, motion.positions[0]
@@ -417,6 +608,15 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
 
 
 def object_pose_of(model: Model, q: np.ndarray):
-    """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q."""
+    """Object pose (p_C, R_o) carried by the carrier arm at stacked angles q.
+
+    Args:
+        model: the Model (its object's carrier arm and grasp).
+        q: (n_total,) rad (m on a prismatic joint), the stacked joint coordinates, arm by arm.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: p_C (3,) m, the object's centre of mass, world; R_o (3, 3),
+        world ← object.
+    """
     obj = carrier_object(model, arm_poses(model, q))
     return obj.p_C, obj.R_o

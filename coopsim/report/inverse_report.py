@@ -39,26 +39,49 @@ def _report(progress: Progress | None, stage: str, fraction: float) -> None:
 
 
 def trajectory_of(model: Model, duration: float | None = None, progress: Progress | None = None):
-    """(JointTrajectory, SimResult or None): the scenario's trajectory to invert — its forward run
-    (`duration` overrides the scenario's) or the IK of its prescribed object motion; `progress` (module
-    `Progress`) hears the stage "forward" or "ik"."""
+    """The scenario's trajectory to invert: its forward run or the IK of its prescribed object motion.
+
+    Args:
+        model: the Model (its inverse.trajectory: 'forward' or 'object_motion').
+        duration: s, in place of the scenario's duration (a forward-run trajectory); None: the
+            scenario's.
+        progress: hears the stage "forward" or "ik" (module `Progress`); None: silent.
+
+    Returns:
+        tuple: the JointTrajectory, and the forward run's SimResult (None for an object motion).
+    """
     if model.inverse.trajectory == "object_motion":
         _report(progress, "ik", 0.0)
         traj = object_motion_trajectory(model, model.inverse.object_motion)
         _report(progress, "ik", 1.0)
         return traj, None
-    res = simulate(closed_loop(model), duration=duration, progress=None if progress is None else lambda f: progress("forward", f))
+    res = simulate(closed_loop(model), duration=duration,
+                   progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res
 
 
 
 @dataclass(frozen=True, eq=False)
 class InverseStudy:
-    """Everything `coopsim inverse` reports: model, traj, sim (forward run or None), problem,
-    resolutions {method: Resolution}, results {method: InverseResult} ('forward' = the forward run's
-    input torques when there is one), components {method: {definition: {axial, shear, torsion,
-    bending} (N, r)}}, stress {method: SectionLoads} (box objects), limits (τ_min, τ_max) (N, n),
-    replays {method: Replay}, curve: energy–stress trade-off (list of dicts), bounds (N, N·m)."""
+    """Everything `coopsim inverse` reports (N samples, n joints, r arms; SI units, world axes).
+
+    Attributes:
+        model: the Model.
+        traj: the JointTrajectory inverted.
+        sim: the forward run's SimResult, or None (an object-motion trajectory).
+        problem: the InverseProblem along traj.
+        resolutions: {method: Resolution}.
+        results: {method: InverseResult}; also 'forward', the forward run's input torques, when there is
+            one.
+        components: {method: {definition: {axial, shear, torsion, bending} (N, r)}}, the internal-wrench
+            components along the grasp lines (N, N·m) by each definition ('paper', 'nonsqueezing').
+        stress: {method: SectionLoads} (box objects only; else empty).
+        limits: (τ_min, τ_max) (N, n) N·m, the motor lines of eq. 36 along traj.
+        replays: {method: Replay} (empty unless asked for).
+        curve: the energy–stress trade-off (list of dicts, `coopsim.inverse.capacity.energy_stress_curve`;
+            empty unless asked for).
+        bounds: (force N, moment N·m), the 'bounded' resolution's internal-wrench bounds.
+    """
 
     model: Model
     traj: JointTrajectory
@@ -98,8 +121,22 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
 def solve_study(model: Model, methods=METHODS, duration: float | None = None,
                 bounds: tuple[float | None, float | None] = (None, None),
                 progress: Progress | None = None) -> InverseStudy:
-    """The inverse study without its checks (no replays, no trade-off curve): trajectory, every
-    resolution of `methods`, internal wrenches and stress — all that `inverse_series` logs."""
+    """The inverse study without its checks (no replays, no trade-off curve).
+
+    Trajectory, every resolution of `methods`, internal wrenches and stress — all that `inverse_series`
+    logs.
+
+    Args:
+        model: the Model.
+        methods: the resolutions to run (names in `coopsim.inverse.resolutions.METHODS`).
+        duration: s, in place of the scenario's (a forward-run trajectory); None: the scenario's.
+        bounds: (N, N·m) the 'bounded' resolution's internal-wrench bounds; None entries: the
+            scenario's, else the defaults (`coopsim.inverse.solve.default_bounds`).
+        progress: hears the stages forward (or ik) and inverse; None: silent.
+
+    Returns:
+        InverseStudy: with empty replays and curve.
+    """
     traj, sim = trajectory_of(model, duration, progress)
     prob = inverse_problem(model, traj)
     base = resolution_for(model, "min_energy")
@@ -131,8 +168,17 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
 
 def add_checks(study: InverseStudy, with_replay: bool = False, curve: bool = True,
                progress: Progress | None = None) -> InverseStudy:
-    """`study` with its checks: each resolution's torques replayed through the forward dynamics
-    (with_replay) and the energy–stress trade-off curve of the bounded minimum-energy resolution."""
+    """`study` with its checks: replays through the forward dynamics and the energy–stress trade-off curve.
+
+    Args:
+        study: the InverseStudy (`solve_study`).
+        with_replay: replay each resolution's torques through the forward dynamics.
+        curve: compute the energy–stress trade-off curve of the bounded minimum-energy resolution.
+        progress: hears the stages replay and curve; None: silent.
+
+    Returns:
+        InverseStudy: a copy with replays and curve filled in as asked.
+    """
     replays = {}
     for i, (k, res) in enumerate(study.resolutions.items() if with_replay else ()):
         _report(progress, "replay", i / len(study.resolutions))
@@ -159,9 +205,20 @@ def _failures(failures) -> list[dict]:
 
 
 def inverse_summary(study: InverseStudy) -> dict:
-    """JSON-ready summary of an inverse study (SI units). Samples a resolution could not solve are
-    listed under its "failed_samples" (every statistic leaves them out; its energy, an integral over
-    the whole trajectory, is then nan); "complete" is false when any method or replay has one."""
+    """JSON-ready summary of an inverse study (SI units).
+
+    Samples a resolution could not solve are listed under its "failed_samples" (every statistic leaves
+    them out; its energy, an integral over the whole trajectory, is then nan); "complete" is false when
+    any method or replay has one.
+
+    Args:
+        study: the InverseStudy.
+
+    Returns:
+        dict: scenario, joints, joint_types, trajectory, complete, energy_definition, nonsqueezing
+        (virtual masses kg, centroid offset m), bounded (bounds N, N·m), methods {method: energy,
+        torque and internal-wrench peaks, stress, replay errors, failures} and energy_stress_curve.
+    """
     m = study.model
     e_min = energy(study.results["min_energy"]) if "min_energy" in study.results else None
     methods = {}
@@ -190,8 +247,10 @@ def inverse_summary(study: InverseStudy) -> dict:
             }
         if k in study.stress:
             s = study.stress[k]
-            entry["stress"] = {"peak_normal_Pa": float(nan_peak(s.peak_normal)), "peak_shear_Pa": float(nan_peak(s.peak_shear)),
-                               "max_axial_N": float(nan_peak(np.abs(s.axial))), "max_bending_Nm": float(nan_peak(s.bending))}
+            entry["stress"] = {"peak_normal_Pa": float(nan_peak(s.peak_normal)),
+                               "peak_shear_Pa": float(nan_peak(s.peak_shear)),
+                               "max_axial_N": float(nan_peak(np.abs(s.axial))),
+                               "max_bending_Nm": float(nan_peak(s.bending))}
         if np.any(m.motors.passive):
             entry["max_abs_passive_torque_Nm"] = float(nan_peak(np.abs(r.tau[:, m.motors.passive])))
         if k in study.replays:
@@ -217,13 +276,22 @@ def inverse_summary(study: InverseStudy) -> dict:
 
 
 def format_inverse_summary(s: dict) -> str:
-    """Short text version of `inverse_summary`."""
+    """Short text version of `inverse_summary`.
+
+    Args:
+        s: the summary dict (`inverse_summary`).
+
+    Returns:
+        str: the lines of the report, joined by newlines.
+    """
     tr = s["trajectory"]
     lines = [f"scenario        {s['scenario']}: {tr['source']} trajectory, {tr['start_s']:g}..{tr['end_s']:g} s, "
              f"{tr['samples']} samples",
-             f"non-squeezing   virtual masses {', '.join(f'{x:.4g}' for x in s['nonsqueezing']['virtual_masses_kg'])} kg, "
+             f"non-squeezing   virtual masses "
+             f"{', '.join(f'{x:.4g}' for x in s['nonsqueezing']['virtual_masses_kg'])} kg, "
              f"centroid offset {np.linalg.norm(s['nonsqueezing']['centroid_offset_m']):.3g} m",
-             f"bounded         |internal| <= {s['bounded']['force_bound_N']:.4g} N, {s['bounded']['moment_bound_Nm']:.4g} N·m "
+             f"bounded         |internal| <= {s['bounded']['force_bound_N']:.4g} N, "
+             f"{s['bounded']['moment_bound_Nm']:.4g} N·m "
              f"(grasp-line components, non-squeezing definition)",
              "",
              _row("method", *METHOD_COLUMNS), _row("", *METHOD_UNITS)]
@@ -244,7 +312,8 @@ def format_inverse_summary(s: dict) -> str:
     if s["energy_stress_curve"]:
         lines += ["", "energy against the internal-wrench bound (bounded minimum energy):"]
         for c in s["energy_stress_curve"]:
-            lines.append(f"  {c['fraction']:>5.2f} x peak: |F_I| <= {c['force_bound_N']:.4g} N, {c['moment_bound_Nm']:.4g} N·m"
+            lines.append(f"  {c['fraction']:>5.2f} x peak: |F_I| <= {c['force_bound_N']:.4g} N, "
+                         f"{c['moment_bound_Nm']:.4g} N·m"
                          f"  energy {c['energy']:.5g}"
                          + (f"  (no solution at {c['failed_samples']} samples)" if c["failed_samples"] else ""))
     return "\n".join(lines)
@@ -276,9 +345,24 @@ def _failure_list(failures: list[dict]) -> str:
 
 @dataclass(frozen=True, eq=False)
 class CapacityStudy:
-    """Everything `coopsim capacity` reports: caps {(method, mode): Capacity}, tau_at {(method, mode):
-    τ (N, n) at the capacity}, lp {mode: Capacity}, optimised (weights, Capacity, τ at it) or None,
-    energies {method: energy at the nominal mass}, checks {(method, mode): brute-force check} or {}."""
+    """Everything `coopsim capacity` reports (N samples, n joints; SI units).
+
+    Attributes:
+        model: the Model.
+        traj: the JointTrajectory along which the capacity holds.
+        problem: the InverseProblem along traj (with the payload position, if any).
+        modes: the capacity modes computed: ('scaled',) or ('scaled', 'payload').
+        caps: {(method, mode): Capacity}.
+        tau_at: {(method, mode): τ (N, n) N·m at the capacity (at the nominal mode's zero where the
+            capacity is not finite)}.
+        lp: {mode: Capacity}, the LP bound over all distributions (empty unless asked for).
+        optimised: (weights (n,), Capacity, τ (N, n) N·m at it) of the optimised minimum-energy weights
+            ('scaled'), or None.
+        energies: {method: energy N²·m²·s at the nominal mass}.
+        checks: {(method, mode): brute-force check dict} or {}.
+        limits: (τ_min, τ_max) (N, n) N·m, the motor lines of eq. 36 along traj.
+        payload_position: (3,) m, object frame, the payload's position, or None.
+    """
 
     model: Model
     traj: JointTrajectory
@@ -359,7 +443,17 @@ def _capacity_entry(model: Model, c: cap.Capacity) -> dict:
 
 
 def capacity_summary(study: CapacityStudy) -> dict:
-    """JSON-ready summary of a capacity study (SI units)."""
+    """JSON-ready summary of a capacity study (SI units).
+
+    Args:
+        study: the CapacityStudy.
+
+    Returns:
+        dict: scenario, joints, joint_types, trajectory, assumptions, nominal_object_mass_kg, capacity
+        {mode: {method: entry}}, lp_bound {mode: entry}, energy {method: N²·m²·s}, and where computed
+        energy_ratio_to_min_energy, optimised_weights and brute_force_check; an entry gives mass_kg,
+        lower_kg, feasible, the saturating motor, its stacked joint, time_s, line and note.
+    """
     m = study.model
     out = {
         "scenario": m.name,
@@ -395,9 +489,17 @@ def capacity_summary(study: CapacityStudy) -> dict:
 
 
 def format_capacity_summary(s: dict) -> str:
-    """Short text version of `capacity_summary`."""
+    """Short text version of `capacity_summary`.
+
+    Args:
+        s: the summary dict (`capacity_summary`).
+
+    Returns:
+        str: the lines of the report, joined by newlines.
+    """
     lines = [f"scenario        {s['scenario']}: {s['trajectory']['source']} trajectory, "
-             f"{s['trajectory']['start_s']:g}..{s['trajectory']['end_s']:g} s; nominal object {s['nominal_object_mass_kg']:.4g} kg"]
+             f"{s['trajectory']['start_s']:g}..{s['trajectory']['end_s']:g} s; "
+             f"nominal object {s['nominal_object_mass_kg']:.4g} kg"]
     for mode, caps in s["capacity"].items():
         what = "object mass (scaled at constant geometry)" if mode == "scaled" else "payload mass"
         lines += ["", f"DLCC, {what}:"]
@@ -418,13 +520,23 @@ def format_capacity_summary(s: dict) -> str:
         lines.append("optimised weights Q: [" + ", ".join(f"{x:.4g}" for x in s["optimised_weights"]["weights"]) + "]")
     if "brute_force_check" in s:
         bad = [k for k, v in s["brute_force_check"].items() if not v["ok"]]
-        lines.append(f"brute-force check at (1 ± 1e-6) x capacity: {'all agree' if not bad else 'FAILED: ' + ', '.join(bad)}")
+        lines.append(f"brute-force check at (1 ± 1e-6) x capacity: "
+                     f"{'all agree' if not bad else 'FAILED: ' + ', '.join(bad)}")
     return "\n".join(lines)
 
 
 def json_safe(obj):
-    """A copy of a summary that strict JSON can carry: non-finite floats become the strings "Infinity",
-    "-Infinity" and "NaN" (the spellings coopsim.io.log uses), e.g. the capacity of unlimited motors."""
+    """A copy of a summary that strict JSON can carry, non-finite floats as strings.
+
+    Non-finite floats become the strings "Infinity", "-Infinity" and "NaN" (the spellings coopsim.io.log
+    uses), e.g. the capacity of unlimited motors.
+
+    Args:
+        obj: a summary: nested dicts, lists and tuples of plain values.
+
+    Returns:
+        object: the same structure (tuples as lists) with every non-finite float replaced.
+    """
     if isinstance(obj, dict):
         return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -439,10 +551,19 @@ def json_safe(obj):
 # ------------------------------------------------------------------------------------------------
 
 def inverse_series(study: InverseStudy) -> list:
-    """Series for the MCAP log: /inverse/trajectory (θ, θ̇, θ̈, motor lines), and per method
-    /inverse/<method>/torque (τ, ½τᵀQτ, |τ|), /inverse/<method>/grasp_wrench (F_e), and
-    /inverse/<method>/internal (both definitions and the grasp-line components of each), plus
-    /inverse/<method>/stress (box section peaks) when the object is a box."""
+    """Series for the MCAP log of an inverse study.
+
+    /inverse/trajectory (θ, θ̇, θ̈, motor lines), and per method /inverse/<method>/torque (τ, ½τᵀQτ,
+    |τ|), /inverse/<method>/grasp_wrench (F_e), and /inverse/<method>/internal (both definitions and the
+    grasp-line components of each), plus /inverse/<method>/stress (box section peaks) when the object is
+    a box.
+
+    Args:
+        study: the InverseStudy.
+
+    Returns:
+        list[Series]: the series, sampled at the trajectory's times (N,) s, SI units.
+    """
 
     t = study.traj.t
     lo, hi = study.limits
@@ -467,13 +588,23 @@ def inverse_series(study: InverseStudy) -> list:
 
 
 def capacity_series(study: CapacityStudy) -> list:
-    """Series for the MCAP log: /capacity/limits (θ̇, motor lines) and per method and mode
-    /capacity/<method>/<mode> (τ at the capacity, the largest mass each sample allows), likewise
-    /capacity/lp/<mode> and /capacity/optimised/scaled."""
+    """Series for the MCAP log of a capacity study.
+
+    /capacity/limits (θ̇, motor lines) and per method and mode /capacity/<method>/<mode> (τ at the
+    capacity, the largest mass each sample allows), likewise /capacity/lp/<mode> and
+    /capacity/optimised/scaled.
+
+    Args:
+        study: the CapacityStudy.
+
+    Returns:
+        list[Series]: the series, sampled at the trajectory's times (N,) s, SI units (masses kg).
+    """
 
     t = study.traj.t
     lo, hi = study.limits
-    out = [Series("/capacity/limits", "coopsim.capacity.Limits", t, {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
+    out = [Series("/capacity/limits", "coopsim.capacity.Limits", t,
+                  {"qd": study.traj.qd, "tau_min": lo, "tau_max": hi})]
     for (k, mode), c in study.caps.items():
         out.append(Series(f"/capacity/{k}/{mode}", "coopsim.capacity.AtCapacity", t,
                           {"tau": study.tau_at[k, mode], "per_sample_mass": c.per_sample}))
@@ -487,7 +618,17 @@ def capacity_series(study: CapacityStudy) -> list:
 
 
 def capacity_metadata(summary: dict) -> dict:
-    """MCAP metadata records of a capacity study: one per method and mode ("capacity.<method>.<mode>")."""
+    """MCAP metadata records of a capacity study: one per method and mode ("capacity.<method>.<mode>").
+
+    Also "capacity.lp.<mode>" for the LP bounds and "capacity.optimised.scaled" for the optimised
+    weights, where computed.
+
+    Args:
+        summary: the capacity summary (`capacity_summary`).
+
+    Returns:
+        dict: record name → its capacity entry (a dict of the summary).
+    """
     recs = {}
     for mode, caps in summary["capacity"].items():
         for k, c in caps.items():
