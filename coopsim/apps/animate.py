@@ -87,8 +87,18 @@ SLEEVE = 0.8                                  # the twin's sleeve: margin / the 
 
 @dataclass(frozen=True, eq=False)
 class Motion:
-    """Joint angles to animate: t (N,) s; q_native and q_twin (N, n) rad in coopsim's joint order (either
-    may be None: only the other model is drawn); source says where they came from (for messages)."""
+    """Joint angles to animate: both models' joint coordinates over time, and the model they belong to.
+
+    Either of q_native and q_twin may be None: only the other model is drawn.
+
+    Attributes:
+        model: the scenario's frozen Model (the geometry drawn).
+        t: (N,) s, the sample times, increasing.
+        q_native: (N, n) rad (m on a prismatic joint), the native model's joint coordinates in coopsim's joint
+            order (arm by arm, n = model.n_total), or None.
+        q_twin: (N, n) rad (m on a prismatic joint), the MuJoCo twin's, in the same order, or None.
+        source: where they came from, for messages ("log PATH" or "run").
+    """
 
     model: Model
     t: np.ndarray
@@ -97,7 +107,17 @@ class Motion:
     source: str
 
     def at(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Both models' angles (F, n) at `times` (linear between samples; exact on them)."""
+        """Both models' joint coordinates at `times`: linear between samples, exact on them.
+
+        A time within 1e-9 s of a sample takes that sample; a time outside [t[0], t[-1]] the end sample.
+
+        Args:
+            times: (F,) s, the frame times.
+
+        Returns:
+            tuple: (q_native, q_twin), each (F, n) rad (m on a prismatic joint), or None where the motion has
+                none.
+        """
         return _interp(self.t, self.q_native, times), _interp(self.t, self.q_twin, times)
 
 
@@ -140,10 +160,27 @@ def _read_log(log_path: Path):
 
 
 def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, log=None) -> Motion:
-    """The angles of a `coopsim run` log (/native/joint_state and /mujoco/joint_state). The log holds
-    the joint angles but not the model's geometry: that comes from the scenario file named in its
-    metadata (found relative to the current folder or a folder above the log, and checked against the
-    recorded sha256), or from `scenario` when given. `log`: the file already read (`LogData`)."""
+    """The joint angles of a `coopsim run` log (/native/joint_state and /mujoco/joint_state).
+
+    The log holds the joint angles but not the model's geometry: that comes from the scenario file named in
+    its metadata (found relative to the current folder or a folder above the log, and checked against the
+    recorded sha256), or from `scenario` when given.
+
+    Args:
+        log_path: the MCAP log written by `coopsim run`.
+        scenario: the scenario file to draw the log with, in place of the one the log names (no sha256
+            check); None: the log's.
+        log: the file already read (`LogData`); None: read `log_path`.
+
+    Returns:
+        Motion: the log's sample times and both models' angles on them (None for a model whose topic is
+            missing), source "log PATH".
+
+    Raises:
+        CoopsimError: the log is missing or unreadable, holds neither joint-state topic or no samples, names no
+            scenario or one that is not found or has changed since (sha256), has another joint count than
+            the scenario, or samples the two models at different times.
+    """
     log_path = Path(log_path)
     if log is None:
         if not log_path.is_file():
@@ -187,21 +224,48 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
 
 
 def motion_from_run(model: Model, duration: float | None = None, progress=None) -> Motion:
-    """Run the native model and the twin (`harness.cross_validate`, as `coopsim run` does, nothing
-    written) and take both models' angles."""
+    """Run the native model and the twin and take both models' angles.
+
+    Runs `harness.cross_validate`, as `coopsim run` does; nothing is written.
+
+    Args:
+        model: the scenario's Model.
+        duration: s, in place of the model's; None: the model's.
+        progress: called with (stage, fraction done), stage "native" or "mujoco"; or None.
+
+    Returns:
+        Motion: the native run's output times and both models' joint angles on them, source "run".
+    """
     cv = cross_validate(model, duration=duration, progress=progress)
     return Motion(model, cv.native.t, cv.native.q, cv.twin.q, "run")
 
 
 def default_log_path(model: Model) -> Path:
-    """Where `coopsim run` writes a scenario's log by default: out/NAME/NAME.mcap."""
+    """Where `coopsim run` writes a scenario's log by default: out/NAME/NAME.mcap.
+
+    Args:
+        model: the scenario's Model (its name).
+
+    Returns:
+        Path: out/NAME/NAME.mcap, relative to the current folder.
+    """
     return Path("out") / model.name / f"{model.name}.mcap"
 
 
 def reusable_log(path: str | Path, model: Model, duration: float | None = None):
-    """(path, LogData) of the scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when
-    it was written from this very file (same sha256), holds both models and covers `duration` (default:
-    the scenario's); else None."""
+    """The scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when it can stand in for a run.
+
+    It can when it was written from this very file (same sha256), holds both models and covers `duration`
+    (its last sample at or after it). An unreadable or foreign file there is not reused.
+
+    Args:
+        path: the scenario file (its sha256 is compared with the one the log records).
+        model: the Model loaded from it (its name and duration).
+        duration: s, the span the log must cover; None: the scenario's.
+
+    Returns:
+        tuple | None: (path, LogData) of the log, or None.
+    """
     log_path = default_log_path(model)
     if not log_path.is_file():
         return None
@@ -218,9 +282,19 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
 
 def scenario_motion(path: str | Path, duration: float | None = None, progress=None,
                     before_run: Callable[[], None] | None = None, overrides=()) -> Motion:
-    """The scenario's :func:`reusable_log` when there is one (never with `overrides`, the `--set`
-    pairs of `coopsim.io.scenario.load_scenario`: the log is the file's), otherwise a fresh run of both
-    models (`before_run()` is called first, e.g. to announce it)."""
+    """The motion of a scenario: its :func:`reusable_log` when there is one, otherwise a fresh run of both models.
+
+    Args:
+        path: the scenario file.
+        duration: s, in place of the scenario's; None: the scenario's.
+        progress: called with (stage, fraction done) during a fresh run (see :func:`motion_from_run`); or None.
+        before_run: called with no arguments before a fresh run, e.g. to announce it; or None.
+        overrides: the `--set` (path, value) pairs of `coopsim.io.scenario.load_scenario`; with any, the log
+            is never reused (the log is the file's).
+
+    Returns:
+        Motion: from the log (:func:`motion_from_log`) or from the run (:func:`motion_from_run`).
+    """
     model = load_scenario(path, overrides=overrides)
     found = None if overrides else reusable_log(path, model, duration)
     if found is not None:
@@ -235,8 +309,22 @@ def scenario_motion(path: str | Path, duration: float | None = None, progress=No
 # ------------------------------------------------------------------------------------------------
 
 def frame_times(motion: Motion, fps: float, speed: float = 1.0, duration: float | None = None) -> np.ndarray:
-    """Frame times (F,) s: from the first sample every speed/fps s of simulated time, up to and including
-    min(first + duration, last sample): F = floor(span·fps/speed) + 1."""
+    """Frame times (F,) s: from the first sample, one every speed/fps s of simulated time.
+
+    Up to and including min(first + duration, last sample): F = floor(span·fps/speed) + 1.
+
+    Args:
+        motion: the Motion (its sample times).
+        fps: frames per second of the animation, > 0.
+        speed: s of simulated time per s of animation, > 0.
+        duration: s of simulated time shown from the first sample; None: up to the last sample.
+
+    Returns:
+        np.ndarray: (F,) s, the frame times.
+
+    Raises:
+        CoopsimError: fps or speed not positive, or duration negative.
+    """
     if not fps > 0 or not speed > 0:
         raise CoopsimError("fps and speed must be positive")
     t0, t1 = float(motion.t[0]), float(motion.t[-1])
@@ -292,8 +380,24 @@ def _unavailable(backend: str, reason: str) -> RenderUnavailable:
 
 
 class OffscreenRenderer:
-    """MuJoCo's offscreen renderer (the calls `mujoco.Renderer` makes) on an explicitly chosen OpenGL
-    backend (see the module notes), so it works in a process that imported mujoco without MUJOCO_GL."""
+    """MuJoCo's offscreen renderer on an explicitly chosen OpenGL backend.
+
+    Makes the calls `mujoco.Renderer` makes, on the backend of the module notes, so it works in a process
+    that imported mujoco without MUJOCO_GL. A context manager: leaving the `with` block closes it.
+
+    Args:
+        m: the MuJoCo model drawn (its offscreen buffer size is raised to width × height where smaller:
+            written).
+        width, height: the image size in pixels.
+
+    Attributes:
+        backend: the OpenGL platform: "egl", "osmesa", "glfw" or "default" (mujoco's own choice).
+        width, height: the image size in pixels.
+        viewport: the MjrRect drawn into (the whole image).
+
+    Raises:
+        RenderUnavailable: the backend cannot start (one line naming MUJOCO_GL and the packages).
+    """
 
     def __init__(self, m: mujoco.MjModel, width: int, height: int):
         self.backend = _backend()
@@ -323,6 +427,17 @@ class OffscreenRenderer:
         self._rgb = np.empty((height, width, 3), dtype=np.uint8)
 
     def render(self, scene: mujoco.MjvScene) -> np.ndarray:
+        """The scene as an RGB image, top row first (a fresh array).
+
+        Args:
+            scene: the MjvScene to draw (filled by mjv_updateScene / mjv_addGeoms).
+
+        Returns:
+            np.ndarray: (height, width, 3) uint8 RGB.
+
+        Raises:
+            RuntimeError: the renderer is closed.
+        """
         if self._con is None:
             raise RuntimeError("renderer closed")
         """The scene as an RGB image (height, width, 3), top row first (a fresh array)."""
@@ -332,6 +447,7 @@ class OffscreenRenderer:
         return self._rgb[::-1].copy()
 
     def close(self) -> None:
+        """Free the MuJoCo rendering context and the OpenGL context (a no-op once closed)."""
         if self._ctx is not None:
             try:
                 with warnings.catch_warnings():      # GLFW's complaints about a context that never started
@@ -351,8 +467,14 @@ class OffscreenRenderer:
 
 
 def probe_renderer() -> str:
-    """Start and stop an OpenGL context on the backend `render_frames` would use (before a long run);
-    returns the backend's name, or raises RenderUnavailable."""
+    """Start and stop an OpenGL context on the backend `render_frames` would use (before a long run).
+
+    Returns:
+        str: the backend's name: "egl", "osmesa", "glfw" or "default".
+
+    Raises:
+        RenderUnavailable: the backend cannot start.
+    """
     m = mujoco.MjModel.from_xml_string("<mujoco/>")
     m.vis.quality.shadowsize = 0
     with OffscreenRenderer(m, 16, 16) as r:
@@ -360,8 +482,20 @@ def probe_renderer() -> str:
 
 
 def scene_model(model: Model, q0: np.ndarray) -> mujoco.MjModel:
-    """The twin's MJCF with its scene (light, floor), posed at q0 for the floor, plus a site marking the
-    object frame; the end-effector sites hidden (group 4: they coincide with the grasp sites)."""
+    """The compiled MuJoCo model of the scene that :func:`render_frames` poses.
+
+    The twin's MJCF with its scene (light, floor), posed at q0 for the floor, plus a site marking the
+    object frame; the end-effector sites hidden (group 4: they coincide with the grasp sites). Multisampling
+    on, shadows off.
+
+    Args:
+        model: the scenario's Model.
+        q0: (n,) rad (m on a prismatic joint), joint coordinates in coopsim's joint order: the keyframe
+            `initial` (zero velocities) the light, floor and camera are placed for.
+
+    Returns:
+        mujoco.MjModel: the compiled scene.
+    """
     spec = build_spec(model, initial=(np.asarray(q0, float), np.zeros(model.n_total)), scene=True)
     spec.body("object").add_site(name="object_frame", size=[1e-3, 1e-3, 1e-3])
     for m in range(model.r):
@@ -401,7 +535,8 @@ def _camera(m: mujoco.MjModel, points: np.ndarray, width: int, height: int) -> m
     tan_v = np.tan(np.deg2rad(m.vis.global_.fovy) / 2)
     tan_h = tan_v * width / height
     margin = 1.08
-    distance = np.max(np.maximum(margin * np.abs(rel @ right) / tan_h, margin * np.abs(rel @ up) / tan_v) - rel @ forward)
+    distance = np.max(np.maximum(margin * np.abs(rel @ right) / tan_h, margin * np.abs(rel @ up) / tan_v)
+                      - rel @ forward)
     cam.lookat[:] = center
     cam.distance = max(float(distance), 1e-3)
     return cam
@@ -458,12 +593,29 @@ class _Overlay:
 def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: int = 360, *,
                   native: bool = True, twin: bool = True, text: bool = True, floor: bool = True,
                   twin_sleeve: bool = True) -> Iterator[np.ndarray]:
-    """RGB frames (height, width, 3) uint8 of `motion` at `times`: the native model in its colours with
-    the object and grasp frames, the twin as a translucent sleeve over it (`native`/`twin` False leaves
-    one out; twin_sleeve=False draws the twin's boxes at their true size), the time stamp, the joint-angle
-    difference and a legend (`text`); floor=False leaves the floor out (plain background). The camera
-    frames both models at every one of `times`, whichever are drawn. Poses are set with mj_kinematics;
-    nothing is simulated."""
+    """RGB frames of `motion` at `times`, drawn by MuJoCo's offscreen renderer.
+
+    The native model in its colours with the object and grasp frames, the twin as a translucent sleeve over
+    it, the time stamp, the joint-angle difference and a legend. The camera frames both models at every one
+    of `times`, whichever are drawn. Poses are set with mj_kinematics; nothing is simulated.
+
+    Args:
+        motion: the Motion drawn.
+        times: (F,) s, the frame times (:func:`frame_times`).
+        width, height: the frame size in pixels.
+        native: False leaves the native model out.
+        twin: False leaves the twin out.
+        text: False leaves out the time stamp, the joint-angle difference and the legend.
+        floor: False leaves the floor out (plain background).
+        twin_sleeve: False draws the twin's boxes at their true size instead of grown into a sleeve.
+
+    Yields:
+        np.ndarray: (height, width, 3) uint8 RGB, one frame per entry of `times`, in order.
+
+    Raises:
+        CoopsimError: neither model is left to draw (on the first frame: this is a generator).
+        RenderUnavailable: no OpenGL backend starts.
+    """
     q_native, q_twin = motion.at(np.asarray(times, float))
     native = native and q_native is not None
     twin = twin and q_twin is not None
@@ -543,8 +695,18 @@ def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: i
 # ------------------------------------------------------------------------------------------------
 
 def check_output(path: str | Path) -> str:
-    """The output format of `path` ('gif' or 'mp4'), or a CoopsimError naming the suffix (and, for an MP4
-    without the ffmpeg program on PATH, naming the program)."""
+    """The output format of `path`, from its suffix.
+
+    Args:
+        path: the output file (.gif or .mp4, any case).
+
+    Returns:
+        str: 'gif' or 'mp4'.
+
+    Raises:
+        CoopsimError: an unknown suffix (named), or an MP4 without the ffmpeg program on PATH (naming the
+            program).
+    """
     suffix = Path(path).suffix.lower()
     if suffix not in SUFFIXES:
         raise CoopsimError(f"--out {path}: unknown suffix {suffix or '(none)'!r}; use .gif or .mp4")
@@ -590,8 +752,20 @@ def _write_mp4(frames: Iterable[np.ndarray], path: Path, fps: float, width: int,
 
 @dataclass(frozen=True)
 class Animation:
-    """What :func:`animate` wrote: path, frame count, size, fps, the frame times' span (s), the largest
-    joint-angle difference of the two models over the frames (rad; None with one model), wall times (s)."""
+    """What :func:`animate` wrote.
+
+    Attributes:
+        path: the file written.
+        frames: the frame count.
+        width, height: the frame size in pixels.
+        fps: frames per second.
+        span: s, the frame times' span (simulated time from the first frame to the last).
+        max_angle_difference: rad (m on a prismatic joint), the largest joint-angle difference of the two
+            models over the frames; None with one model.
+        render_time: s, the wall time of rendering the frames.
+        write_time: s, the wall time of encoding and writing the file.
+        source: where the angles came from (`Motion.source`).
+    """
 
     path: Path
     frames: int
@@ -605,6 +779,12 @@ class Animation:
     source: str
 
     def as_dict(self) -> dict:
+        """The record as JSON-ready values, keys carrying their units.
+
+        Returns:
+            dict: path (str), frames, width, height, fps, span_s, max_angle_difference_rad, render_time_s,
+                write_time_s, source.
+        """
         return {"path": str(self.path), "frames": self.frames, "width": self.width, "height": self.height,
                 "fps": self.fps, "span_s": self.span, "max_angle_difference_rad": self.max_angle_difference,
                 "render_time_s": self.render_time, "write_time_s": self.write_time, "source": self.source}
@@ -613,8 +793,28 @@ class Animation:
 def animate(motion: Motion, out: str | Path, *, fps: float = 20.0, speed: float = 1.0,
             duration: float | None = None, width: int = 480, height: int = 360,
             progress: Callable[[float], None] | None = None) -> Animation:
-    """Render `motion` (see :func:`render_frames`) at :func:`frame_times` and write it to `out` (.gif
-    with Pillow, .mp4 through ffmpeg), atomically; returns what was written."""
+    """Render `motion` at :func:`frame_times` and write it to `out`, atomically.
+
+    The frames are those of :func:`render_frames` (both models, text, floor); a .gif is written with
+    Pillow, an .mp4 through ffmpeg.
+
+    Args:
+        motion: the Motion drawn.
+        out: the output file, .gif or .mp4 (written atomically).
+        fps: frames per second of the animation.
+        speed: s of simulated time per s of animation.
+        duration: s of simulated time shown from the first sample; None: up to the last sample.
+        width, height: the frame size in pixels, 16 ... 4096.
+        progress: called with the fraction of the frames rendered; or None.
+
+    Returns:
+        Animation: what was written.
+
+    Raises:
+        CoopsimError: a bad suffix or no ffmpeg for an MP4 (:func:`check_output`), a frame size outside
+            16 ... 4096, fps, speed or duration out of range (:func:`frame_times`), or ffmpeg failing.
+        RenderUnavailable: no OpenGL backend starts.
+    """
     fmt = check_output(out)
     if width < 16 or height < 16 or width > 4096 or height > 4096:
         raise CoopsimError(f"frame size {width}x{height}: width and height must be 16 ... 4096 pixels")
@@ -659,9 +859,22 @@ def _check_window() -> None:
 
 
 def view(source: str | Path, label: str | None = None, overrides=()) -> None:
-    """MuJoCo's interactive viewer (`mjcf.launch_viewer`) at the consistent initial state: on an MJCF file
-    (`models/NAME.xml`, started at its keyframe) or on a scenario (its twin written as `coopsim mjcf`
-    would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when the window is closed. Without a display: CoopsimError."""
+    """Open MuJoCo's interactive viewer (`mjcf.launch_viewer`) at the consistent initial state.
+
+    On an MJCF file (`models/NAME.xml`, started at its keyframe) or on a scenario (its twin written as
+    `coopsim mjcf` would, to a temporary file, `overrides` applied as `load_scenario` does). Returns when
+    the window is closed.
+
+    Args:
+        source: an MJCF file (.xml) or a scenario file.
+        label: the source named in the temporary MJCF's header (`mjcf_text`); None: the scenario's path.
+            Unused for an MJCF file.
+        overrides: the `--set` (path, value) pairs applied to a scenario; unused for an MJCF file.
+
+    Raises:
+        CoopsimError: the file is missing or MuJoCo cannot load it, there is no display or no window opens,
+            or the viewer does not start.
+    """
     source = Path(source)
     if not source.is_file():
         raise CoopsimError(f"{source}: file not found")

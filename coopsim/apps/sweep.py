@@ -60,7 +60,8 @@ COLUMNS = {   # the summary entries a row keeps, per study (patterns over the fl
                  "initial_correction.max_abs_dq_rad", "warnings", "steps_accepted", "rhs_evaluations"),
     "validate": ("passed", "metrics.*.max"),
     "inverse": ("complete", "bounded.force_bound_N", "bounded.moment_bound_Nm", "methods.*.energy",
-                "methods.*.max_torque_norm_Nm", "methods.*.internal.*.max_force_N", "methods.*.internal.*.max_moment_Nm",
+                "methods.*.max_torque_norm_Nm", "methods.*.internal.*.max_force_N",
+                "methods.*.internal.*.max_moment_Nm",
                 "methods.*.stress.peak_normal_Pa", "methods.*.stress.peak_shear_Pa", "methods.*.replay.*"),
     "capacity": ("capacity.*.mass_kg", "capacity.*.saturating_motor", "capacity.*.line", "capacity.*.time_s",
                  "capacity.*.feasible", "lp_bound.*.mass_kg", "lp_bound.*.saturating_motor", "lp_bound.*.feasible",
@@ -77,9 +78,15 @@ PLOTS = {     # the columns drawn by default
 
 @dataclass(frozen=True)
 class Study:
-    """What runs at each point: kind (KINDS); duration (s) in place of the scenario's (the commands'
-    --duration) or None; options: the kind's own (capacity: lp, optimise; inverse: methods, replay,
-    bound_force, bound_moment); columns: fnmatch patterns of the summary entries kept."""
+    """What runs at each point of a sweep: one study of the single-run commands.
+
+    Attributes:
+        kind: the study, one of KINDS ("simulate", "validate", "inverse", "capacity").
+        duration: s, in place of the scenario's (the commands' --duration), or None.
+        options: the kind's own as (key, value) pairs (capacity: lp, optimise; inverse: methods, replay,
+            bound_force, bound_moment; others: none).
+        columns: the patterns of the summary entries kept in a row (:func:`matcher`: `*` matches any text).
+    """
 
     kind: str
     duration: float | None
@@ -87,13 +94,28 @@ class Study:
     columns: tuple[str, ...]
 
     def option(self, key: str, default=None):
+        """The value of one of the study's options.
+
+        Args:
+            key: the option's name (e.g. "lp", "methods", "bound_force").
+            default: returned when the study has no such option.
+
+        Returns:
+            Any: the option's value, or `default`.
+        """
         return dict(self.options).get(key, default)
 
 
 @dataclass(frozen=True)
 class Axis:
-    """One varied field: name (its column), path (`coopsim.io.overrides`), values (grid) or bounds (low,
-    high) of a quasi-random design."""
+    """One varied field of a sweep.
+
+    Attributes:
+        name: its column in the rows (default: the path).
+        path: the scenario field varied (a `coopsim.io.overrides` path, e.g. inverse.payload.position[0]).
+        values: the values of a grid design, in the field's own units, or None.
+        bounds: (low, high) of a quasi-random design (sobol, halton), in the field's own units, or None.
+    """
 
     name: str
     path: str
@@ -103,10 +125,23 @@ class Axis:
 
 @dataclass(frozen=True, eq=False)
 class Sweep:
-    """A validated sweep: name, file (the sweep file), scenario (the base scenario's path), base (its
-    data), fixed ((path, value) overrides of every point: the file's `set`, then the command line's),
-    axes, design, points (P, len(axes)) float values, study, plot (column patterns), digest (SHA-256
-    of everything a row depends on: a checkpoint of another sweep is never resumed)."""
+    """A validated sweep: the base scenario, the overrides of each point and the study run there.
+
+    Attributes:
+        name: the sweep's name (outputs go to out/NAME; default: the file's stem).
+        description: the file's description, or "".
+        file: the sweep file's path.
+        scenario: the base scenario's path: the file's `scenario` joined to the sweep file's folder.
+        base: the base scenario's data, as read from its YAML file.
+        fixed: the (path, value) overrides of every point: the file's `set`, then the command line's.
+        axes: the varied fields, in the file's order.
+        design: "grid", "sobol" or "halton".
+        points: (P, len(axes)) float, each point's axis values.
+        study: what runs at each point.
+        plot: the column patterns drawn.
+        digest: SHA-256 (hex) of everything a row depends on: a checkpoint of another sweep is never
+            resumed.
+    """
 
     name: str
     description: str
@@ -122,11 +157,29 @@ class Sweep:
     digest: str
 
     def overrides(self, index: int) -> list[tuple[str, Any]]:
-        """The (path, value) overrides of point `index`: the fixed ones, then one per axis."""
+        """The overrides of one point: the fixed ones, then one per axis.
+
+        Args:
+            index: the point, 0-based.
+
+        Returns:
+            list: (path, value) pairs, in the order they are applied.
+        """
         return list(self.fixed) + [(a.path, float(v)) for a, v in zip(self.axes, self.points[index])]
 
     def model(self, index: int):
-        """The validated model of point `index` (ScenarioError or OverrideError, one line, otherwise)."""
+        """The validated model of one point: the base scenario with the point's overrides.
+
+        Args:
+            index: the point, 0-based.
+
+        Returns:
+            Model: the point's frozen Model (duration the study's when it sets one).
+
+        Raises:
+            ScenarioError: the overridden scenario is invalid (one line).
+            OverrideError: an override does not apply (one line).
+        """
         path = Path(self.scenario)
         data = apply_overrides(self.base, self.overrides(index), where=f"{path}: point {index}: --set")
         return model_from_dict(data, where=str(path), base_dir=path.parent, default_name=path.stem,
@@ -138,10 +191,22 @@ class Sweep:
 # ------------------------------------------------------------------------------------------------
 
 def load_sweep(path: str | Path, overrides=()) -> Sweep:
-    """Read and validate a sweep file (format: module docstring); `overrides`: (path, value) pairs set
-    in the base scenario after the file's `set` (the command line's --set). The base scenario with
-    the fixed overrides, and every axis path, are checked here; ScenarioError (one line "FILE: FIELD:
-    reason") otherwise, as for a scenario."""
+    """Read and validate a sweep file (format: module docstring).
+
+    The base scenario with the fixed overrides, and every axis path, are checked here (each point's own
+    values are checked when it runs).
+
+    Args:
+        path: the sweep file (YAML).
+        overrides: (path, value) pairs set in the base scenario after the file's `set` (the command line's
+            --set).
+
+    Returns:
+        Sweep: the validated sweep, its points laid out and its digest set.
+
+    Raises:
+        ScenarioError: one line "FILE: FIELD: reason", as for a scenario (a missing file included).
+    """
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: sweep file not found")
@@ -159,7 +224,8 @@ def load_sweep(path: str | Path, overrides=()) -> Sweep:
     plot = tuple(_patterns(root, "plot", PLOTS[study.kind]))
     root.done()
     base = load_yaml(scenario)
-    sweep = Sweep(name, description, str(path), str(scenario), base, tuple(fixed), axes, design, points, study, plot, "")
+    sweep = Sweep(name, description, str(path), str(scenario), base, tuple(fixed), axes, design, points, study, plot,
+                  "")
     _check_base(sweep, root)
     digest = hashlib.sha256(json.dumps(
         {"base": base, "fixed": sweep.fixed, "axes": [a.path for a in axes], "points": points.tolist(),
@@ -200,7 +266,8 @@ def _axes(root: Section, design: str) -> tuple[Axis, ...]:
             else:
                 lin = sec.array("linspace", (3,))
                 if not (lin[2].is_integer() and lin[2] >= 1):
-                    sec.fail("linspace", f"the count (third entry) must be a whole number of at least 1, got {lin[2]:g}")
+                    sec.fail("linspace",
+                             f"the count (third entry) must be a whole number of at least 1, got {lin[2]:g}")
                 values = np.linspace(lin[0], lin[1], int(lin[2]))
             axes.append(Axis(name, p, values=tuple(float(v) for v in values)))
         else:
@@ -294,9 +361,22 @@ def _check_base(sweep: Sweep, root: Section) -> None:
 # ------------------------------------------------------------------------------------------------
 
 def study_summary(model, study: Study) -> dict:
-    """The JSON summary of the single-run command of `study` on `model` (library calls only, no
-    files): `simulation_summary`, the comparison of `cross_validate`, `inverse_summary` of the study
-    without its trade-off curve, `capacity_summary`."""
+    """The JSON summary of the single-run command of `study` on `model` (library calls only, no files).
+
+    `simulation_summary` (simulate), the comparison of `cross_validate` (validate), `inverse_summary` of
+    the study without its trade-off curve (inverse), `capacity_summary` (capacity).
+
+    Args:
+        model: the point's Model.
+        study: what to run.
+
+    Returns:
+        dict: the nested summary the command prints with --json.
+
+    Raises:
+        ScenarioError: a capacity study on a model without motor limits; besides, whatever the run itself
+            raises.
+    """
     if study.kind == "simulate":
         return simulation_summary(simulate(closed_loop(model), duration=study.duration))
     if study.kind == "validate":
@@ -311,8 +391,18 @@ def study_summary(model, study: Study) -> dict:
 
 
 def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
-    """A nested summary as {dotted name: leaf}: mapping keys joined by '.', spaces made '_', list items
-    as [i]; a list of mappings (the warnings, failed samples), or an empty list, becomes its length."""
+    """A nested summary as {dotted name: leaf}.
+
+    Mapping keys are joined by '.', spaces made '_', list items named [i]; a list of mappings (the
+    warnings, failed samples), or an empty list, becomes its length; NumPy scalars become Python ones.
+
+    Args:
+        obj: the summary (dicts, lists and tuples of leaves).
+        prefix: the name of `obj` itself ("" at the top).
+
+    Returns:
+        dict: dotted name → leaf value, in the summary's order.
+    """
     if isinstance(obj, dict):
         out: dict[str, Any] = {}
         for k, v in obj.items():
@@ -331,34 +421,76 @@ def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def matcher(patterns):
-    """A test name → bool: whether the name matches one of `patterns`, where `*` stands for any text and
-    every other character for itself (brackets too: `min_manipulability[*]`)."""
+    """A test of names against `patterns`: `*` stands for any text, every other character for itself.
+
+    Brackets too match themselves (`min_manipulability[*]`); a name must match a whole pattern.
+
+    Args:
+        patterns: the patterns (an empty list matches nothing).
+
+    Returns:
+        Callable: name → bool, whether the name matches one of `patterns`.
+    """
     regex = re.compile("(?:" + "|".join(re.escape(p).replace(r"\*", ".*") for p in patterns) + r")\Z" if patterns
                        else r"(?!)")
     return lambda name: regex.match(name) is not None
 
 
 def select(flat: dict[str, Any], patterns) -> dict[str, Any]:
-    """The entries of `flat` whose names match one of `patterns` (`matcher`), in order."""
+    """The entries of `flat` whose names match one of `patterns` (:func:`matcher`), in order.
+
+    Args:
+        flat: a flattened summary (:func:`flatten`).
+        patterns: the name patterns kept.
+
+    Returns:
+        dict: the matching entries.
+    """
     match = matcher(patterns)
     return {k: v for k, v in flat.items() if match(k)}
 
 
 def study_row(summary: dict, study: Study) -> dict[str, Any]:
-    """The study's columns of a single-run summary (what `evaluate_point` puts in a row)."""
+    """The study's columns of a single-run summary (what :func:`evaluate_point` puts in a row).
+
+    Args:
+        summary: the nested summary (:func:`study_summary`).
+        study: the study (its `columns` patterns).
+
+    Returns:
+        dict: dotted name → value of the kept entries.
+    """
     return select(flatten(summary), study.columns)
 
 
 def one_line(exc: BaseException) -> str:
-    """An exception as one line: a coopsim error's own text, anything else prefixed by its type."""
+    """An exception as one line: a coopsim error's own text, anything else prefixed by its type.
+
+    Args:
+        exc: the exception.
+
+    Returns:
+        str: its message with line breaks joined.
+    """
     text = " ".join(part.strip() for part in str(exc).splitlines()).strip()
     return text if isinstance(exc, CoopsimError) else f"{type(exc).__name__}: {text}"
 
 
 def evaluate_point(sweep: Sweep, index: int) -> dict[str, Any]:
-    """The row of point `index`: point, the axis values, error (None, or the one-line reason it
-    failed: bad values, a failed run), then the study's columns. Deterministic; runs anywhere the
-    scenario's files are (a Dask worker)."""
+    """The row of one point: point, the axis values, error, then the study's columns.
+
+    error is None, or the one-line reason the point failed (bad values, a failed run); a failed point has
+    no study columns. Deterministic; runs anywhere the scenario's files are (a Dask worker). Never raises
+    for the point's own failure.
+
+    Args:
+        sweep: the sweep.
+        index: the point, 0-based.
+
+    Returns:
+        dict: column name → value: "point" (int), one float per axis (its name), "error", the study's
+            columns.
+    """
     row: dict[str, Any] = {"point": int(index)}
     row |= {a.name: float(v) for a, v in zip(sweep.axes, sweep.points[index])}
     try:

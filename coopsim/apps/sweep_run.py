@@ -55,8 +55,15 @@ INDEX = "sweep.json"
 
 @dataclass(frozen=True)
 class SweepRun:
-    """A finished sweep: rows (ordered by point), computed (points run now), resumed (points taken from
-    the checkpoint), executor (text), wall_time_s (of the points run now)."""
+    """A finished sweep: every point's row and how they were obtained.
+
+    Attributes:
+        rows: one row per point (:func:`coopsim.apps.sweep.evaluate_point`), ordered by point.
+        computed: the number of points run now.
+        resumed: the number of points taken from the checkpoint.
+        executor: what ran the points, as text (e.g. "serial (this process)").
+        wall_time_s: s, the wall time of the points run now.
+    """
 
     rows: list[dict]
     computed: int
@@ -70,8 +77,21 @@ class SweepRun:
 # ------------------------------------------------------------------------------------------------
 
 def read_checkpoint(path: Path, sweep: Sweep) -> dict[int, dict]:
-    """The rows {point: row} of the checkpoint at `path` if it is one of `sweep` (same digest); {} where
-    there is none; CoopsimError where it belongs to another sweep. A last line cut short is dropped."""
+    """The rows of the checkpoint at `path` if it is one of `sweep` (same digest).
+
+    A line that does not parse (the last one, cut short by a kill) is dropped, as is a row whose point is
+    not one of the sweep's.
+
+    Args:
+        path: the checkpoint file (DIR/points.jsonl).
+        sweep: the sweep being resumed (its digest and point count).
+
+    Returns:
+        dict: point index → row; {} where there is no file.
+
+    Raises:
+        CoopsimError: the file is another sweep's checkpoint, or not a sweep checkpoint at all.
+    """
     try:
         lines = path.read_text(encoding="utf-8").split("\n")
     except FileNotFoundError:
@@ -96,7 +116,20 @@ def read_checkpoint(path: Path, sweep: Sweep) -> dict[int, dict]:
 
 
 class Checkpoint:
-    """The append-only checkpoint file: `append(row)` writes one line, flushed and fsynced."""
+    """The append-only checkpoint file: `append(row)` writes one line, flushed and fsynced.
+
+    Opening it writes the header line {"sweep": digest, "points": P, "name": NAME} (atomically, replacing
+    any file there) unless `resume` finds a file, whose unfinished last line is then cut. A context
+    manager: leaving the `with` block closes the file.
+
+    Args:
+        path: the checkpoint file (its folder is made when missing).
+        sweep: the sweep (its digest, point count and name go into the header).
+        resume: keep an existing file and append to it.
+
+    Attributes:
+        file: the text file open for appending.
+    """
 
     def __init__(self, path: Path, sweep: Sweep, resume: bool):
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -108,11 +141,17 @@ class Checkpoint:
         self.file = open(path, "a", encoding="utf-8")
 
     def append(self, row: dict) -> None:
+        """Append one finished point's row as a line {"row": ...}, flushed and fsynced.
+
+        Args:
+            row: the point's row (non-finite floats written as JSON's NaN / Infinity).
+        """
         self.file.write(json.dumps({"row": row}, allow_nan=True) + "\n")
         self.file.flush()
         os.fsync(self.file.fileno())
 
     def close(self) -> None:
+        """Close the file."""
         self.file.close()
 
     def __enter__(self) -> Checkpoint:
@@ -135,8 +174,15 @@ def _end_line(path: Path) -> None:
 # ------------------------------------------------------------------------------------------------
 
 def require_packages(dask: bool) -> None:
-    """CoopsimError naming what to install when pyarrow (the results table) or, for `dask`, Dask's
-    distributed scheduler is missing (the `sweep` extra)."""
+    """Check that what the `sweep` extra installs is there, naming what to install otherwise.
+
+    Args:
+        dask: also require Dask's distributed scheduler (a run not `serial`); pyarrow (the results table) is
+            always required.
+
+    Raises:
+        CoopsimError: pyarrow or, with `dask`, distributed is missing.
+    """
     missing = [m for m in ("pyarrow",) + (("distributed",) if dask else ()) if importlib.util.find_spec(m) is None]
     if missing:
         raise CoopsimError(f"coopsim sweep needs {' and '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} "
@@ -146,9 +192,29 @@ def require_packages(dask: bool) -> None:
 def run_sweep(sweep: Sweep, out: str | Path, serial: bool = False, scheduler: str | None = None,
               workers: int | None = None, resume: bool = False,
               progress: Callable[[float], None] | None = None) -> SweepRun:
-    """Run every point of `sweep` not already in the checkpoint (with `resume`) and return all rows
-    ordered by point; each finished point is appended to the checkpoint DIR/points.jsonl as it arrives,
-    and progress(fraction of the points done) is called."""
+    """Run every point of `sweep` not already in the checkpoint and return all rows ordered by point.
+
+    Each finished point is appended to the checkpoint DIR/points.jsonl as it arrives, and
+    progress(fraction of the points done) is called (first with the resumed share).
+
+    Args:
+        sweep: the sweep.
+        out: the output folder DIR (holding the checkpoint).
+        serial: run the points in this process (see :func:`run_points`).
+        scheduler: the address of an existing Dask scheduler (e.g. tcp://10.0.0.5:8786); None: an embedded
+            LocalCluster.
+        workers: the LocalCluster's worker processes; None: one per core.
+        resume: keep the rows of a checkpoint of the same sweep and run only the other points; False starts
+            the checkpoint afresh.
+        progress: called with the fraction of the points done; or None.
+
+    Returns:
+        SweepRun: the rows of every point and the counts, executor and wall time of this run.
+
+    Raises:
+        CoopsimError: with `resume`, a checkpoint of another sweep; a bad `workers` or an unreachable
+            `scheduler`.
+    """
     ckpt = Path(out) / CHECKPOINT
     done = read_checkpoint(ckpt, sweep) if resume else {}
     todo = [i for i in range(len(sweep.points)) if i not in done]
@@ -168,9 +234,25 @@ def run_sweep(sweep: Sweep, out: str | Path, serial: bool = False, scheduler: st
 
 def run_points(sweep: Sweep, todo: list[int], serial: bool = False, scheduler: str | None = None,
                workers: int | None = None) -> tuple[Iterator[dict], str]:
-    """(rows of the points `todo` as they finish, a description of what runs them): in this process
-    (`serial`), on the Dask cluster at `scheduler`, or on an embedded LocalCluster of `workers` processes
-    (default: one per core) with one thread each."""
+    """The rows of the points `todo` as they finish, and a description of what runs them.
+
+    In this process (`serial`), on the Dask cluster at `scheduler`, or on an embedded LocalCluster of
+    `workers` processes (default: one per core) with one thread each. The rows come lazily: the points run
+    while the iterator is consumed.
+
+    Args:
+        sweep: the sweep.
+        todo: the point indices to run (0-based).
+        serial: run them in this process, in order.
+        scheduler: the address of an existing Dask scheduler; None: an embedded LocalCluster.
+        workers: the LocalCluster's worker processes, at least 1; None: one per core.
+
+    Returns:
+        tuple: (Iterator[dict] of the rows, in the order they finish; str, the executor's description).
+
+    Raises:
+        CoopsimError: `workers` below 1; while iterating, a `scheduler` that does not answer.
+    """
     if serial:
         return (evaluate_point(sweep, i) for i in todo), "serial (this process)"
     if workers is not None and workers < 1:
@@ -231,7 +313,8 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
             try:
                 yield fut.result()
             except Exception as exc:     # noqa: BLE001 — the task itself failed (evaluate_point catches the point's)
-                yield {"point": futures[fut]} | {a.name: float(v) for a, v in zip(sweep.axes, sweep.points[futures[fut]])} \
+                yield {"point": futures[fut]} | {a.name: float(v) for a, v in
+                                                 zip(sweep.axes, sweep.points[futures[fut]])} \
                     | {"error": f"Dask: {one_line(exc)}"}
     finally:
         client.close()
@@ -244,7 +327,14 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
 # ------------------------------------------------------------------------------------------------
 
 def columns_of(rows: list[dict]) -> list[str]:
-    """Every column of `rows`, in first-seen order (a failed point's row holds fewer)."""
+    """Every column of `rows`, in first-seen order (a failed point's row holds fewer).
+
+    Args:
+        rows: the rows.
+
+    Returns:
+        list: the column names.
+    """
     seen: dict[str, None] = {}
     for row in rows:
         seen.update(dict.fromkeys(row))
@@ -252,8 +342,17 @@ def columns_of(rows: list[dict]) -> list[str]:
 
 
 def table(rows: list[dict]):
-    """The rows as a pyarrow Table: a column of numbers is float64 (int64 when every value is a whole
-    number given as an int), of booleans bool, anything else string; a missing value is null."""
+    """The rows as a pyarrow Table.
+
+    A column of numbers is float64 (int64 when every value is a whole number given as an int), of booleans
+    bool, anything else string; a missing value is null.
+
+    Args:
+        rows: the rows (one per point).
+
+    Returns:
+        pyarrow.Table: one column per name of :func:`columns_of`, one row per point.
+    """
     import pyarrow as pa
 
     cols = {}
@@ -284,7 +383,15 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def plotted_columns(sweep: Sweep, rows: list[dict]) -> list[str]:
-    """The numeric columns the sweep's `plot` patterns name (in the rows' order)."""
+    """The numeric columns the sweep's `plot` patterns name, in the rows' order (the axes left out).
+
+    Args:
+        sweep: the sweep (its plot patterns and axis names).
+        rows: the rows.
+
+    Returns:
+        list: the names of the columns that match and hold a number (not a bool) in some row.
+    """
     match = matcher(sweep.plot)
     axis_names = {a.name for a in sweep.axes}
     return [c for c in columns_of(rows) if match(c) and c not in axis_names and
@@ -292,8 +399,19 @@ def plotted_columns(sweep: Sweep, rows: list[dict]) -> list[str]:
 
 
 def summary(sweep: Sweep, run: SweepRun, files: list[str]) -> dict:
-    """sweep.json: what was swept and how, the counts and throughput, per plotted column its range over
-    the points (and which point), the failed points with their errors, the files written."""
+    """The content of sweep.json: what was swept and how, and what came of it.
+
+    The counts and throughput, per plotted column its range over the points (and at which point), the
+    failed points with their errors, the files written.
+
+    Args:
+        sweep: the sweep.
+        run: its finished run.
+        files: the paths of the files written (as text).
+
+    Returns:
+        dict: the summary; non-finite floats left as they are (`write_outputs` writes it through `json_safe`).
+    """
     rows = run.rows
     stats = {}
     for c in plotted_columns(sweep, rows):
@@ -321,8 +439,19 @@ def _json_value(v: Any) -> Any:
 
 
 def point_log(sweep: Sweep, rows: list[dict]):
-    """(streams, metadata) of sweep.mcap: /sweep/point, one JSON message per point at log time = its index
-    (s), fields named by `field_name` (non-finite numbers as the strings "Infinity", "-Infinity", "NaN")."""
+    """The streams and metadata of sweep.mcap: /sweep/point, one JSON message per point.
+
+    Each message at log time = the point's index (s), its fields named by `field_name`, non-finite numbers
+    as the strings "Infinity", "-Infinity", "NaN".
+
+    Args:
+        sweep: the sweep (its name, files, digest and study kind go into the metadata).
+        rows: the rows, one per point.
+
+    Returns:
+        tuple: ([JsonTopic] of /sweep/point, metadata {"sweep": {key: text}}), the arguments of
+            `write_mcap` after the path.
+    """
     names = columns_of(rows)
     fields = {c: field_name(c) for c in names}
     t = np.array([float(r["point"]) for r in rows])
@@ -338,7 +467,21 @@ def point_log(sweep: Sweep, rows: list[dict]):
 
 
 def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = True) -> list[Path]:
-    """Write the sweep's outputs into folder `out` as one set (module docstring); returns their paths."""
+    """Write the sweep's outputs into folder `out` as one set (module docstring).
+
+    results.parquet, results.csv, sweep.mcap, the figures (with `figures`) and sweep.json, staged and then
+    swapped in; files of earlier sets listed in sweep.json are replaced, the checkpoint and anything else
+    kept.
+
+    Args:
+        sweep: the sweep.
+        run: its finished run.
+        out: the output folder.
+        figures: also draw the figures of `coopsim.plots.sweep`.
+
+    Returns:
+        list: the Paths of the files written, sweep.json last.
+    """
     import pyarrow.parquet as pq
 
     out = Path(out)
@@ -354,7 +497,14 @@ def write_outputs(sweep: Sweep, run: SweepRun, out: str | Path, figures: bool = 
 
 
 def read_rows(path: str | Path) -> list[dict]:
-    """The rows of a results.parquet (pyarrow), as dicts."""
+    """The rows of a results.parquet (pyarrow), as dicts.
+
+    Args:
+        path: the results.parquet file.
+
+    Returns:
+        list: one dict per row, column name → value (None where missing).
+    """
     import pyarrow.parquet as pq
 
     return pq.read_table(path).to_pylist()

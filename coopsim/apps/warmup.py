@@ -93,7 +93,11 @@ def _named(names) -> dict:
 
 
 def compile_kernels(names) -> None:
-    """The named kernels of `_signatures` (P, W first), from their types alone: no record needed."""
+    """Compile the named kernels of `_signatures` (P, W first), from their types alone: no record needed.
+
+    Args:
+        names: the kernels' function names (e.g. `KINEMATICS`, `CHILD_KERNELS`).
+    """
 
     for kernel, rest in _named(names).items():
         kernel.compile((PACKED_T, WORKSPACE_T, *rest))
@@ -107,19 +111,31 @@ CHILD_KERNELS = ("chain_solve", "arm_mass_matrix", "constraint_bias")
 
 
 def compile_loop(model) -> None:
-    """The time loop, through a short integration of the model."""
+    """Compile the time loop, through a short integration of the model (0.01 s, dop853).
+
+    Args:
+        model: the warm-up scene's Model (any model: kernels are compiled for argument types).
+    """
 
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
 
 
 def compile_consistent(model) -> None:
-    """The consistent projection."""
+    """Compile the consistent projection, on the model's initial state.
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     api.consistent_state(model, model.q0, model.qd0)
 
 
 def compile_inverse_terms(model) -> None:
-    """The inverse-dynamics terms."""
+    """Compile the inverse-dynamics terms, on one sample (the initial state, zero accelerations).
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     y = _state(model)[None]
     n = model.n_total
@@ -127,7 +143,11 @@ def compile_inverse_terms(model) -> None:
 
 
 def compile_extras(model) -> None:
-    """The entries some commands use: inverse kinematics and the capacity objective."""
+    """Compile the entries some commands use: inverse kinematics and the capacity objective.
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
     z = np.zeros((1, 1, 1))
@@ -136,13 +156,21 @@ def compile_extras(model) -> None:
 
 
 def compile_evaluations(model) -> None:
-    """The evaluation entry (every reported quantity)."""
+    """Compile the evaluation entry (every reported quantity), on one sample.
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     api.evaluate_states(model, _state(model)[None], np.zeros((1, model.n_total)), full=True, n_threads=1)
 
 
 def compile_control(model) -> None:
-    """The controller entries and the time loop with a controller in it."""
+    """Compile the controller entries and the time loop with a controller in it (a zero-gain joint PD).
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     n = model.n_total
     y = _state(model)
@@ -153,8 +181,12 @@ def compile_control(model) -> None:
 
 
 def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
-    """Until `kernel` is cached (`api.is_cached`), at most WAIT_S, and while `child` (the process
-    compiling it) runs."""
+    """Wait until `kernel` is cached (`api.is_cached`), at most WAIT_S, and only while `child` runs.
+
+    Args:
+        kernel: the compiled function waited for.
+        child: the process compiling it; None: wait for the cache or WAIT_S alone.
+    """
 
     deadline = time.monotonic() + WAIT_S
     while not is_cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
@@ -162,7 +194,11 @@ def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
 
 
 def chain_free_child(model) -> None:
-    """The "chain_free" child's share (module docstring)."""
+    """The "chain_free" child's share (module docstring).
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     compile_kernels(CHILD_KERNELS)
     wait_for(_new_workspace)
@@ -174,7 +210,11 @@ def chain_free_child(model) -> None:
 
 
 def control_child(model) -> None:
-    """The "control" child's share (module docstring)."""
+    """The "control" child's share (module docstring).
+
+    Args:
+        model: the warm-up scene's Model.
+    """
 
     wait_for(chain_forward)
     compile_extras(model)
@@ -185,8 +225,11 @@ CHILDREN = {"chain_free": chain_free_child, "control": control_child}
 
 
 def warm_up(control: bool = False) -> None:
-    """Compile what every command uses, on two processes, and with `control` the extras and the
-    controllers too, on a third (a no-op for what is cached already)."""
+    """Compile what every command uses, on two processes (a no-op for what is cached already).
+
+    Args:
+        control: also compile the extras and the controllers, on a third process.
+    """
 
     if not compile_pending():
         if control:
@@ -218,8 +261,12 @@ GROUPS = {"extras": compile_extras, "control": compile_control}
 
 
 def warm_up_group(group: str) -> None:
-    """Compile a compile group (`api._group_entries`): "base" by `warm_up`; "extras" or "control" in
-    this process (a no-op when cached), what every command uses first if needed."""
+    """Compile one compile group (`api._group_entries`), what every command uses first if needed.
+
+    Args:
+        group: "base" (by :func:`warm_up`), or "extras" or "control" (in this process, a no-op when
+            cached).
+    """
 
     if group == "base":
         warm_up()
