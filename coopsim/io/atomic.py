@@ -38,8 +38,18 @@ def _alive(pid: int) -> bool:
 
 
 def is_stale_temporary(path: str | Path) -> bool:
-    """Whether `path` is a coopsim temporary whose process no longer runs (one of an older coopsim, which
-    wrote no process id: untouched for LEGACY_AGE_S)."""
+    """Whether `path` is a coopsim temporary whose process no longer runs.
+
+    A temporary of an older coopsim, which wrote no process id, counts as stale when untouched for
+    LEGACY_AGE_S.
+
+    Args:
+        path: the file or folder (only its name is matched; its modification time read for an old one).
+
+    Returns:
+        bool: True for a stale coopsim temporary; False for anything else, this process's own, or one that
+            has gone.
+    """
     m = _TEMP.match(Path(path).name)
     if m is None:
         return False
@@ -51,7 +61,14 @@ def is_stale_temporary(path: str | Path) -> bool:
 
 
 def sweep_stale(folder: str | Path) -> list[Path]:
-    """Remove the stale coopsim temporaries (files and folders) in `folder`; returns what was removed."""
+    """Remove the stale coopsim temporaries (files and folders) in `folder`.
+
+    Args:
+        folder: the folder swept; a missing one, or a file, is left alone.
+
+    Returns:
+        list[Path]: what was removed.
+    """
     removed = []
     with contextlib.suppress(FileNotFoundError, NotADirectoryError):
         for entry in os.scandir(folder):
@@ -68,8 +85,17 @@ def sweep_stale(folder: str | Path) -> list[Path]:
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path):
-    """Yield a temporary path in the target's folder; on success it replaces `path`, on any exception
-    it is removed and `path` is left as it was. Stale temporaries in the folder are removed first."""
+    """Context manager giving a temporary path in the target's folder that replaces `path` on success.
+
+    On any exception the temporary is removed and `path` is left as it was. The folder is created if
+    missing; stale temporaries in it are removed first.
+
+    Args:
+        path: the file to write.
+
+    Yields:
+        Path: the temporary file (created empty, with the mode open() would give) to write to.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(path.parent)
@@ -92,7 +118,15 @@ def _umask() -> int:
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write `text` (UTF-8) to `path` atomically."""
+    """Write `text` (UTF-8) to `path` atomically (`atomic_path`).
+
+    Args:
+        path: the file written (its folder is created if missing).
+        text: the content.
+
+    Returns:
+        Path: the path written.
+    """
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
@@ -129,8 +163,17 @@ def _keep_others(old: Path, new: Path, replaced: set[str]) -> None:
 
 
 def previous_set(index: str):
-    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files ("files": a
-    list, or {"log", "plots"}): the names of a previous set in folder `out`, and `index` itself."""
+    """`staged_folder`'s replaces= for a command whose JSON summary `index` lists its files.
+
+    Args:
+        index: the summary's file name in the output folder; its "files" entry is a list of names, or
+            {"log": name, "plots": [names]}.
+
+    Returns:
+        Callable[[Path], set[str]]: folder `out` → the names (last path component) of the previous set
+            that `out`'s summary lists, and `index` itself (only `index` when the summary is missing or
+            unreadable).
+    """
     def names(out) -> set[str]:
         try:
             files = json.loads((Path(out) / index).read_text(encoding="utf-8"))["files"]
@@ -143,11 +186,21 @@ def previous_set(index: str):
 
 @contextlib.contextmanager
 def staged_folder(out: str | Path, replaces=lambda old: set()):
-    """Write a set of files as a whole: yield a temporary sibling folder of `out` to write them into; on
-    success it becomes `out` in one rename (an atomic swap where `out` exists), on any exception it is
-    removed and `out` is left as it was. Where `out` already exists, the entries of it named by
+    """Context manager writing a set of files as a whole, through a temporary sibling folder of `out`.
+
+    On success the folder becomes `out` in one rename (an atomic swap where `out` exists), on any exception
+    it is removed and `out` is left as it was. Where `out` already exists, the entries of it named by
     `replaces(out)` (a previous set) go, every other entry stays (hard links, so nothing is copied).
-    Stale temporaries beside `out` and in it are removed first."""
+    Stale temporaries beside `out` and in it are removed first.
+
+    Args:
+        out: the output folder (its parent is created if missing).
+        replaces: existing folder `out` → the entry names of the previous set to drop (e.g.
+            `previous_set`); default: none.
+
+    Yields:
+        Path: the temporary folder to write the files into.
+    """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(out.parent)

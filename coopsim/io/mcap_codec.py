@@ -72,9 +72,15 @@ class UnreadableLogError(CoopsimError):
 class Series:
     """Arrays sampled over time, written as one JSON message per sample on `topic`.
 
-    t (N,) s, finite, >= 0; fields: name → array (N, ...) of floats, integers or booleans (floats
-    are stored as float64, integers as int64: read back with those dtypes). Field names must not be
-    "timestamp" or "t". All series sharing a schema_name must have the same fields, dtypes, shapes."""
+    Floats are stored as float64, integers as int64: read back with those dtypes. Field names must not be
+    "timestamp" or "t". All series sharing a schema_name must have the same fields, dtypes, shapes.
+
+    Attributes:
+        topic: the MCAP topic (channel) the messages are written on.
+        schema_name: the name the series' JSON Schema is registered under.
+        t: (N,) s, the sample times, finite, >= 0.
+        fields: name → array (N, ...) of floats, integers or booleans, one row per sample.
+    """
 
     topic: str
     schema_name: str
@@ -84,8 +90,15 @@ class Series:
 
 @dataclass(frozen=True, eq=False)
 class JsonTopic:
-    """Ready-made JSON messages on `topic`: messages[k] (a JSON-serialisable dict) is logged at t[k] s;
-    `schema` is its JSON Schema (a dict) registered under schema_name."""
+    """Ready-made JSON messages on `topic`, with a fixed JSON Schema.
+
+    Attributes:
+        topic: the MCAP topic (channel) the messages are written on.
+        schema_name: the name `schema` is registered under.
+        schema: the messages' JSON Schema (a dict).
+        t: (N,) s, the log times, finite, >= 0: messages[k] is logged at t[k].
+        messages: N JSON-serialisable dicts.
+    """
 
     topic: str
     schema_name: str
@@ -96,9 +109,14 @@ class JsonTopic:
 
 @dataclass(frozen=True, eq=False)
 class LogData:
-    """A log read back. metadata: record name → {key: value}; topics: series topic → {"t": (N,),
-    field: (N, ...)} (bit-identical to what was written); schemas: every topic → its schema name;
-    messages: every non-series topic (e.g. /tf, /scene) → its decoded JSON messages in file order."""
+    """A log read back (`read_mcap`), or built in memory as it would be read back (`log_data`).
+
+    Attributes:
+        metadata: MCAP metadata record name → {key: value}, strings.
+        topics: series topic → {"t": (N,) s, field: (N, ...)} (bit-identical to what was written).
+        schemas: every topic → its schema name.
+        messages: every non-series topic (e.g. /tf, /scene) → its decoded JSON messages in file order.
+    """
 
     metadata: dict[str, dict[str, str]]
     topics: dict[str, dict[str, np.ndarray]]
@@ -107,16 +125,38 @@ class LogData:
 
 
 def time_ns(t: np.ndarray) -> np.ndarray:
-    """Times t (N,) s → integer nanoseconds (N,) int64 (rounded to nearest)."""
+    """Times in seconds to integer nanoseconds, rounded to nearest.
+
+    Args:
+        t: (N,) s, the times.
+
+    Returns:
+        np.ndarray: (N,) int64, the times in ns.
+    """
     return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
 
 
 def stamp(ns: int) -> dict[str, int]:
-    """Integer nanoseconds → Foxglove/ROS time {"sec", "nsec"}."""
+    """Integer nanoseconds to a Foxglove/ROS time {"sec", "nsec"}.
+
+    Args:
+        ns: the time, integer nanoseconds, >= 0.
+
+    Returns:
+        dict[str, int]: {"sec": whole seconds, "nsec": the remaining nanoseconds, 0 to 999999999}.
+    """
     return {"sec": int(ns // 1_000_000_000), "nsec": int(ns % 1_000_000_000)}
 
 
 def time_schema(description: str) -> dict:
+    """JSON Schema of a Foxglove/ROS time object {"sec", "nsec"}, the form `stamp` writes.
+
+    Args:
+        description: the schema's description text.
+
+    Returns:
+        dict: an object schema with integer sec >= 0 and nsec in 0 to 999999999, both required.
+    """
     return {"type": "object", "title": "time", "description": description,
             "properties": {"sec": {"type": "integer", "minimum": 0},
                            "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}},
@@ -133,7 +173,16 @@ def _value_schema(shape: tuple[int, ...], leaf: str) -> dict:
 
 
 def series_schema(s: Series) -> dict:
-    """JSON Schema (draft 2020-12) of the messages of series `s`, from its field dtypes and shapes."""
+    """JSON Schema (draft 2020-12) of the messages of series `s`, from its field dtypes and shapes.
+
+    Args:
+        s: the series.
+
+    Returns:
+        dict: the schema titled s.schema_name: "timestamp" (time object), "t" (number, s) and one property
+            per field (number, array of numbers, or array of {"row": …} objects), all required; its "$comment"
+            is SERIES_COMMENT, which marks a series when the log is read back.
+    """
     props = {"timestamp": time_schema("Sample time, rounded to nanoseconds"),
              "t": {"type": "number", "description": "Sample time (s), exact"}}
     for name, a in s.fields.items():
@@ -162,7 +211,14 @@ def _check_series(s: Series) -> None:
 
 
 def nonfinite_name(x: float) -> str:
-    """The string a non-finite float is written as: "NaN", "Infinity" or "-Infinity"."""
+    """The string a non-finite float is written as in a log.
+
+    Args:
+        x: a non-finite float (nan, +inf or -inf).
+
+    Returns:
+        str: "NaN", "Infinity" or "-Infinity".
+    """
     return "NaN" if np.isnan(x) else ("Infinity" if x > 0 else "-Infinity")
 
 
@@ -277,9 +333,22 @@ def _write_all(f, streams: Sequence[Series | JsonTopic], metadata: dict[str, dic
 
 def write_mcap(path: str | Path, series: Sequence[Series | JsonTopic],
                metadata: dict[str, dict[str, str]] | None = None) -> Path:
-    """Write `series` (Series or JsonTopic streams, one topic each) and MCAP metadata records
-    (name → {key: value}, strings) to `path`, atomically. Messages are ordered by time, then by the
-    order of the streams, then by sample. Returns the path."""
+    """Write streams and MCAP metadata records to `path`, atomically.
+
+    Messages are ordered by time, then by the order of the streams, then by sample.
+
+    Args:
+        path: the MCAP file written (its folder is created if missing).
+        series: the Series or JsonTopic streams, one topic each.
+        metadata: MCAP metadata records, name → {key: value}, strings; None: none.
+
+    Returns:
+        Path: the path written.
+
+    Raises:
+        LogError: a malformed series or JSON topic, a message JSON cannot hold, a topic given twice, two
+            topics of one schema name with different schemas, or metadata keys or values that are not strings.
+    """
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         _write_all(f, series, metadata or {})
         f.flush()
@@ -289,11 +358,25 @@ def write_mcap(path: str | Path, series: Sequence[Series | JsonTopic],
 
 def log_data(streams: Sequence[Series | JsonTopic], metadata: dict[str, dict[str, str]] | None = None,
              messages: bool = True) -> LogData:
-    """The LogData that `read_mcap` gives back for a log written by `write_mcap(path, streams, metadata)`,
-    built in memory (what the commands draw their figures from while the file is written): series as
-    float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them (`messages` False: left
-    out, e.g. the thousands of /tf transforms no figure draws). Checked as `write_mcap` checks them;
-    tests/io/test_log.py compares it with the file read back."""
+    """The LogData `read_mcap` gives back for a log written by `write_mcap(path, streams, metadata)`, in memory.
+
+    It is what the commands draw their figures from while the file is written. The streams are checked as
+    `write_mcap` checks them (JSON topics only when their messages are kept); tests/io/test_log.py compares
+    it with the file read back.
+
+    Args:
+        streams: the Series or JsonTopic streams, one topic each.
+        metadata: MCAP metadata records, name → {key: value}, strings; None: none.
+        messages: False: the JSON topics' messages are left out (e.g. the thousands of /tf transforms no
+            figure draws); their schema names are still given.
+
+    Returns:
+        LogData: series as float64 / int64 / bool arrays, JSON topics' messages as JSON decodes them.
+
+    Raises:
+        LogError: a malformed series, or (with `messages`) a malformed JSON topic or a message JSON cannot
+            hold.
+    """
     topics, schemas, decoded = {}, {}, {}
     for st in streams:
         if isinstance(st, Series):
@@ -354,11 +437,22 @@ def _decode_series(schema: dict, msgs: list[dict]) -> dict[str, np.ndarray]:
 
 
 def read_mcap(path: str | Path) -> LogData:
-    """Read a log written by :func:`write_mcap`: series topics as arrays (bit-identical), other JSON
-    topics as decoded messages, metadata records and schema names. A file that is not a whole, intact
-    MCAP log of JSON messages raises UnreadableLogError naming the file: the whole file is read in
-    order, checking the magic at both ends, every record's length, the data section's CRC (where the
-    log carries one), each chunk's, the summary's, and that nothing follows the end."""
+    """Read a log written by :func:`write_mcap`.
+
+    The whole file is read in order, checking the magic at both ends, every record's length, the data
+    section's CRC (where the log carries one), each chunk's, the summary's, and that nothing follows the end.
+
+    Args:
+        path: the MCAP file.
+
+    Returns:
+        LogData: series topics as arrays (bit-identical), other JSON topics as decoded messages, metadata
+            records and schema names.
+
+    Raises:
+        UnreadableLogError: naming the file, when it cannot be read or is not a whole, intact MCAP log of
+            JSON messages.
+    """
     path = Path(path)
     try:
         data = path.read_bytes()

@@ -57,8 +57,15 @@ ROBOTS_PACKAGE = "example-robot-data"
 
 
 class RobotFileError(CoopsimError):
-    """A robot file, or a chain in it, that cannot become an arm; one line naming the element. field:
-    the `chain` key at fault ('base', 'tip', 'lock'), None when it is the file itself."""
+    """A robot file, or a chain in it, that cannot become an arm; one line naming the element.
+
+    Args:
+        message: the one-line message.
+        field: the `chain` key at fault ('base', 'tip', 'lock'), None when it is the file itself.
+
+    Attributes:
+        field: as given.
+    """
 
     def __init__(self, message: str, field: str | None = None):
         super().__init__(message)
@@ -67,9 +74,14 @@ class RobotFileError(CoopsimError):
 
 @dataclass(frozen=True)
 class Robot:
-    """A bundled robot (README, "Real robots"): `file` relative to example-robot-data's `robots/`
-    folder, the default chain (`base` and `tip` link names) and the joints locked by default (a
-    gripper's fingers)."""
+    """A bundled robot (README, "Real robots") of example-robot-data, with its default chain.
+
+    Attributes:
+        file: its URDF, relative to example-robot-data's `robots/` folder.
+        base: the default chain's base link name.
+        tip: the default chain's tip link name.
+        lock: the joints locked by default (a gripper's fingers).
+    """
 
     file: str
     base: str
@@ -95,7 +107,11 @@ ROBOTS: dict[str, Robot] = {
 
 
 def robots_folder() -> Path | None:
-    """example-robot-data's `robots/` folder (its URDFs), or None when the package is not installed."""
+    """example-robot-data's `robots/` folder (its URDFs).
+
+    Returns:
+        Path | None: the folder, or None when the package is not installed (or the folder is missing).
+    """
     try:
         dist = metadata.distribution(ROBOTS_PACKAGE)
     except metadata.PackageNotFoundError:
@@ -105,7 +121,18 @@ def robots_folder() -> Path | None:
 
 
 def robot_file(name: str) -> Path:
-    """The URDF of a bundled robot; RobotFileError naming it (and the extra to install) otherwise."""
+    """The URDF of a bundled robot.
+
+    Args:
+        name: a key of ROBOTS (e.g. 'ur5').
+
+    Returns:
+        Path: the installed URDF file.
+
+    Raises:
+        RobotFileError: naming it when it is not in ROBOTS, when example-robot-data is not installed (with
+            the extra to install), or when its file is missing from the installed package.
+    """
     if name not in ROBOTS:
         raise RobotFileError(f"no robot {name!r} (robots: {', '.join(ROBOTS)})")
     folder = robots_folder()
@@ -120,11 +147,21 @@ def robot_file(name: str) -> Path:
 
 @dataclass(frozen=True, eq=False)
 class Chain:
-    """One serial chain of a robot file: `links`, the arm in coopsim's link convention
-    (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes yet) with its base
-    link's frame at the world origin and its end-effector at the tip body's frame; per joint (n of
-    them) joint_names, joint_range (n, 2) rad (±inf: none), effort (n,) N·m and velocity (n,) rad/s
-    limits (inf: none) — m, N and m/s for a prismatic joint (`links.joint_type`)."""
+    """One serial chain of a robot file, n joints, as an arm in coopsim's link convention.
+
+    Attributes:
+        file: the robot file read.
+        base: the base link (body) name.
+        tip: the tip link (body) name.
+        joint_names: the n joint names, base to tip.
+        links: the arm (`model.ArmModel`: link frames at the joints, fixed bodies merged, no drawing boxes
+            yet, no name) with its base link's frame at the world origin and its end-effector at the tip
+            body's frame.
+        joint_range: (n, 2) rad (m for a prismatic joint, `links.joint_type`), the position limits [low,
+            high] (±inf: none).
+        effort: (n,) N·m (N for a prismatic joint), the effort limits (inf: none).
+        velocity: (n,) rad/s (m/s for a prismatic joint), the velocity limits (inf: none).
+    """
 
     file: Path
     base: str
@@ -137,13 +174,25 @@ class Chain:
 
     @property
     def n(self) -> int:
+        """The number of joints n."""
         return len(self.joint_names)
 
     def arm(self, name: str, base_pos: np.ndarray, base_rot: np.ndarray, ee_pos: np.ndarray,
             ee_rot: np.ndarray) -> ArmModel:
-        """The arm with its base link's frame at (base_pos, base_rot) in the world and its end-effector
-        at (ee_pos, ee_rot) in the tip body's frame, each link drawn as a box from its joint to the next
-        (`segment_boxes`)."""
+        """The chain placed in the world as a named arm, each link drawn as a box from its joint to the next.
+
+        The drawing boxes are `segment_boxes`'s.
+
+        Args:
+            name: the arm's name in the scenario.
+            base_pos: (3,) m, the base link frame's origin, world axes.
+            base_rot: (3, 3) world ← base link frame.
+            ee_pos: (3,) m, the end-effector frame's origin in the tip body's frame.
+            ee_rot: (3, 3) tip body frame ← end-effector frame.
+
+        Returns:
+            ArmModel: the arm (`links` with that name, base, end-effector and drawing boxes).
+        """
         tip_pos, tip_rot = self.links.ee_pos, self.links.ee_rot
         ee = tip_pos + tip_rot @ ee_pos
         size, centre, axes = segment_boxes(self.links.joint_pos, ee)
@@ -156,13 +205,24 @@ DRAW_WIDTH = 0.06      # m: the cross-section of a robot-file link's drawing box
 
 
 def segment_boxes(joint_pos: np.ndarray, ee_pos: np.ndarray, width: float = DRAW_WIDTH):
-    """Drawing boxes of a chain whose link frames sit at its joints (a robot file's arm has no shapes
-    of its own: meshes are not read): link i as a box of cross-section width × width (m) from its
-    frame's origin, the joint, to where the next joint sits on it, joint_pos[i + 1] (n, 3) in frame i,
-    the last link to the end-effector ee_pos (3,) in its frame; a link whose next joint sits on its own
-    (Panda's shoulder) is a cube of side `width` at the joint. (A prismatic next joint slides its link
-    from that end.) Returns (size (n, 3) along the box's axes, centre (n, 3) in frame i, axes (n, 3, 3):
-    frame i ← box axes, x along the segment) — `ArmModel.link_box`, `box_pos`, `box_rot`."""
+    """Drawing boxes of a chain whose link frames sit at its joints.
+
+    A robot file's arm has no shapes of its own (meshes are not read). Link i is a box of cross-section
+    width × width from its frame's origin, the joint, to where the next joint sits on it, joint_pos[i + 1]
+    in frame i, the last link to the end-effector; a link whose next joint sits on its own (Panda's
+    shoulder) is a cube of side `width` at the joint. (A prismatic next joint slides its link from that
+    end.)
+
+    Args:
+        joint_pos: (n, 3) m, origin of frame i in frame i−1 (`ArmModel.joint_pos`; row 0 is not used).
+        ee_pos: (3,) m, the end-effector's origin in frame n−1.
+        width: m, the boxes' cross-section side.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray, np.ndarray]: (size (n, 3) m along the box's axes, centre (n, 3) m in
+            frame i, axes (n, 3, 3): frame i ← box axes, x along the segment) — `ArmModel.link_box`, `box_pos`,
+            `box_rot`.
+    """
     ends = np.vstack([joint_pos[1:], ee_pos[None]])
     length = np.linalg.norm(ends, axis=1)
     size = np.column_stack([np.where(length > 1e-9, length, width), np.full(len(ends), width),
@@ -189,10 +249,22 @@ def _one_line(exc: BaseException) -> str:
 
 
 def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
-    """(model, floor): the file compiled by MuJoCo with only bodies, joints, inertials and joint motors
-    left (see the module docstring), and the mass and principal inertia (kg, kg·m²) that stand for zero
-    in it (MuJoCo's MINVAL, given to massless bodies so that it compiles; 0 where the file sets its own
-    bounds); RobotFileError with MuJoCo's message when it cannot be read or compiled."""
+    """A robot file compiled by MuJoCo with only bodies, joints, inertials and joint motors left.
+
+    See the module docstring for what is deleted and the compiler settings.
+
+    Args:
+        path: the URDF or MJCF file.
+
+    Returns:
+        tuple[mujoco.MjModel, float]: (model, floor): the compiled model, and the mass and principal
+            inertia (kg, kg·m²) that stand for zero in it (MuJoCo's MINVAL, given to massless bodies so that it
+            compiles; 0 where the file sets its own bounds).
+
+    Raises:
+        RobotFileError: with MuJoCo's message when the file cannot be read or compiled, or when it is larger
+            than MAX_ROBOT_FILE_BYTES.
+    """
     size = path.stat().st_size
     if size > MAX_ROBOT_FILE_BYTES:
         raise RobotFileError(f"{path.name}: {size / 2 ** 20:.0f} MiB: larger than the "
@@ -395,8 +467,24 @@ def _locked_ids(m: mujoco.MjModel, lock, path: Path) -> set[int]:
 
 
 def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | list[str] = ()) -> Chain:
-    """The serial chain from link `base` to link `tip` of a URDF or MJCF file, joints in `lock` held
-    fixed (see the module docstring); RobotFileError naming what cannot be taken."""
+    """The serial chain from link `base` to link `tip` of a URDF or MJCF file, joints in `lock` held fixed.
+
+    See the module docstring for how bodies are merged into links and what is refused.
+
+    Args:
+        path: the URDF or MJCF file.
+        base: the base link (body) name.
+        tip: the tip link (body) name, below `base`.
+        lock: names of joints held at their reference position (0).
+
+    Returns:
+        Chain: the chain, its links' frames relative to the base link's frame.
+
+    Raises:
+        RobotFileError: naming what cannot be taken (a missing file, link or joint, a tip not below the base,
+            an unsupported or moving off-chain joint, a link without mass, ...); `field` says which `chain`
+            key is at fault.
+    """
     path = Path(path)
     if not path.is_file():
         raise RobotFileError(f"robot file not found: {path}")
@@ -444,8 +532,8 @@ def _range(m: mujoco.MjModel, j: int) -> tuple[float, float]:
 
 
 def _effort(m: mujoco.MjModel, j: int) -> float:
-    """The joint's torque limit (N·m; a force limit, N, for a slide): its actuatorfrcrange, else the forcerange × gear of a motor on it
-    (the smaller bound in magnitude); inf when the file gives none."""
+    """The joint's torque limit (N·m; a force limit, N, for a slide): its actuatorfrcrange, else the
+    forcerange × gear of a motor on it (the smaller bound in magnitude); inf when the file gives none."""
     if m.jnt_actfrclimited[j]:
         return float(np.min(np.abs(m.jnt_actfrcrange[j])))
     limits = [float(np.min(np.abs(m.actuator_forcerange[a])) * abs(m.actuator_gear[a, 0]))

@@ -27,8 +27,16 @@ MAX_NODES = 1_000_000           # YAML values with every alias expanded
 
 
 def read_text(path: Path, fail) -> str:
-    """The text of a UTF-8 file (a byte-order mark is skipped) of at most MAX_FILE_BYTES; otherwise
-    fail(reason) with one line naming the first byte that is not UTF-8 and its line."""
+    """The text of a UTF-8 file (a byte-order mark is skipped) of at most MAX_FILE_BYTES.
+
+    Args:
+        path: the file.
+        fail: called as fail(reason) with a one-line reason (the size, or the first byte that is not UTF-8
+            and its line) when the file breaks a rule; expected to raise.
+
+    Returns:
+        str: the decoded text.
+    """
     size = path.stat().st_size
     if size > MAX_FILE_BYTES:
         fail(f"{size / 2 ** 20:.0f} MiB: larger than the {MAX_FILE_BYTES >> 20} MiB a file may hold")
@@ -47,12 +55,24 @@ _MERGE = "tag:yaml.org,2002:merge"
 
 
 def load_yaml(path: Path):
-    """The data of a YAML file, read defensively: UTF-8 text of at most MAX_FILE_BYTES, one document,
-    no key twice in a mapping, nested at most MAX_DEPTH levels and holding at most MAX_NODES values with
-    every alias expanded (a "billion laughs" document is refused before anything is built). A first
-    pass over the parser's events checks all that (iteratively: no recursion to overflow); then the
-    document is composed and constructed (libyaml's parser and composer when present, PyYAML's safe
-    constructor). ScenarioError with one line naming the file (and the line, and the key) otherwise."""
+    """The data of a YAML file, read defensively.
+
+    The file must be UTF-8 text of at most MAX_FILE_BYTES, one document, no key twice in a mapping, nested
+    at most MAX_DEPTH levels and holding at most MAX_NODES values with every alias expanded (a "billion
+    laughs" document is refused before anything is built). A first pass over the parser's events checks
+    all that (iteratively: no recursion to overflow); then the document is composed and constructed
+    (libyaml's parser and composer when present, PyYAML's safe constructor).
+
+    Args:
+        path: the YAML file.
+
+    Returns:
+        Any: the document's data (dicts, lists, scalars), None for an empty document.
+
+    Raises:
+        ScenarioError: one line naming the file (and the line, and the key) when a rule is broken or the
+            YAML is malformed.
+    """
     def fail(reason: str):
         raise ScenarioError(f"{path}: {reason}")
 
@@ -60,9 +80,18 @@ def load_yaml(path: Path):
 
 
 def parse_yaml_text(text: str, fail):
-    """The data of YAML text under the rules of `load_yaml` (one document, no key twice, depth, expanded
-    size; libyaml when present); fail(reason) with one line (the line, and the key) otherwise — e.g. a
-    `--set` value (`coopsim.io.overrides`)."""
+    """The data of YAML text under the rules of `load_yaml`, e.g. a `--set` value (`coopsim.io.overrides`).
+
+    The rules: one document, no key twice, depth, expanded size; libyaml when present.
+
+    Args:
+        text: the YAML text.
+        fail: called as fail(reason) with a one-line reason (the line, and the key) when a rule is broken
+            or the YAML is malformed; expected to raise.
+
+    Returns:
+        Any: the document's data (dicts, lists, scalars), None for an empty document.
+    """
     try:
         _check_events(text, fail)
         loader = _YAML_LOADER(text)
@@ -141,7 +170,8 @@ def _check_events(text: str, fail) -> None:
                 parent.key_next, parent.label = False, "?"
                 if isinstance(ev, ScalarEvent):
                     parent.label = ev.value
-                    tag = ev.tag if ev.tag not in (None, "!") else loader.resolve(yaml.ScalarNode, ev.value, ev.implicit)
+                    tag = (ev.tag if ev.tag not in (None, "!")
+                           else loader.resolve(yaml.ScalarNode, ev.value, ev.implicit))
                     if tag != _MERGE:
                         key = (tag, ev.value)
                         if key in parent.keys:

@@ -28,7 +28,18 @@ def _errors(ch: dict, groups) -> list[tuple[str, str, np.ndarray]]:
 
 
 def tracking_error_figure(log: LogData) -> Figure:
-    """|reference − actual| of both closed loops on a log axis (native solid, MuJoCo twin dashed)."""
+    """|reference − actual| of both closed loops on a log axis (native solid, MuJoCo twin dashed).
+
+    Per arm the largest joint-angle error (joint_pd, rad), or the object's position (m) and orientation
+    (rad) error (computed_torque).
+
+    Args:
+        log: a closed-loop run log (its /native/joint_state and /native/control series; /mujoco/control
+            where the twin ran).
+
+    Returns:
+        Figure: the matplotlib figure.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 4))
@@ -39,14 +50,22 @@ def tracking_error_figure(log: LogData) -> Figure:
     for prefix, who, ls in ((NATIVE, "native", "-"), (TWIN, "MuJoCo", "--")):
         ch = log.topics.get(prefix + "/control")
         if ch is not None:
-            drawn += [log_plot(ax, ch["t"], e, f"{who}: {label} ({unit})", ls=ls) for label, unit, e in _errors(ch, groups)]
+            drawn += [log_plot(ax, ch["t"], e, f"{who}: {label} ({unit})", ls=ls)
+                      for label, unit, e in _errors(ch, groups)]
     ax.set_title(run_title(log, "Tracking error", twin=TWIN + "/control" in log.topics), fontsize=9)
     finish_log_axis(ax, any(drawn), "tracking error (rad or m)")
     return fig
 
 
 def internal_force_figure(log: LogData) -> Figure:
-    """|f_I^m| (N) of every grasp's internal force (the paper's eq. 7) along the native closed loop."""
+    """|f_I^m| (N) of every grasp's internal force (the paper's eq. 7) along the native closed loop.
+
+    Args:
+        log: a closed-loop run log (its /native/internal_wrench series, wrench (N, r, 6) [f; n]).
+
+    Returns:
+        Figure: the matplotlib figure, one curve per grasp.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 4))
@@ -63,7 +82,14 @@ def internal_force_figure(log: LogData) -> Figure:
 
 
 def control_jobs(log: LogData) -> list[tuple]:
-    """(figure function, args, file name) of the closed-loop figures; none for a log without a controller."""
+    """The figure jobs of the closed-loop figures; none for a log without a controller.
+
+    Args:
+        log: a run log.
+
+    Returns:
+        list[tuple]: (figure function, args, file name) per figure (FILES), [] without /native/control.
+    """
     if NATIVE + "/control" not in log.topics:
         return []
     return [(tracking_error_figure, (log,), FILES[0]), (internal_force_figure, (log,), FILES[1])]

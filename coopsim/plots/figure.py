@@ -24,9 +24,18 @@ LEGEND_GAP = 0.12    # inches between a panel's right edge and its legend
 
 
 def legend_width(labels: list[str], fontsize: float = LEGEND_FONT) -> float:
-    """Width (inches) of a one-column legend of `labels` at `fontsize`: the longest label measured with
-    matplotlib's font metrics, plus matplotlib's default handle (2 em), text pad (0.8 em) and border
-    pads (0.4 em each side) and the frame."""
+    """Width (inches) of a one-column legend of `labels` at `fontsize`.
+
+    The longest label measured with matplotlib's font metrics, plus matplotlib's default handle (2 em),
+    text pad (0.8 em) and border pads (0.4 em each side) and the frame.
+
+    Args:
+        labels: the legend's labels (none: only the handle, pads and frame).
+        fontsize: pt.
+
+    Returns:
+        float: the width, inches.
+    """
     from matplotlib.font_manager import FontProperties
     from matplotlib.textpath import TextToPath
 
@@ -37,11 +46,22 @@ def legend_width(labels: list[str], fontsize: float = LEGEND_FONT) -> float:
 
 def panel_grid(fig: Figure, rows: int, cols: int, size: tuple[float, float], legend: float = 0.0,
                legend_after=None, suptitle: bool = True) -> np.ndarray:
-    """Axes (rows, cols) of panels `size` (width, height) inches on `fig`, with room `legend` inches
-    wide for a legend (`legend_beside`) right of each panel column in `legend_after` (default: the
-    last column; `legend` 0: none): an empty grid column, so the panels, the legends and the next
-    column's labels never meet. Sets the figure size for `coopsim.plots.render.fixed_layout`'s margins and
-    gaps (`suptitle`: the figure will have one)."""
+    """A grid of panels on `fig`, with room for a legend right of chosen panel columns.
+
+    The room is an empty grid column, so the panels, the legends and the next column's labels never meet.
+    Sets the figure size for `coopsim.plots.render.fixed_layout`'s margins and gaps.
+
+    Args:
+        fig: the figure, resized.
+        rows, cols: the number of panel rows and columns.
+        size: (width, height) inches of each panel.
+        legend: inches, the width kept for a legend (`legend_beside`); 0: none.
+        legend_after: the panel columns (0-based) a legend follows; None: the last column.
+        suptitle: the figure will have a suptitle (room is kept for it).
+
+    Returns:
+        np.ndarray: (rows, cols) of matplotlib Axes, the panels.
+    """
     after = set(range(cols)[-1:] if legend_after is None else legend_after) if legend > 0 else set()
     spare = max(legend + LEGEND_GAP - MARGIN["wgap"], 0.05)   # the legend starts inside the gap before its column
     widths, index = [], []
@@ -56,8 +76,18 @@ def panel_grid(fig: Figure, rows: int, cols: int, size: tuple[float, float], leg
 
 
 def legend_beside(ax, handles: list | None = None, fontsize: float = LEGEND_FONT):
-    """The legend of `ax` (or of `handles`) outside it: right of the panel, LEGEND_GAP inches from it,
-    top edges aligned (in the room `panel_grid` keeps there)."""
+    """The legend of `ax` (or of `handles`) outside it, right of the panel.
+
+    It stands LEGEND_GAP inches from the panel, top edges aligned, in the room `panel_grid` keeps there.
+
+    Args:
+        ax: the panel.
+        handles: the artists to list; None: the labelled artists of `ax`.
+        fontsize: pt.
+
+    Returns:
+        Legend: the matplotlib legend.
+    """
     from matplotlib.transforms import ScaledTranslation
 
     at = ax.transAxes + ScaledTranslation(LEGEND_GAP, 0.0, ax.get_figure().dpi_scale_trans)
@@ -66,7 +96,16 @@ def legend_beside(ax, handles: list | None = None, fontsize: float = LEGEND_FONT
 
 
 def arm_groups(log: LogData, n: int) -> list[tuple[str, slice]]:
-    """(arm label, joint slice) per arm from the "model" metadata record; one group without it."""
+    """The stacked joints grouped by arm, from the log's "model" metadata record.
+
+    Args:
+        log: the log read back.
+        n: the number of joints of all arms (the width of the joint arrays).
+
+    Returns:
+        list[tuple[str, slice]]: (arm label, slice of its joints in the stacked order) per arm; one group
+            ("joints", all n) when the record is missing or its joint counts do not add up to n.
+    """
     arms = metadata_arms(log.metadata)
     if arms is None or sum(arms[1]) != n:
         return [("joints", slice(0, n))]
@@ -76,9 +115,18 @@ def arm_groups(log: LogData, n: int) -> list[tuple[str, slice]]:
 
 
 def run_title(log: LogData, what: str, twin: bool = False) -> str:
-    """A figure title naming the scenario and its settings, as the log's metadata records them:
-    'paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12; MuJoCo RK4 0.001 s)'. `twin`: name the
-    MuJoCo settings too."""
+    """A figure title naming the scenario and its settings, as the log's metadata records them.
+
+    E.g. 'paper_planar_2x3 — Joint angle (native dop853 rtol 1e-12; MuJoCo RK4 0.001 s)'.
+
+    Args:
+        log: the log read back.
+        what: what the figure shows ('Joint angle').
+        twin: name the MuJoCo settings too.
+
+    Returns:
+        str: the title.
+    """
     meta = log.metadata
     name = meta.get("scenario", {}).get("name")
     nat, mj = meta.get("native.integrator", {}), meta.get("mujoco", {})
@@ -93,7 +141,18 @@ def run_title(log: LogData, what: str, twin: bool = False) -> str:
 
 
 def log_plot(ax, t: np.ndarray, y: np.ndarray, label: str, **kw) -> bool:
-    """Plot positive values of y on a log axis; return whether anything was drawn."""
+    """Plot the positive values of y against t on a log axis (the others left out).
+
+    Args:
+        ax: the panel; it becomes a log axis when something is drawn.
+        t: (N,) s, the sample times.
+        y: (N,) the values (any unit), e.g. a difference's magnitude.
+        label: the curve's legend label.
+        kw: passed on to `ax.semilogy`.
+
+    Returns:
+        bool: whether anything was drawn.
+    """
     y = np.where(y > 0, y, np.nan)
     if not np.any(np.isfinite(y)):
         return False
@@ -102,8 +161,16 @@ def log_plot(ax, t: np.ndarray, y: np.ndarray, label: str, **kw) -> bool:
 
 
 def finish_log_axis(ax, drawn: bool, ylabel: str) -> None:
-    """Labels and a grid at the decades (minor ticks off: over ten decades they are ~80 tick objects
-    an axis, a third of the figure's drawing time); a note when nothing was drawn."""
+    """Labels and a grid at the decades on a panel of `log_plot` curves; a note when nothing was drawn.
+
+    Minor ticks are off: over ten decades they are ~80 tick objects an axis, a third of the figure's
+    drawing time.
+
+    Args:
+        ax: the panel.
+        drawn: whether any `log_plot` on it drew something (False: "difference exactly zero" is written).
+        ylabel: the y-axis label; the x-axis is time (s).
+    """
     from matplotlib.ticker import LogLocator, NullLocator
 
     ax.set_ylabel(ylabel)

@@ -64,9 +64,18 @@ def _torque_grid(log: LogData, n: int) -> list[list[int]]:
 
 
 def inverse_torques_figure(log: LogData) -> Figure:
-    """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint
-    (a row per arm, at most 4 panels a row), with the motor lines of eq. 36 (grey); one legend beside
-    the first row."""
+    """Fig. 6: joint torques of every resolution against the forward-dynamics input, one panel per joint.
+
+    A row per arm, at most 4 panels a row, with the motor lines of eq. 36 (grey; on a panel where they are
+    finite and τ_max comes below three times the largest |τ| drawn); one legend beside the first row.
+    Torques in N·m (N on a prismatic joint).
+
+    Args:
+        log: a `coopsim inverse` log (/inverse/trajectory and /inverse/<method>/torque series).
+
+    Returns:
+        Figure: the matplotlib figure.
+    """
     from matplotlib.figure import Figure
 
     traj = log.topics["/inverse/trajectory"]
@@ -76,7 +85,8 @@ def inverse_torques_figure(log: LogData) -> Figure:
     grid = _torque_grid(log, n)
     cols = max(len(r) for r in grid)
     fig = Figure()
-    axes = panel_grid(fig, len(grid), cols, (3.4, 2.3), legend=legend_width([LABEL.get(k, k) for k in methods] + [MOTOR_LINES]))
+    axes = panel_grid(fig, len(grid), cols, (3.4, 2.3),
+                      legend=legend_width([LABEL.get(k, k) for k in methods] + [MOTOR_LINES]))
     for row, joints in zip(axes, grid):
         for ax in row[len(joints):]:
             ax.remove()
@@ -103,7 +113,14 @@ def inverse_torques_figure(log: LogData) -> Figure:
 
 
 def inverse_norms_figure(log: LogData) -> Figure:
-    """Fig. 7: the torque norm |τ| and the cost ½τᵀQτ of every resolution over time."""
+    """Fig. 7: the torque norm |τ| and the cost ½τᵀQτ of every resolution over time.
+
+    Args:
+        log: a `coopsim inverse` log (/inverse/trajectory and /inverse/<method>/torque series).
+
+    Returns:
+        Figure: the matplotlib figure, two panels.
+    """
     from matplotlib.figure import Figure
 
     methods = _methods(log, "/inverse/", "/torque")
@@ -127,8 +144,18 @@ def inverse_norms_figure(log: LogData) -> Figure:
 
 
 def inverse_internal_figure(log: LogData) -> Figure:
-    """What each resolution puts into the object: the largest internal force and moment over the arms
-    (non-squeezing definition, at C) and, for a box, the peak normal stress over its cross-sections."""
+    """What each resolution puts into the object: its largest internal wrench over the arms and its stress.
+
+    The largest internal force (N) and moment (N·m) over the arms (non-squeezing definition, at C) and, for
+    a box, the peak normal stress (kPa) over its cross-sections.
+
+    Args:
+        log: a `coopsim inverse` log (/inverse/<method>/internal series, and /inverse/<method>/stress for a
+            box).
+
+    Returns:
+        Figure: the matplotlib figure, two or three panels.
+    """
     from matplotlib.figure import Figure
 
     methods = _methods(log, "/inverse/", "/internal")
@@ -139,7 +166,8 @@ def inverse_internal_figure(log: LogData) -> Figure:
     for k in methods:
         d = log.topics[f"/inverse/{k}/internal"]
         F = d["nonsqueezing"]
-        axes[0].plot(d["t"], np.max(np.linalg.norm(F[..., :3], axis=-1), axis=1), label=LABEL.get(k, k), **STYLE.get(k, {}))
+        axes[0].plot(d["t"], np.max(np.linalg.norm(F[..., :3], axis=-1), axis=1), label=LABEL.get(k, k),
+                     **STYLE.get(k, {}))
         axes[1].plot(d["t"], np.max(np.linalg.norm(F[..., 3:], axis=-1), axis=1), **STYLE.get(k, {}))
         if has_stress:
             s = log.topics[f"/inverse/{k}/stress"]
@@ -157,7 +185,15 @@ def inverse_internal_figure(log: LogData) -> Figure:
 
 
 def inverse_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
-    """The figures of `inverse_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE)."""
+    """The figures of `inverse_plots` as `coopsim.plots.render` jobs.
+
+    Args:
+        log: a `coopsim inverse` log.
+        out_dir: the folder the figures go to.
+
+    Returns:
+        list[tuple]: (builder, args, out_dir/FILE) per figure.
+    """
     out = Path(out_dir)
     return [(inverse_torques_figure, (log,), out / "inverse_torques.png"),
             (inverse_norms_figure, (log,), out / "inverse_norms.png"),
@@ -165,14 +201,34 @@ def inverse_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
 
 
 def inverse_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
-    """inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir (drawn on `workers`)."""
+    """Write inverse_torques.png, inverse_norms.png, inverse_internal.png in out_dir.
+
+    Args:
+        log: a `coopsim inverse` log.
+        out_dir: the folder the figures go to.
+        workers: the figure workers to draw on; None: workers started for this call only.
+
+    Returns:
+        list[Path]: the figures written.
+    """
     return render_figures(inverse_jobs(log, out_dir), workers)
 
 
 def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
-    """Fig. 8: per resolution, the torque of the motor that saturates first, at the capacity mass,
-    against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation. Each
-    panel's legend stands beside it."""
+    """Fig. 8: per resolution, the torque of the motor that saturates first, at the capacity mass.
+
+    It is drawn against its torque–speed lines τ_max(θ̇), τ_min(θ̇) (eq. 36); the dot marks the saturation.
+    Each panel's legend stands beside it. The LP bound has no panel.
+
+    Args:
+        log: a `coopsim capacity` log (/capacity/limits, /capacity/<method>/<mode> and the
+            capacity.<method>.<mode> metadata records).
+        mode: the capacity mode (`coopsim.inverse.capacity.MODES`): 'scaled' (the object scaled at constant
+            geometry) or 'payload' (a point payload on the object).
+
+    Returns:
+        Figure: the matplotlib figure.
+    """
     from matplotlib.figure import Figure
 
     lim = log.topics["/capacity/limits"]
@@ -211,8 +267,18 @@ def capacity_motor_figure(log: LogData, mode: str = "scaled") -> Figure:
 
 
 def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
-    """The largest mass each sample alone allows, per resolution and for the LP bound: the capacity is
-    the lowest point of each curve."""
+    """The largest mass (kg) each sample alone allows, per resolution and for the LP bound.
+
+    The capacity is the lowest point of each curve.
+
+    Args:
+        log: a `coopsim capacity` log (/capacity/<method>/<mode> series).
+        mode: the capacity mode (`coopsim.inverse.capacity.MODES`): 'scaled' (the object scaled at constant
+            geometry) or 'payload' (a point payload on the object).
+
+    Returns:
+        Figure: the matplotlib figure, a log axis.
+    """
     from matplotlib.figure import Figure
 
     methods = _methods(log, "/capacity/", f"/{mode}")
@@ -232,7 +298,15 @@ def capacity_along_path_figure(log: LogData, mode: str = "scaled") -> Figure:
 
 
 def capacity_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
-    """The figures of `capacity_plots` as `coopsim.plots.render` jobs (builder, args, out_dir/FILE)."""
+    """The figures of `capacity_plots` as `coopsim.plots.render` jobs, for each mode the log holds.
+
+    Args:
+        log: a `coopsim capacity` log.
+        out_dir: the folder the figures go to.
+
+    Returns:
+        list[tuple]: (builder, args, out_dir/FILE) per figure.
+    """
     out = Path(out_dir)
     jobs = []
     for mode in ("scaled", "payload"):
@@ -245,6 +319,14 @@ def capacity_jobs(log: LogData, out_dir: str | Path) -> list[tuple]:
 
 
 def capacity_plots(log: LogData, out_dir: str | Path, workers: FigureWorkers | None = None) -> list[Path]:
-    """capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir (drawn on
-    `workers`)."""
+    """Write capacity_motors[_payload].png and capacity_along_path[_payload].png in out_dir.
+
+    Args:
+        log: a `coopsim capacity` log.
+        out_dir: the folder the figures go to.
+        workers: the figure workers to draw on; None: workers started for this call only.
+
+    Returns:
+        list[Path]: the figures written.
+    """
     return render_figures(capacity_jobs(log, out_dir), workers)

@@ -34,7 +34,11 @@ MARGIN = {"left": 0.85, "right": 0.2, "bottom": 0.55, "top": 0.5, "suptitle": 0.
 
 
 def fixed_layout(fig: Figure) -> None:
-    """Place fig's grid of subplots with the MARGIN gaps (inches), whatever the figure size."""
+    """Place fig's grid of subplots with the MARGIN gaps (inches), whatever the figure size.
+
+    Args:
+        fig: the figure, its subplot parameters set.
+    """
     specs = [ax.get_subplotspec() for ax in fig.axes if ax.get_subplotspec() is not None]
     if not specs:
         return
@@ -59,7 +63,15 @@ def _draw_png(fig: Figure, target) -> None:
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
-    """Write `fig` as PNG atomically (`_draw_png`); returns the path."""
+    """Write `fig` as PNG atomically (`_draw_png`: laid out by `fixed_layout`, DPI dots per inch).
+
+    Args:
+        fig: the figure.
+        path: the PNG file (its folder is created if missing).
+
+    Returns:
+        Path: the path written.
+    """
     with atomic_path(path) as tmp:
         _draw_png(fig, tmp)
     return path
@@ -89,9 +101,18 @@ def _can_fork(n: int) -> bool:
 
 
 class FigureWorkers:
-    """n worker processes for figures (module docstring), started by the constructor and, with `warm`,
-    warmed up; without fork or a second core there are none and `render` draws in this process. Use
-    as a context manager, or call `close`."""
+    """Worker processes for figures (module docstring), started by the constructor.
+
+    Without fork or a second core (or with n < 2) there are none and `render` draws in this process. Use
+    as a context manager (an exception in the block stops the workers at once), or call `close`.
+
+    Args:
+        n: the number of worker processes.
+        warm: warm the workers up as they start (import matplotlib, draw a throw-away figure).
+
+    Attributes:
+        pool: the worker processes (a ProcessPoolExecutor), None when there are none or after `close`.
+    """
 
     def __init__(self, n: int = 2, warm: bool = True):
         self.pool = None
@@ -101,9 +122,18 @@ class FigureWorkers:
             self.pool.submit(int)   # a fork-context pool starts all its workers at the first submit
 
     def render(self, jobs: list, first: tuple[int, ...] = ()) -> list[Path]:
-        """Write every job's figure; returns the paths in job order. The jobs numbered in `first` (the
-        costliest) are handed out before the others, so that the workers finish together. A builder's
-        error is raised here."""
+        """Write every job's figure.
+
+        The jobs numbered in `first` (the costliest) are handed out before the others, so that the
+        workers finish together. A builder's error is raised here.
+
+        Args:
+            jobs: (builder, args, path) each: the figure builder(*args) is written to path as PNG.
+            first: indices (0-based) of the jobs handed out first.
+
+        Returns:
+            list[Path]: the paths written, in job order.
+        """
         if self.pool is None or len(jobs) < 2:
             return [Path(_render(job)) for job in jobs]
         order = [i for i in first if i < len(jobs)] + [i for i in range(len(jobs)) if i not in first]
@@ -111,7 +141,11 @@ class FigureWorkers:
         return [Path(done[i].result()) for i in range(len(jobs))]
 
     def close(self, stop: bool = False) -> None:
-        """Shut the workers down: after their jobs, or (stop) at once, e.g. when the command failed."""
+        """Shut the workers down: after their jobs, or (stop) at once, e.g. when the command failed.
+
+        Args:
+            stop: terminate the workers at once, cancelling the jobs not started.
+        """
         if self.pool is None:
             return
         if stop:
@@ -128,9 +162,17 @@ class FigureWorkers:
 
 
 def render_while(draw: Callable[[], list[Path]], work: Callable[[], T]) -> tuple[list[Path], T]:
-    """(draw(), work()): `draw` — a call that hands its figure jobs to FigureWorkers and waits for them —
-    runs on a thread of this process while `work` (e.g. writing the log) runs here, so the workers
-    draw while it runs. An error of either is raised here once both have ended."""
+    """Run `draw` on a thread of this process while `work` runs here, so the workers draw meanwhile.
+
+    An error of either is raised here once both have ended.
+
+    Args:
+        draw: a call that hands its figure jobs to FigureWorkers and waits for them.
+        work: the work done meanwhile (e.g. writing the log).
+
+    Returns:
+        tuple[list[Path], T]: (draw(), work()).
+    """
     with ThreadPoolExecutor(1) as thread:
         figures = thread.submit(draw)
         done = work()
@@ -138,8 +180,16 @@ def render_while(draw: Callable[[], list[Path]], work: Callable[[], T]) -> tuple
 
 
 def render_figures(jobs: list, workers: FigureWorkers | None = None, first: tuple[int, ...] = ()) -> list[Path]:
-    """Write the figures of `jobs` on `workers` (default: workers started for this call only), the jobs
-    numbered in `first` handed out first (`FigureWorkers.render`); paths in job order."""
+    """Write the figures of `jobs` on `workers`, the jobs numbered in `first` handed out first.
+
+    Args:
+        jobs: (builder, args, path) each, as `FigureWorkers.render` takes them.
+        workers: the workers; None: workers started (not warmed) for this call only.
+        first: indices (0-based) of the jobs handed out first.
+
+    Returns:
+        list[Path]: the paths written, in job order.
+    """
     if workers is not None:
         return workers.render(jobs, first)
     with FigureWorkers(min(2, len(jobs)), warm=False) as own:

@@ -32,8 +32,17 @@ MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">")
 
 
 def sibling(column: str, columns, name: str) -> str | None:
-    """The column `name` beside a capacity column (…mass_kg → …saturating_motor, …feasible), if the rows
-    have it."""
+    """The column `name` beside a capacity column (…mass_kg → …saturating_motor, …feasible), if the rows have it.
+
+    Args:
+        column: the column plotted.
+        columns: the column names the rows hold (a set or any container).
+        name: the sibling's last part, 'saturating_motor' or 'feasible'.
+
+    Returns:
+        str | None: the sibling column's name; None when `column` is not a capacity column (…mass_kg) or
+            the sibling is not among `columns`.
+    """
     if not column.endswith("mass_kg"):
         return None
     other = column[: -len("mass_kg")] + name
@@ -41,8 +50,17 @@ def sibling(column: str, columns, name: str) -> str | None:
 
 
 def marks(rows: list[dict], column: str, values: np.ndarray) -> list | None:
-    """Per point the legend label of its marker ("first saturates: arm 2 joint 1", "infeasible") or None,
-    for a capacity column (None: no marks); infeasible values are set to nan in `values`."""
+    """Per point the legend label of its marker, for a capacity column.
+
+    Args:
+        rows: the sweep's rows, one dict (column → value) per point.
+        column: the column plotted.
+        values: (P,) the column's values per point, written: infeasible points' set to nan.
+
+    Returns:
+        list | None: (P,) per point "first saturates: arm 2 joint 1", "infeasible" or None (no marker);
+            None (no marks at all) when the column has no `…saturating_motor` sibling.
+    """
     present = set().union(*(r.keys() for r in rows)) if rows else set()
     motor, feasible = sibling(column, present, "saturating_motor"), sibling(column, present, "feasible")
     if motor is None:
@@ -86,8 +104,20 @@ def _legend_labels(labels) -> list[str]:
 
 def column_figure(title: str, axis_names: list[str], axis_values: np.ndarray, grid: bool, values: np.ndarray,
                   column: str, motors: list | None) -> Figure:
-    """One column of a sweep over its points: axis_values (P, a), values (P,) (nan: left out), motors
-    (P,) each point's marker label (`marks`) or None; `grid`: the points form a grid."""
+    """The figure of one column of a sweep over its P points (module docstring: line, heat map or histogram).
+
+    Args:
+        title: the panel's title.
+        axis_names: the a sweep axes' names (the axis labels).
+        axis_values: (P, a) each point's axis values, in the axes' own units.
+        grid: the points form a grid (a heat map draws cells).
+        values: (P,) the column's value per point (nan: left out).
+        column: the column's name (its axis or colorbar label).
+        motors: (P,) each point's marker label (`marks`), or None: no marks.
+
+    Returns:
+        Figure: the matplotlib figure, not yet laid out or saved.
+    """
     from matplotlib.figure import Figure
 
     labels = _legend_labels(motors)
@@ -153,11 +183,30 @@ def _edges(centres: np.ndarray) -> np.ndarray:
 
 
 def figure_name(column: str, axes: int) -> str:
+    """The PNG file name of a column's figure: line_…, map_… or hist_… by the number of axes.
+
+    Args:
+        column: the column's name (made a field name by `coopsim.core.labels.field_name`).
+        axes: the sweep's number of axes.
+
+    Returns:
+        str: e.g. 'map_capacity_payload_min_energy_mass_kg.png'.
+    """
     return f"{'line' if axes == 1 else 'map' if axes == 2 else 'hist'}_{field_name(column)}.png"
 
 
 def sweep_figures(sweep, rows: list[dict], columns: list[str], folder: Path) -> list[Path]:
-    """Draw each of `columns` of the sweep's rows into `folder` (names by `figure_name`); their paths."""
+    """Draw each of `columns` of the sweep's rows into `folder`, one PNG each (names by `figure_name`).
+
+    Args:
+        sweep: the validated Sweep (`coopsim.apps.sweep`: its name, axes, design and study kind are used).
+        rows: one dict per point (column → value), holding each axis's value under the axis's name.
+        columns: the columns to plot.
+        folder: the output folder.
+
+    Returns:
+        list[Path]: the figures written, in the order of `columns`.
+    """
     names = [a.name for a in sweep.axes]
     axis_values = np.array([[r[n] for n in names] for r in rows], dtype=float).reshape(len(rows), len(names))
     paths = []
