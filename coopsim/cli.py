@@ -153,8 +153,8 @@ def _cmd_validate(args) -> int:
     results, overrides = [], _overrides(args)
     for scenario in _scenario_paths(args.scenarios, hard=True):
         bar = ProgressBar(enabled=not args.json)
-        cv = cross_validate(load_scenario(scenario, duration=args.duration, overrides=overrides), duration=args.duration,
-                            progress=bar)
+        cv = cross_validate(load_scenario(scenario, duration=args.duration, overrides=overrides),
+                            duration=args.duration, progress=bar)
         bar.close()
         results.append(cv.comparison)
         if not args.json:
@@ -172,7 +172,8 @@ def _cmd_validate(args) -> int:
 def _cmd_inverse(args) -> int:
     from pathlib import Path
 
-    from coopsim.report.inverse_report import add_checks, format_inverse_summary, inverse_series, inverse_summary, json_safe, solve_study
+    from coopsim.report.inverse_report import (add_checks, format_inverse_summary, inverse_series, inverse_summary,
+                                               json_safe, solve_study)
     from coopsim.io.log import file_sha256, run_metadata
     from coopsim.plots.inverse import inverse_plots
     from coopsim.apps.progress import ProgressBar
@@ -199,10 +200,12 @@ def _cmd_inverse(args) -> int:
             bar.close()
 
         log_path, plots = _write_set(out, "inverse.json", "inverse.mcap", streams, meta, inverse_plots, workers,
-                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "inverse.json"),
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots,
+                                                                           out / "inverse.json"),
                                      during=checks)
     print(json.dumps(json_safe(summary), indent=2) if args.json else
-          format_inverse_summary(summary) + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
+          format_inverse_summary(summary)
+          + f"\nwrote {log_path}, {out / 'inverse.json'} and {len(plots)} plots in {out}")
     if args.torques_csv is not None:
         from coopsim.io.torque_csv import write_torque_csvs
 
@@ -246,9 +249,11 @@ def _cmd_capacity(args) -> int:
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
         streams, meta = capacity_series(study), run_metadata(model, None, meta | capacity_metadata(summary))
         log_path, plots = _write_set(out, "capacity.json", "capacity.mcap", streams, meta, capacity_plots, workers,
-                                     lambda log_path, plots: _summary_text(summary, log_path, plots, out / "capacity.json"))
+                                     lambda log_path, plots: _summary_text(summary, log_path, plots,
+                                                                           out / "capacity.json"))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
-          format_capacity_summary(summary) + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
+          format_capacity_summary(summary)
+          + f"\nwrote {log_path}, {out / 'capacity.json'} and {len(plots)} plots in {out}")
     ok = all(v["ok"] for v in summary.get("brute_force_check", {}).values())
     return 0 if ok else 1
 
@@ -421,6 +426,16 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The `coopsim` argument parser: one subcommand per command, each with its options and help.
+
+    The commands are simulate, run, plot, validate, mjcf, inverse, capacity, sweep, bench, animate and
+    view; each sets `func` (its handler, called with the parsed arguments) and, when it runs the native
+    model, `native` (then `main` announces a first run's compilation). Usage errors print one line and
+    exit 2.
+
+    Returns:
+        argparse.ArgumentParser: the parser (prog 'coopsim').
+    """
     parser = _Parser(prog="coopsim", description=(
         "Cooperative manipulators: recursive Gibbs-Appell closed-chain dynamics, validated against MuJoCo."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -478,7 +493,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bound-force", type=float, default=None,
                    help="internal-force bound of 'bounded', N (default: scenario, else half the minimum-energy peak)")
     p.add_argument("--bound-moment", type=float, default=None,
-                   help="internal-moment bound of 'bounded', N·m (default: scenario, else half the minimum-energy peak)")
+                   help="internal-moment bound of 'bounded', N·m (default: scenario, else half the "
+                        "minimum-energy peak)")
     p.add_argument("--replay", action="store_true",
                    help="feed each resolution's torques back through the forward dynamics and report the error")
     p.add_argument("--no-curve", action="store_true", help="skip the energy-against-bound sweep")
@@ -520,7 +536,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("sweep", help="sweep YAML file")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--serial", action="store_true", help="run the points in this process, one after another")
-    p.add_argument("--workers", type=int, default=None, help="worker processes of the embedded cluster (default: cores)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the embedded cluster (default: cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on the Dask cluster whose scheduler is at ADDRESS (e.g. tcp://10.0.0.5:8786)")
     p.add_argument("--resume", action="store_true",
@@ -603,8 +620,17 @@ INTERRUPTED = 130   # the shell's status for a command stopped by Ctrl-C (128 + 
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; returns the exit status: 0, 1 (a check failed), 2 (bad input or a failure with
-    a one-line reason), 130 (interrupted). `coopsim` alone prints the help."""
+    """Run one command and return its exit status. `coopsim` alone prints the help.
+
+    A CoopsimError or OSError prints one line `coopsim: error: …` on stderr (status 2); a closed stdout
+    pipe ends quietly (status 1).
+
+    Args:
+        argv: the command-line arguments after the program name; None: sys.argv[1:].
+
+    Returns:
+        int: 0, 1 (a check failed), 2 (bad input or a failure with a one-line reason), 130 (interrupted).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

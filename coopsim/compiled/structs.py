@@ -36,6 +36,14 @@ class StructType(types.StructRef):
     """The numba type of a coopsim record (fields as declared below)."""
 
     def preprocess_fields(self, fields):
+        """The declared fields with literal types widened (numba's hook, called when the type is made).
+
+        Args:
+            fields: the (name, numba type) pairs of the record, in order.
+
+        Returns:
+            tuple: the (name, type) pairs, each type `types.unliteral`.
+        """
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
 
 
@@ -70,8 +78,18 @@ def _struct_getattr(context, builder, typ, val, attr):
 
 @intrinsic
 def borrow(typingctx, arr):
-    """`arr` borrowed, as a field read (module docstring): for a kernel's array arguments, whose
-    owner outlives the call, so that passing them on to other kernels costs no reference count."""
+    """`arr` borrowed, as a field read (module docstring).
+
+    For a kernel's array arguments, whose owner outlives the call, so that passing them on to other
+    kernels costs no reference count. Compiled code calls it as borrow(arr); numba supplies typingctx.
+
+    Args:
+        typingctx: numba's typing context.
+        arr: the numba type of the argument (an array type; any other type does not match).
+
+    Returns:
+        tuple | None: (signature arr(arr), codegen) for an array type; None (no match) otherwise.
+    """
     if not isinstance(arr, types.Array):
         return None
 
@@ -232,9 +250,22 @@ TABLEAU_T = StructType(list(TABLEAU_FIELDS))
 
 @intrinsic
 def from_record(typingctx, struct_type, record):
-    """A new StructRef of `struct_type` holding the fields of the NamedTuple `record` (same names in the
-    same order, arrays of the same types; a reference taken to each), built in one step: typing and
-    lowering ~50 field assignments one by one took most of the constructors' compile time."""
+    """A new StructRef of `struct_type` holding the fields of the NamedTuple `record`, built in one step.
+
+    Same names in the same order, arrays of the same types; a reference is taken to each. Typing and
+    lowering ~50 field assignments one by one took most of the constructors' compile time. Compiled
+    code calls it as from_record(STRUCT_T, record); numba supplies typingctx.
+
+    Args:
+        typingctx: numba's typing context.
+        struct_type: the numba type of the first argument, a type reference to a StructType (PACKED_T,
+            WORKSPACE_T, LOOP_T or TABLEAU_T).
+        record: the numba type of the NamedTuple.
+
+    Returns:
+        tuple | None: (signature, codegen) of the constructor; None (no match) when `record` is not a
+        NamedTuple with the struct's field names in order, or one of its arrays has another type.
+    """
     inst_type = struct_type.instance_type
     fields = inst_type.field_dict
     if not isinstance(record, types.BaseNamedTuple) or tuple(record.fields) != tuple(fields):
@@ -284,5 +315,13 @@ _NEW = {"PackedModel": _new_packed, "Workspace": _new_workspace, "Loop": _new_lo
 
 
 def to_struct(record) -> Struct:
-    """The StructRef of a PackedModel, Workspace, Loop or Tableau NamedTuple (sharing its arrays)."""
+    """The StructRef of a PackedModel, Workspace, Loop or Tableau NamedTuple (sharing its arrays).
+
+    Args:
+        record: the NamedTuple (`coopsim.compiled.packing` / `coopsim.compiled.integrate`), its arrays
+            float64 / int64 C-contiguous.
+
+    Returns:
+        Struct: the Python handle of the StructRef holding the same arrays (no copy).
+    """
     return _NEW[type(record).__name__](record)

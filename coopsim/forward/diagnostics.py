@@ -41,14 +41,31 @@ STEP_CHECK_SAMPLES = 64   # states at which a fixed rk4 step is checked by step 
 
 
 def describe_state(t: float, q: np.ndarray) -> str:
-    """'t=0.35 s, q=[0.1, …] rad': the time and configuration every failure and warning names."""
+    """'t=0.35 s, q=[0.1, …] rad': the time and configuration every failure and warning names.
+
+    Args:
+        t: s, the time.
+        q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+
+    Returns:
+        str: the one-line state text (6 significant digits).
+    """
     return f"t={t:.6g} s, q=[{', '.join(f'{x:.6g}' for x in q)}] rad"
 
 
 @dataclass(frozen=True)
 class RunWarning:
-    """One warning about a run: kind (see the module docstring), time t s, configuration q (n,) rad
-    there, a one-line reason, and the numbers it names (`values`, SI)."""
+    """One warning about a run: where it applies, why, and the numbers it names.
+
+    Attributes:
+        kind: the check that raised it (see the module docstring): 'rank_deficient', 'ill_conditioned',
+            'arm_singularity', 'initial_correction', 'joint_limit', 'step_too_large', or a controller's
+            ('distribution_fallback').
+        t: s, the time it names.
+        q: (n,) rad (m on a prismatic joint), the stacked joint coordinates there.
+        reason: the one-line reason.
+        values: the numbers it names, name → float, SI.
+    """
 
     kind: str
     t: float
@@ -57,15 +74,36 @@ class RunWarning:
     values: dict = field(default_factory=dict)
 
     def message(self) -> str:
-        """'at t=…, q=[…] rad: reason' (one line)."""
+        """'at t=…, q=[…] rad: reason' (one line).
+
+        Returns:
+            str: the warning's message.
+        """
         return f"at {describe_state(self.t, self.q)}: {self.reason}"
 
     def as_dict(self) -> dict:
+        """The warning as JSON-ready data (summary.json, the run log's metadata).
+
+        Returns:
+            dict: {"kind", "t_s" (s), "q_rad" (list of n floats), "reason", "values" (name → float)}.
+        """
         return {"kind": self.kind, "t_s": self.t, "q_rad": list(self.q), "reason": self.reason,
                 "values": dict(self.values)}
 
 
 def run_warning(kind: str, t: float, q: np.ndarray, reason: str, **values) -> RunWarning:
+    """A RunWarning with its time, configuration and values as plain floats.
+
+    Args:
+        kind: the check that raised it (module docstring).
+        t: s, the time it names.
+        q: (n,) rad (m on a prismatic joint), the stacked joint coordinates there.
+        reason: the one-line reason.
+        values: the numbers it names (SI), each converted with float().
+
+    Returns:
+        RunWarning: the warning (q as a tuple of floats).
+    """
     return RunWarning(kind, float(t), tuple(float(x) for x in q), reason, {k: float(v) for k, v in values.items()})
 
 
@@ -74,9 +112,13 @@ def run_warning(kind: str, t: float, q: np.ndarray, reason: str, **values) -> Ru
 # ------------------------------------------------------------------------------------------------
 
 class ArmTerms(NamedTuple):
-    """Per sample (S samples, r arms, nmax joints per arm at most): J (S, r, 6, nmax) end-effector
-    Jacobians (world axes, EE point); I_qd (S, n) 𝐈_m θ̇_m per arm (no object), N·m·s;
-    R_o (S, 3, 3) object rotation."""
+    """Per-sample arm terms of the diagnostics (S samples, n joints, r arms, nmax joints per arm at most).
+
+    Attributes:
+        J: (S, r, 6, nmax) the end-effector Jacobians J_m (columns 0:n_m of arm m), world axes, EE point.
+        I_qd: (S, n) N·m·s (N·s on a prismatic joint), 𝐈_m θ̇_m per arm (no object), stacked arm by arm.
+        R_o: (S, 3, 3) the object rotation, world ← object frame.
+    """
 
     J: np.ndarray
     I_qd: np.ndarray
@@ -84,8 +126,19 @@ class ArmTerms(NamedTuple):
 
 
 def arm_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> ArmTerms:
-    """`ArmTerms` at the states (q, qd) (S, n): the compiled per-sample inverse-dynamics terms at θ̈ = θ̇
-    and at θ̈ = 0, whose difference is 𝐈_m θ̇_m."""
+    """`ArmTerms` at the states (q, qd).
+
+    The compiled per-sample inverse-dynamics terms (`coopsim.compiled.api.inverse_terms`) at θ̈ = θ̇ and
+    at θ̈ = 0, whose difference is 𝐈_m θ̇_m.
+
+    Args:
+        model: the Model.
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates at S samples.
+        qd: (S, n) rad/s (m/s), the joint rates.
+
+    Returns:
+        ArmTerms: J (S, r, 6, nmax), I_qd (S, n), R_o (S, 3, 3), world axes.
+    """
     from coopsim.compiled import api
 
     with_rate = api.inverse_terms(model, q, qd, qd)
@@ -104,16 +157,36 @@ def _row_jacobians(model: Model, J: np.ndarray, m: int, scaled: bool = False) ->
 
 
 def manipulability(model: Model, J: np.ndarray) -> np.ndarray:
-    """Each arm's manipulability (S, r): the product of the singular values of A = S J_m (k × n_m), which
-    is √det(A Aᵀ) for k ≤ n_m (Yoshikawa's measure in the scene's rows; units m^(linear rows)); zero at
-    a singular configuration."""
+    """Each arm's manipulability: the product of the singular values of A = S J_m (k × n_m).
+
+    This is √det(A Aᵀ) for k ≤ n_m (Yoshikawa's measure in the scene's rows; units m^(linear rows)); zero
+    at a singular configuration.
+
+    Args:
+        model: the Model (its constraint rows S (k, 6)).
+        J: (S, r, 6, nmax) the end-effector Jacobians (`ArmTerms.J`), world axes, EE point.
+
+    Returns:
+        np.ndarray: (S, r) the manipulability of each arm at each sample.
+    """
     return np.stack([np.prod(np.linalg.svd(_row_jacobians(model, J, m), compute_uv=False), axis=1)
                      for m in range(model.r)], axis=1)
 
 
 def kinetic_energy(model: Model, qd: np.ndarray, terms: ArmTerms, twist: np.ndarray) -> np.ndarray:
-    """Kinetic energy (S,) J of arms and object: ½ Σ_m θ̇_mᵀ 𝐈_m θ̇_m + ½ (m_o |v_C|² + ωᵀ R_o I_o R_oᵀ ω)
-    (= ½ θ̇ᵀ 𝐈 θ̇ of the closed chain); twist (S, 6) [v_C; ω] of the object."""
+    """Kinetic energy of arms and object: ½ Σ_m θ̇_mᵀ 𝐈_m θ̇_m + ½ (m_o |v_C|² + ωᵀ R_o I_o R_oᵀ ω).
+
+    This equals ½ θ̇ᵀ 𝐈 θ̇ of the closed chain.
+
+    Args:
+        model: the Model (the object's mass kg and inertia I_o (3, 3) kg·m² about C, object axes).
+        qd: (S, n) rad/s (m/s on a prismatic joint), the joint rates.
+        terms: the `ArmTerms` at those states (I_qd, R_o).
+        twist: (S, 6) [v_C (m/s); ω (rad/s)], the object's twist at C, world axes.
+
+    Returns:
+        np.ndarray: (S,) J, the kinetic energy at each sample.
+    """
     obj = model.object
     v, w = twist[:, :3], twist[:, 3:]
     w_body = np.einsum("sji,sj->si", terms.R_o, w)
@@ -131,12 +204,30 @@ def _internal_force(internal_wrench: np.ndarray) -> np.ndarray:
 
 
 def first_ill_conditioned(model: Model, cond: np.ndarray) -> int | None:
-    """Index of the first sample whose condition number exceeds integrator.condition_limit, or None."""
+    """Index of the first sample whose condition number exceeds integrator.condition_limit, or None.
+
+    Args:
+        model: the Model (its integrator.condition_limit).
+        cond: (S,) the condition number of Λ𝐈⁻¹Λᵀ at each sample (nan counts as above the limit).
+
+    Returns:
+        int | None: the 0-based sample index, or None when every sample is within the limit.
+    """
     above = np.flatnonzero(~(cond <= model.integrator.condition_limit))
     return int(above[0]) if len(above) else None
 
 
 def ill_conditioning_reason(model: Model, cond: float, force: float) -> str:
+    """The one-line reason of an ill-conditioned constraint matrix (warning or error).
+
+    Args:
+        model: the Model (its integrator.condition_limit).
+        cond: the condition number of Λ𝐈⁻¹Λᵀ at the sample.
+        force: N, the largest internal force |F_I| over the arms there.
+
+    Returns:
+        str: the reason, naming the condition number, the limit, the digits lost and the force.
+    """
     lim = model.integrator.condition_limit
     digits = np.log10(cond) if np.isfinite(cond) else np.inf
     return (f"constraint matrix Λ𝐈⁻¹Λᵀ is ill-conditioned: condition number {cond:.3g} > "
@@ -145,7 +236,18 @@ def ill_conditioning_reason(model: Model, cond: float, force: float) -> str:
 
 
 def conditioning(model: Model, t, q, cond, internal_wrench) -> list[RunWarning]:
-    """An `ill_conditioned` warning at the sample of largest condition number, if above the limit."""
+    """An `ill_conditioned` warning at the sample of largest condition number, if above the limit.
+
+    Args:
+        model: the Model (its integrator.condition_limit).
+        t: (S,) s, the sample times.
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates.
+        cond: (S,) the condition number of Λ𝐈⁻¹Λᵀ (nan counts as infinite).
+        internal_wrench: (S, r, 6) [N; N·m], the internal wrenches at C, world axes.
+
+    Returns:
+        list[RunWarning]: one warning, or none when no sample is above the limit.
+    """
     if first_ill_conditioned(model, cond) is None:
         return []
     i = int(np.argmax(np.where(np.isnan(cond), np.inf, cond)))
@@ -156,9 +258,21 @@ def conditioning(model: Model, t, q, cond, internal_wrench) -> list[RunWarning]:
 
 
 def arm_singularities(model: Model, t, q, J) -> list[RunWarning]:
-    """Per arm, at most one `arm_singularity` warning: where its end-effector Jacobian in the scene's rows
-    passes through a singularity (square: det changes sign between two samples), else at its most
-    singular sample if σ_min/σ_max (linear rows over the reach) is below integrator.singularity_limit."""
+    """Per arm, at most one `arm_singularity` warning.
+
+    Where the arm's end-effector Jacobian in the scene's rows passes through a singularity (square: det
+    changes sign between two samples), else at its most singular sample if σ_min/σ_max (linear rows
+    over the reach) is below integrator.singularity_limit.
+
+    Args:
+        model: the Model (its rows S, arms and integrator.singularity_limit).
+        t: (S,) s, the sample times.
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates.
+        J: (S, r, 6, nmax) the end-effector Jacobians (`ArmTerms.J`), world axes, EE point.
+
+    Returns:
+        list[RunWarning]: the warnings, in arm order (values: arm 1-based, manipulability, sigma_ratio).
+    """
     out = []
     lim = model.integrator.singularity_limit
     w = manipulability(model, J)
@@ -189,9 +303,19 @@ def arm_singularities(model: Model, t, q, J) -> list[RunWarning]:
 
 
 def initial_correction(model: Model, init) -> list[RunWarning]:
-    """An `initial_correction` warning when closing the loop at t = 0 moved a joint by more than
-    integrator.initial_correction_warning (init: the `coopsim.dynamics.manifold.Projection`; the configuration
-    named is the scenario's, before the correction)."""
+    """An `initial_correction` warning when closing the loop at t = 0 moved a joint too far.
+
+    Too far: by more than integrator.initial_correction_warning. The configuration named is the
+    scenario's, before the correction.
+
+    Args:
+        model: the Model (its q0 and integrator settings).
+        init: the Projection of the initial state (`coopsim.core.results.Projection`: dq (n,) rad or m,
+            residual_before m or rad).
+
+    Returns:
+        list[RunWarning]: one warning, or none when every |dq| is within the limit.
+    """
     s = model.integrator
     j = int(np.argmax(np.abs(init.dq)))
     worst = float(abs(init.dq[j]))
@@ -207,8 +331,16 @@ def initial_correction(model: Model, init) -> list[RunWarning]:
 
 
 def joint_limit_violation(model: Model, q: np.ndarray) -> tuple[int, int] | None:
-    """(sample i, stacked joint j) of the first sample (then the first joint) of q (S, n) rad outside
-    `Model.joint_range`, or None (also when the model has no ranges)."""
+    """The first sample (then the first joint) of q outside `Model.joint_range`.
+
+    Args:
+        model: the Model (its joint_range (n, 2) rad or m, or None).
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates.
+
+    Returns:
+        tuple[int, int] | None: (sample i, stacked joint j), 0-based; None when no joint leaves its range
+        (also when the model has no ranges).
+    """
     if model.joint_range is None:
         return None
     lo, hi = model.joint_range.T
@@ -217,14 +349,32 @@ def joint_limit_violation(model: Model, q: np.ndarray) -> tuple[int, int] | None
 
 
 def joint_limit_reason(model: Model, j: int, value: float) -> str:
-    """'arm 1 (left) joint 4 at -3.1 rad is outside its range [-3.07, -0.07] rad' (stacked joint j)."""
+    """'arm 1 (left) joint 4 at -3.1 rad is outside its range [-3.07, -0.07] rad'.
+
+    Args:
+        model: the Model (its joint_range and joint labels).
+        j: the stacked joint index, 0-based.
+        value: rad (m on a prismatic joint), the joint's coordinate.
+
+    Returns:
+        str: the one-line reason.
+    """
     lo, hi = model.joint_range[j]
     return (f"{joint_labels(model)[j]} at {value:.6g} rad is outside its range "
             f"[{lo:.6g}, {hi:.6g}] rad")
 
 
 def joint_limits(model: Model, t, q) -> list[RunWarning]:
-    """A `joint_limit` warning at the first sample where a joint leaves its range."""
+    """A `joint_limit` warning at the first sample where a joint leaves its range.
+
+    Args:
+        model: the Model (its joint_range).
+        t: (S,) s, the sample times.
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates.
+
+    Returns:
+        list[RunWarning]: one warning (values: joint 1-based, angle_rad), or none.
+    """
     hit = joint_limit_violation(model, q)
     if hit is None:
         return []
@@ -244,8 +394,20 @@ def _torques(model: Model, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 
 def rk4_local_error(model: Model, t: np.ndarray, Y: np.ndarray, h: float) -> np.ndarray:
-    """Step-doubling estimate of one rk4 step's local error from the states Y (S, 2n) at times t (S,):
-    16/15 |y_h − y_{h/2,h/2}| per component (S, 2n) (the h/2 pair is 16 times more accurate at order 4)."""
+    """Step-doubling estimate of one rk4 step's local error from each state: 16/15 |y_h − y_{h/2,h/2}|.
+
+    The h/2 pair is 16 times more accurate at order 4. The closed chain is evaluated compiled, with the
+    model's torques at each stage (a controller in the loop reads the state).
+
+    Args:
+        model: the Model.
+        t: (S,) s, the times of the states.
+        Y: (S, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s).
+        h: s, the step.
+
+    Returns:
+        np.ndarray: (S, 2n) the error estimate per component, in the units of Y.
+    """
     from coopsim.compiled import api
 
     n = model.n_total
@@ -264,9 +426,21 @@ def rk4_local_error(model: Model, t: np.ndarray, Y: np.ndarray, h: float) -> np.
 
 
 def step_size(model: Model, t, q, qd) -> list[RunWarning]:
-    """A `step_too_large` warning when a fixed rk4 step's local error (`rk4_local_error` at up to
-    STEP_CHECK_SAMPLES samples, evenly spread) exceeds atol + rtol·|y| somewhere; it names the worst
-    sample and a step that would meet the tolerance (the error scales as h⁵)."""
+    """A `step_too_large` warning when a fixed rk4 step's local error exceeds atol + rtol·|y| somewhere.
+
+    The error is `rk4_local_error` at up to STEP_CHECK_SAMPLES samples, evenly spread; the warning names
+    the worst sample and a step that would meet the tolerance (the error scales as h⁵). Only for
+    integrator.method rk4.
+
+    Args:
+        model: the Model (its integrator settings: method, step s, rtol, atol).
+        t: (S,) s, the sample times.
+        q: (S, n) rad (m on a prismatic joint), the stacked joint coordinates.
+        qd: (S, n) rad/s (m/s), the joint rates.
+
+    Returns:
+        list[RunWarning]: one warning (values: error_ratio, local_error, suggested_step_s), or none.
+    """
     s = model.integrator
     if s.method != "rk4" or len(t) < 2:
         return []
@@ -287,8 +461,19 @@ def step_size(model: Model, t, q, qd) -> list[RunWarning]:
 
 
 def collect(res, terms: ArmTerms) -> tuple[RunWarning, ...]:
-    """Every warning of a native SimResult (its integration events first, then the checks in the order
-    of the module docstring)."""
+    """Every warning of a native SimResult, its integration events first.
+
+    Then the checks in the order of the module docstring; the `ill_conditioned` check is skipped when the
+    run already has a `rank_deficient` event.
+
+    Args:
+        res: the `coopsim.forward.simulate.SimResult` (model, t, q, qd, cond, internal_wrench, initial,
+            events).
+        terms: its `ArmTerms`.
+
+    Returns:
+        tuple[RunWarning, ...]: the warnings.
+    """
     m = res.model
     found = list(res.events)
     if not any(w.kind == "rank_deficient" for w in found):

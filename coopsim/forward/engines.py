@@ -25,7 +25,8 @@ from coopsim.core.errors import ConstraintError, ConstraintRankWarning, Simulati
 from coopsim.core.model import Model, applied_torque, loop_controller, torque_at
 from coopsim.core.results import Projection
 from coopsim.core.spatial import rot_to_quat
-from coopsim.dynamics.closed_chain import ChainAcceleration, ChainTerms, chain_terms, forward_dynamics, position_residual
+from coopsim.dynamics.closed_chain import (ChainAcceleration, ChainTerms, chain_terms, forward_dynamics,
+                                           position_residual)
 from coopsim.dynamics.grasp import grasp_matrix, internal_wrench
 from coopsim.dynamics.integrate import IntegrationError, IntegratorStats, integrate
 from coopsim.dynamics.manifold import baumgarte_term, consistent_state, project_positions, project_velocities
@@ -58,34 +59,114 @@ SAMPLED = ("qdd", "tau", "object_pos", "object_quat", "object_twist", "object_ac
 
 
 class Engine(Protocol):
-    """The interface every engine implements (module docstring)."""
+    """The interface every engine implements (module docstring).
+
+    Attributes:
+        name: the engine's name: 'compiled', 'reference' or 'stages' (the key of ENGINES).
+    """
 
     name: str
 
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
-        """(q, qd) (n,) projected onto the loop-closure manifold; ConstraintError if it cannot be."""
+        """(q, qd) projected onto the loop-closure manifold.
+
+        Args:
+            model: the Model.
+            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+            qd: (n,) rad/s (m/s), the joint rates.
+
+        Returns:
+            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
+
+        Raises:
+            ConstraintError: the positions do not converge onto the manifold.
+        """
 
     def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
-        """The time loop from `init` over the output times t_out (N,) s; SimulationError on failure."""
+        """The time loop from `init` over the output times t_out.
+
+        Args:
+            model: the Model (its torques, integrator settings, duration).
+            init: the consistent initial state (Projection: q, qd (n,)).
+            t_out: (N,) s, the output times, from 0.
+            progress: called with the fraction done (0..1) as the run advances; None: no reports.
+            fixed_step: s, the compiled engine only: the method at fixed steps of at most this size (None:
+                as the integrator settings say).
+
+        Returns:
+            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events, and with a controller in
+            the compiled loop its torques and counters.
+
+        Raises:
+            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        """
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
-        """Every reported quantity (SAMPLED) at the states Y (N, 2n) (torques `tau` (N, n), or the model's)."""
+        """Every reported quantity (SAMPLED) at the states Y.
+
+        Args:
+            model: the Model.
+            t_out: (N,) s, the sample times.
+            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
+            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
+                there.
+
+        Returns:
+            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
+            name (`coopsim.forward.simulate.SimResult`), world axes.
+        """
 
 
 def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[ChainTerms, ChainAcceleration]:
-    """One evaluation of the reference closed-chain forward dynamics (eqs. 25–27) at (q, qd) (n,)
-    with torques tau (n,) N·m, Baumgarte stabilization included when selected."""
+    """One evaluation of the reference closed-chain forward dynamics (eqs. 25–27).
+
+    Baumgarte stabilization is included when integrator.stabilization selects it.
+
+    Args:
+        model: the Model.
+        q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+        qd: (n,) rad/s (m/s), the joint rates.
+        tau: (n,) N·m (N on a prismatic joint), the joint torques.
+
+    Returns:
+        tuple[ChainTerms, ChainAcceleration]: the terms of the state and its accelerations (θ̈, grasp
+        wrenches, object acceleration, cond and rank of Λ𝐈⁻¹Λᵀ).
+
+    Raises:
+        ConstraintError: the closed-chain mass matrix 𝐈 is not positive definite.
+    """
     terms = chain_terms(model, q, qd)
     stab = baumgarte_term(model, q, terms.Lam_qd) if model.integrator.stabilization == "baumgarte" else None
     return terms, forward_dynamics(model, terms, tau, stab)
 
 
 def rank_reason(rank: int, cond: float) -> str:
+    """The one-line reason of a rank-deficient constraint matrix.
+
+    Args:
+        rank: the numerical rank of Λ𝐈⁻¹Λᵀ.
+        cond: its condition number.
+
+    Returns:
+        str: 'constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank …, cond …)'.
+    """
     return f"constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient (rank {rank}, cond {cond:.3g})"
 
 
 def rank_event(t: float, q: np.ndarray, rank: int, cond: float, stacklevel: int) -> RunWarning:
-    """The rank-deficiency warning (a ConstraintRankWarning now, a RunWarning on the result)."""
+    """The rank-deficiency warning: a ConstraintRankWarning now, a RunWarning on the result.
+
+    Args:
+        t: s, the time of the rank loss.
+        q: (n,) rad (m on a prismatic joint), the stacked joint coordinates there.
+        rank: the numerical rank of Λ𝐈⁻¹Λᵀ.
+        cond: its condition number.
+        stacklevel: the stack level of the Python warning, counted from the caller (the caller's own
+            frame is 1).
+
+    Returns:
+        RunWarning: a 'rank_deficient' warning (values: rank, condition_number).
+    """
     reason = rank_reason(rank, cond) + "; using minimum-norm grasp wrenches"
     warnings.warn(f"at {describe_state(t, q)}: {reason}", ConstraintRankWarning, stacklevel=stacklevel + 1)
     return run_warning("rank_deficient", t, q, reason, rank=rank, condition_number=cond)
@@ -101,7 +182,8 @@ def _step_bound(model: Model) -> float:
     return s.step if s.method == "rk4" else (np.inf if s.max_step is None else s.max_step)
 
 
-def _reference_loop(model: Model, init: Projection, t_out: np.ndarray, rhs, project) -> tuple[np.ndarray, IntegratorStats]:
+def _reference_loop(model: Model, init: Projection, t_out: np.ndarray, rhs,
+                    project) -> tuple[np.ndarray, IntegratorStats]:
     """`coopsim.dynamics.integrate` over rhs and project (the latter with projection stabilization
     only); an IntegrationError becomes a SimulationError naming the time and configuration."""
     s, n = model.integrator, model.n_total
@@ -132,14 +214,50 @@ def _torques_at(model: Model, t_out: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 
 class ReferenceEngine:
-    """The plain-NumPy stages in the reference time loop (module docstring)."""
+    """The plain-NumPy stages in the reference time loop (module docstring).
+
+    Attributes:
+        name: 'reference'.
+    """
 
     name = "reference"
 
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        """(q, qd) projected onto the loop-closure manifold (`coopsim.dynamics.manifold.consistent_state`).
+
+        Args:
+            model: the Model.
+            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+            qd: (n,) rad/s (m/s), the joint rates.
+
+        Returns:
+            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
+
+        Raises:
+            ConstraintError: the positions do not converge onto the manifold.
+        """
         return consistent_state(model, q, qd)
 
     def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        """The reference time loop (`coopsim.dynamics.integrate`) over `forward`, landing on every output time.
+
+        Projection stabilization projects after each step; a rank-deficient Λ𝐈⁻¹Λᵀ warns once (a
+        ConstraintRankWarning and a 'rank_deficient' event) or, with integrator.on_rank_deficiency: error,
+        stops the run.
+
+        Args:
+            model: the Model (its torques, integrator settings, duration).
+            init: the consistent initial state (Projection: q, qd (n,)).
+            t_out: (N,) s, the output times, from 0.
+            progress: called with the fraction done (0..1) as the run advances; None: no reports.
+            fixed_step: s, not used (the step is the integrator settings').
+
+        Returns:
+            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events (tau None).
+
+        Raises:
+            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        """
         n, events = model.n_total, []
 
         def rhs(t, y):
@@ -171,6 +289,19 @@ class ReferenceEngine:
         return Run(Y, stats, tuple(events))
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
+        """Every reported quantity (SAMPLED) at the states Y, one reference evaluation per sample.
+
+        Args:
+            model: the Model.
+            t_out: (N,) s, the sample times.
+            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
+            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
+                at (t, q, qd).
+
+        Returns:
+            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
+            name (`coopsim.forward.simulate.SimResult`), world axes.
+        """
         n, N, r = model.n_total, len(t_out), model.r
         out = {k: np.zeros((N,) + shape) for k, shape in [
             ("qdd", (n,)), ("tau", (n,)), ("object_pos", (3,)), ("object_quat", (4,)), ("object_twist", (6,)),
@@ -205,13 +336,32 @@ def _compiled_projection(model: Model, q: np.ndarray, qd: np.ndarray) -> Project
 
 
 class CompiledEngine:
-    """The whole time loop compiled (module docstring). With an in-the-loop controller the loop runs on
-    the controller's model (its torque tables, the command added at every stage), lands on every
-    output time, and the samples' torques are the controller's."""
+    """The whole time loop compiled (module docstring).
+
+    With an in-the-loop controller the loop runs on the controller's model (its torque tables, the
+    command added at every stage), lands on every output time, and the samples' torques are the
+    controller's.
+
+    Attributes:
+        name: 'compiled'.
+    """
 
     name = "compiled"
 
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        """(q, qd) projected onto the loop-closure manifold, compiled (`coopsim.compiled.api.consistent_state`).
+
+        Args:
+            model: the Model.
+            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+            qd: (n,) rad/s (m/s), the joint rates.
+
+        Returns:
+            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
+
+        Raises:
+            ConstraintError: the positions do not converge onto the manifold.
+        """
         return _compiled_projection(model, q, qd)
 
     @staticmethod
@@ -220,6 +370,27 @@ class CompiledEngine:
         return model if ctrl is None else ctrl.model
 
     def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        """The compiled time loop (`coopsim.compiled.api.integrate_chain`, dense output).
+
+        rk4 runs at integrator.step; with a controller in the loop the controller is evaluated at every
+        stage, the steps land on every output time, and the run returns the controller's torques at the
+        samples and its evaluation counters.
+
+        Args:
+            model: the Model (its torques, integrator settings, duration).
+            init: the consistent initial state (Projection: q, qd (n,)).
+            t_out: (N,) s, the output times, from 0.
+            progress: called with the fraction done (0..1) as the run advances; None: no reports.
+            fixed_step: s, the method (DOP853 or DOPRI5 too) at fixed steps of at most this size; None: rk4 at
+                integrator.step, the others adaptive.
+
+        Returns:
+            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events, and with a controller in
+            the loop its torques (N, n) N·m at t_out and its evaluation counters.
+
+        Raises:
+            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        """
         from coopsim.compiled import api
 
         s, n = model.integrator, model.n_total
@@ -245,6 +416,19 @@ class CompiledEngine:
         return Run(run.Y, stats, events, ctrl.loop_torques(t_out, run.Y[:, :n], run.Y[:, n:]), counts)
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
+        """Every reported quantity (SAMPLED) at the states Y, compiled, on the model the loop ran on.
+
+        Args:
+            model: the Model.
+            t_out: (N,) s, the sample times.
+            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
+            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the torque tables of
+                the model the loop ran on, at t_out.
+
+        Returns:
+            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
+            name (`coopsim.forward.simulate.SimResult`), world axes.
+        """
         return _compiled_samples(self._kernel_model(model), t_out, Y, tau)
 
     @staticmethod
@@ -265,15 +449,53 @@ class CompiledEngine:
 
 
 class StagesEngine:
-    """The reference time loop over the compiled stage kernels (module docstring): the compiled
-    closed-chain evaluation and projection at every stage, the torques evaluated in Python there."""
+    """The reference time loop over the compiled stage kernels (module docstring).
+
+    The compiled closed-chain evaluation and projection at every stage, the torques evaluated in
+    Python there.
+
+    Attributes:
+        name: 'stages'.
+    """
 
     name = "stages"
 
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
+        """(q, qd) projected onto the loop-closure manifold, compiled (`coopsim.compiled.api.consistent_state`).
+
+        Args:
+            model: the Model.
+            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
+            qd: (n,) rad/s (m/s), the joint rates.
+
+        Returns:
+            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
+
+        Raises:
+            ConstraintError: the positions do not converge onto the manifold.
+        """
         return _compiled_projection(model, q, qd)
 
     def run(self, model: Model, init: Projection, t_out: np.ndarray, progress, fixed_step: float | None) -> Run:
+        """The reference time loop over the compiled evaluation, the torques evaluated in Python.
+
+        `coopsim.dynamics.integrate` over `coopsim.compiled.api.forward`. Projection stabilization
+        projects after each step (compiled); a rank-deficient Λ𝐈⁻¹Λᵀ warns once unless
+        integrator.on_rank_deficiency is error, and any other failure code stops the run.
+
+        Args:
+            model: the Model (its torques, integrator settings, duration).
+            init: the consistent initial state (Projection: q, qd (n,)).
+            t_out: (N,) s, the output times, from 0.
+            progress: called with the fraction done (0..1) as the run advances; None: no reports.
+            fixed_step: s, not used (the step is the integrator settings').
+
+        Returns:
+            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events (tau None).
+
+        Raises:
+            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        """
         from coopsim.compiled import api
 
         n, events = model.n_total, []
@@ -297,6 +519,19 @@ class StagesEngine:
         return Run(Y, stats, tuple(events))
 
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
+        """Every reported quantity (SAMPLED) at the states Y, compiled.
+
+        Args:
+            model: the Model.
+            t_out: (N,) s, the sample times.
+            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
+            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
+                at (t, q, qd), evaluated in Python.
+
+        Returns:
+            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
+            name (`coopsim.forward.simulate.SimResult`), world axes.
+        """
         return _compiled_samples(model, t_out, Y, _torques_at(model, t_out, Y) if tau is None else tau)
 
 

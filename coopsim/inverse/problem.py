@@ -29,18 +29,30 @@ class InverseError(CoopsimError):
 
 
 class InverseRankWarning(ConstraintRankWarning):
-    """The equations of a resolution lost rank at some samples, by the forward model's rule (the
-    scenario's integrator.rank_tol on the relative eigenvalues of the Gram matrix, as for Λ𝐈⁻¹Λᵀ): the
-    minimum-norm solution is used there; the message names the first times and configurations."""
+    """The equations of a resolution lost rank at some samples: the minimum-norm solution is used there.
+
+    Rank is judged by the forward model's rule (the scenario's integrator.rank_tol on the relative
+    eigenvalues of the Gram matrix, as for Λ𝐈⁻¹Λᵀ); the message names the first times and
+    configurations.
+    """
 
 
 class SampleFailureWarning(UserWarning):
-    """A resolution has no solution at some samples (e.g. 'bounded': an infeasible bound): they are
-    left out (nan) and listed in InverseResult.failures; the other samples are exact."""
+    """A resolution has no solution at some samples: they are left out (nan).
+
+    E.g. 'bounded' with an infeasible bound. The samples are listed in InverseResult.failures; the other
+    samples are exact.
+    """
 
 
 class SampleFailure(NamedTuple):
-    """A sample a resolution could not solve: index into the trajectory, time s, reason."""
+    """A sample a resolution could not solve.
+
+    Attributes:
+        index: the sample's index into the trajectory (0-based).
+        time: s, the sample's time.
+        reason: why it has no solution (e.g. 'infeasible').
+    """
 
     index: int
     time: float
@@ -48,7 +60,15 @@ class SampleFailure(NamedTuple):
 
 
 def failure_text(failures: list[tuple[float, str]], shown: int = 3) -> str:
-    """'t=0.35 s (infeasible), …' for the first `shown` of (time s, reason) pairs."""
+    """'t=0.35 s (infeasible), …' for the first `shown` of (time, reason) pairs.
+
+    Args:
+        failures: the (time s, reason) pairs.
+        shown: how many are named; ', ...' follows when there are more.
+
+    Returns:
+        str: the one-line list.
+    """
     text = ", ".join(f"t={t:.6g} s ({reason})" for t, reason in failures[:shown])
     return text + (", ..." if len(failures) > shown else "")
 
@@ -56,16 +76,39 @@ def failure_text(failures: list[tuple[float, str]], shown: int = 3) -> str:
 @dataclass(frozen=True, eq=False)
 class InverseProblem:
     """Per-sample terms of the inverse dynamics along a trajectory (N samples, n joints, r arms, k rows).
-    t (N,) s; q, qd, qdd (N, n); tau_arms (N, n) N·m = I_m θ̈_m + h_m stacked; JT (N, n, rk) =
-    blockdiag((S J_m)ᵀ); A (N, k, rk) = [S W_m Sᵀ]; y (N, k) = S Y (N, N·m) for the model's object;
-    y_unit (N, k) = y per kg of object mass (object scaled at constant geometry: Y ∝ m_o);
-    y_payload (N, k) per kg of point payload at `payload_position` (object frame), or None;
-    W (N, r, 6, 6) grasp matrices; p_C (N, 3) (world, for output only); R_o (N, 3, 3); twist, acc
-    (N, 6) object [v_C; ω], [v̇_C; ω̇]; grasp_offset (N, r, 3) grasp points relative to C (p_grasp − p_C,
-    formed without world positions); rows S (k, 6); normal (3,) plane normal or None; gravity (3,);
-    mass kg; inertia (3, 3) object frame; box (3,); grasp_pos (r, 3) object frame; rank_tol: the
-    scenario's integrator.rank_tol, the relative eigenvalue below which a Gram matrix of the equations
-    counts as rank-deficient (as for the forward model's Λ𝐈⁻¹Λᵀ)."""
+
+    World axes and SI units unless stated.
+
+    Attributes:
+        t: (N,) s, the sample times.
+        q: (N, n) rad (m on a prismatic joint), the stacked joint coordinates θ.
+        qd: (N, n) rad/s (m/s), θ̇.
+        qdd: (N, n) rad/s² (m/s²), θ̈.
+        tau_arms: (N, n) N·m (N on a prismatic joint), I_m θ̈_m + h_m stacked (eq. 29, no object).
+        JT: (N, n, rk) Jᵀ = blockdiag((S J_m)ᵀ), the end-effector Jacobians in the rows S, transposed.
+        A: (N, k, rk) A = [S W_1 Sᵀ … S W_r Sᵀ].
+        y: (N, k) [N; N·m], y = S Y for the model's object (Y = M_o v̇_o + b_o at C).
+        y_unit: (N, k) [N/kg; N·m/kg], y per kg of object mass (object scaled at constant geometry:
+            Y ∝ m_o).
+        y_payload: (N, k) [N/kg; N·m/kg] per kg of point payload at `payload_position` (object frame),
+            or None.
+        W: (N, r, 6, 6) the grasp matrices W_m (eq. 2).
+        p_C: (N, 3) m, the object's centre of mass C (world, for output only).
+        R_o: (N, 3, 3) the object rotation, world ← object frame.
+        twist: (N, 6) [v_C (m/s); ω (rad/s)], the object's twist at C.
+        acc: (N, 6) [v̇_C (m/s²); ω̇ (rad/s²)], the object's acceleration at C.
+        grasp_offset: (N, r, 3) m, the grasp points relative to C (p_grasp − p_C, formed without world
+            positions).
+        rows: (k, 6) the constraint rows S.
+        normal: (3,) the plane normal of a planar scene, or None.
+        gravity: (3,) m/s².
+        mass: kg, the object's mass m_o.
+        inertia: (3, 3) kg·m², the object's inertia about C, object frame.
+        box: (3,) m, the object's box size along the object axes (zeros: none).
+        grasp_pos: (r, 3) m, the grasp points (end-effector frame origins), object frame.
+        rank_tol: the scenario's integrator.rank_tol, the relative eigenvalue below which a Gram matrix of
+            the equations counts as rank-deficient (as for the forward model's Λ𝐈⁻¹Λᵀ).
+    """
 
     t: np.ndarray
     q: np.ndarray
@@ -94,19 +137,29 @@ class InverseProblem:
 
     @property
     def r(self) -> int:
+        """The number of arms r."""
         return self.W.shape[1]
 
     @property
     def k(self) -> int:
+        """The number of constraint rows k per grasp (3 planar, 6 spatial)."""
         return self.rows.shape[0]
 
 
 @dataclass(frozen=True, eq=False)
 class Resolution:
-    """A redundancy resolution, all but the net object wrench: method (a name in RESOLUTIONS); weights (n,)
-    diagonal of Q; passive (n,) bool (τ = 0 enforced by 'min_energy' and 'bounded'); masses (r,) kg and
-    inertias (r, 3, 3) kg·m² (object frame) of the non-squeezing virtual bodies; force_bound N,
-    moment_bound N·m and bound_definition ('nonsqueezing' | 'paper') of 'bounded'."""
+    """A redundancy resolution, all but the net object wrench.
+
+    Attributes:
+        method: a name in RESOLUTIONS (`coopsim.inverse.resolutions`).
+        weights: (n,) the diagonal of Q (the cost ½ τᵀQτ).
+        passive: (n,) bool, the passive joints (τ = 0 enforced by 'min_energy' and 'bounded').
+        masses: (r,) kg, the masses of the non-squeezing virtual bodies.
+        inertias: (r, 3, 3) kg·m² (object frame), the inertias of the non-squeezing virtual bodies.
+        force_bound: N, the internal-force bound of 'bounded' (inf: none).
+        moment_bound: N·m, the internal-moment bound of 'bounded' (inf: none).
+        bound_definition: 'nonsqueezing' | 'paper', the internal wrench the bounds of 'bounded' apply to.
+    """
 
     method: str
     weights: np.ndarray
@@ -120,10 +173,20 @@ class Resolution:
 
 @dataclass(frozen=True, eq=False)
 class InverseResult:
-    """One resolution along the trajectory: t (N,) s; tau (N, n) N·m; grasp_wrench (N, r, 6) F_e^m;
-    internal_paper and internal_nonsqueezing (N, r, 6) internal wrench at C by each definition;
-    cost (N,) ½ τᵀQτ (N²·m²); f (N, rk) grasp wrenches in the rows S; failures: the samples it could
-    not solve (SampleFailure; every array is nan there)."""
+    """One resolution along the trajectory (N samples, n joints, r arms, k rows), world axes.
+
+    Attributes:
+        method: the resolution's name (a key of RESOLUTIONS).
+        t: (N,) s, the sample times.
+        tau: (N, n) N·m (N on a prismatic joint), the joint torques.
+        grasp_wrench: (N, r, 6) [N; N·m], F_e^m, applied by EE m to the object at the EE point.
+        internal_paper: (N, r, 6) [N; N·m], the internal wrench at C by the paper's definition (W⁺).
+        internal_nonsqueezing: (N, r, 6) [N; N·m], the internal wrench at C by the non-squeezing
+            definition.
+        cost: (N,) ½ τᵀQτ (N²·m²).
+        f: (N, rk) [N; N·m], the grasp wrenches in the rows S, arm after arm.
+        failures: the samples it could not solve (SampleFailure; every array is nan there).
+    """
 
     method: str
     t: np.ndarray
@@ -174,17 +237,44 @@ def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.nd
 
 
 def payload_wrench(rho: np.ndarray, twist: np.ndarray, acc: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Net wrench at C (…, 6) needed per kg of a point mass at ρ = p_P − p_C (…, 3) (world axes; twist,
-    acc (…, 6)): a_P = a_C + ω̇ × ρ + ω × (ω × ρ), Y_P = [a_P − g; ρ × (a_P − g)]."""
+    """Net wrench at C needed per kg of a point mass at ρ = p_P − p_C.
+
+    a_P = a_C + ω̇ × ρ + ω × (ω × ρ), Y_P = [a_P − g; ρ × (a_P − g)].
+
+    Args:
+        rho: (…, 3) m, ρ = p_P − p_C, world axes.
+        twist: (…, 6) [v_C (m/s); ω (rad/s)], the object's twist at C, world axes.
+        acc: (…, 6) [v̇_C (m/s²); ω̇ (rad/s²)], the object's acceleration at C, world axes.
+        g: (3,) m/s², gravity, world axes.
+
+    Returns:
+        np.ndarray: (…, 6) [N/kg; N·m/kg], Y_P at C, world axes.
+    """
     a = rigid_acceleration(acc[..., :3], twist[..., 3:], acc[..., 3:], rho) - g
     return np.concatenate([a, cross(rho, a)], axis=-1)
 
 
 def torques_of(prob: InverseProblem, f: np.ndarray) -> np.ndarray:
-    """τ (N, n) = τ_arms + Jᵀ f (eq. 28 solved for τ)."""
+    """τ = τ_arms + Jᵀ f (eq. 28 solved for τ).
+
+    Args:
+        prob: the InverseProblem (N samples).
+        f: (N, rk) [N; N·m], the grasp wrenches in the rows S, arm after arm, world axes.
+
+    Returns:
+        np.ndarray: (N, n) N·m (N on a prismatic joint), the joint torques.
+    """
     return prob.tau_arms + np.einsum("nij,nj->ni", prob.JT, f)
 
 
 def grasp_wrenches(prob: InverseProblem, f: np.ndarray) -> np.ndarray:
-    """F_e (N, r, 6) = Sᵀ f_m."""
+    """F_e^m = Sᵀ f_m for every arm.
+
+    Args:
+        prob: the InverseProblem (N samples, r arms, rows S).
+        f: (N, rk) [N; N·m], the grasp wrenches in the rows S, arm after arm, world axes.
+
+    Returns:
+        np.ndarray: (N, r, 6) [N; N·m], F_e^m applied by EE m to the object at the EE point, world axes.
+    """
     return np.einsum("ki,nmk->nmi", prob.rows, f.reshape(len(f), prob.r, prob.k))

@@ -43,12 +43,22 @@ def _bounded(prob, y, res):
 
 
 class ResolutionMethod(NamedTuple):
-    """One redundancy resolution: name; distribute(prob, y, res) → (f, failures) — its pure function:
-    grasp wrenches f (N, rk) for the net object wrenches y (N, k) of an `coopsim.inverse.problem.InverseProblem`
-    with the settings of a `coopsim.inverse.problem.Resolution`, and the samples it could not solve
-    (SampleFailure tuple, nan in f); label (plot legends); color (matplotlib); linear: the distribution is
-    linear in the net object wrench (fixed weights and virtual bodies), so the capacity has a closed form;
-    nonlinear_why: why it has none (the capacity's refusal); help: its words in `coopsim inverse --help`."""
+    """One redundancy resolution: its pure function and how the readers name and show it.
+
+    Attributes:
+        name: the method's name (the key of RESOLUTIONS, `coopsim inverse --method`).
+        distribute: its pure function, distribute(prob, y, res) → (f, failures): grasp wrenches f (N, rk)
+            [N; N·m] in the rows S, arm after arm, world axes, for the net object wrenches y (N, k) of an
+            `coopsim.inverse.problem.InverseProblem` with the settings of a
+            `coopsim.inverse.problem.Resolution`, and the samples it could not solve (SampleFailure tuple,
+            nan in f).
+        label: its name in plot legends.
+        color: its matplotlib colour.
+        linear: the distribution is linear in the net object wrench (fixed weights and virtual bodies), so
+            the capacity has a closed form.
+        nonlinear_why: why it has none (the capacity's refusal); empty for a linear one.
+        help: its words in `coopsim inverse --help`.
+    """
 
     name: str
     distribute: Callable
@@ -75,7 +85,17 @@ LINEAR_METHODS = tuple(k for k, m in RESOLUTIONS.items() if m.linear)  # those w
 
 
 def resolution_method(name: str) -> ResolutionMethod:
-    """The registered resolution `name` (ValueError naming the known ones otherwise)."""
+    """The registered resolution `name`.
+
+    Args:
+        name: a key of RESOLUTIONS ('paper', 'nonsqueezing', 'min_energy', 'bounded').
+
+    Returns:
+        ResolutionMethod: its registry entry.
+
+    Raises:
+        ValueError: an unknown name (the message names the known ones).
+    """
     try:
         return RESOLUTIONS[name]
     except KeyError:
@@ -83,5 +103,9 @@ def resolution_method(name: str) -> ResolutionMethod:
 
 
 def methods_help() -> str:
-    """'paper: …; nonsqueezing: …' — every resolution's help, for the CLI."""
+    """'paper: …; nonsqueezing: …' — every resolution's help, for the CLI.
+
+    Returns:
+        str: each method's `help`, in registry order, joined by '; '.
+    """
     return "; ".join(f"{k}: {m.help}" for k, m in RESOLUTIONS.items())

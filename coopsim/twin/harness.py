@@ -20,11 +20,19 @@ from coopsim.twin.mujoco_run import TwinResult, run_twin
 
 @dataclass(frozen=True, eq=False)
 class CrossValidation:
-    """Both runs and their comparison; control: the controller along the native and the twin run
-    (`coopsim.control.controller.Command` along the run, native first), None without a controller; replay: with a
-    controller, the twin driven open-loop by the native closed loop's torques (piecewise linear between
-    the native samples) compared with the native run — information, no thresholds (its error is the
-    tabulation's, and an unstable open loop, such as a pose held against gravity, drifts)."""
+    """Both runs and their comparison, and with a controller its records and an open-loop replay.
+
+    Attributes:
+        native: the native run (`coopsim.forward.simulate.SimResult`, closed loop with a controller).
+        twin: the MuJoCo twin's run (TwinResult) on the native output grid.
+        comparison: the agreement metrics of the two runs against the scenario's thresholds.
+        control: the controller along the native and the twin run (`coopsim.control.controller.Command`
+            of (N, …) arrays each, native first); None without a controller.
+        replay: with a controller, the twin driven open-loop by the native closed loop's torques
+            (piecewise linear between the native samples) compared with the native run — information, no
+            thresholds (its error is the tabulation's, and an unstable open loop, such as a pose held
+            against gravity, drifts); None without a controller.
+    """
 
     native: SimResult
     twin: TwinResult
@@ -35,8 +43,9 @@ class CrossValidation:
 
 def cross_validate(model: Model, duration: float | None = None, twin_model: Model | None = None,
                    progress: Callable[[str, float], None] | None = None) -> CrossValidation:
-    """Run the native model and its MuJoCo twin on the same torques (a `control:` section in the loop
-    of each) and compare them against the scenario's thresholds.
+    """Run the native model and its MuJoCo twin on the same torques and compare them.
+
+    A `control:` section runs in the loop of each; the comparison is against the scenario's thresholds.
 
     Args:
         model: the scenario's Model.
@@ -79,8 +88,15 @@ def _control_records(native: SimResult, twin: TwinResult, twin_model: Model) -> 
 
 
 def control_series(cv: CrossValidation) -> list:
-    """The log channels of the controllers (`coopsim.io.log.control_series`): /native/control and
-    /mujoco/control; none without a controller."""
+    """The log channels of the controllers (`coopsim.io.log.control_series`).
+
+    Args:
+        cv: the CrossValidation.
+
+    Returns:
+        list: the Series /native/control and /mujoco/control (`coopsim.io.log.Series`, at each run's
+        sample times); empty without a controller.
+    """
     if cv.control is None:
         return []
     law = cv.native.model.control.law

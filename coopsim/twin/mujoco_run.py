@@ -22,11 +22,22 @@ from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
 
 @dataclass(frozen=True, eq=False)
 class TwinResult(SampledMotion):
-    """MuJoCo twin trajectory sampled at t (N,) s: q, qd, qdd, tau (N, n) in coopsim's joint order;
-    object_pos (N, 3) m, object_quat (N, 4) [w, x, y, z], object_twist (N, 6) [v_C; ω] world axes;
-    weld_violation (N,) max |efc_pos| over the weld rows (m or rad); link_pos (N, n, 3) and
-    link_quat (N, n, 4) MuJoCo's link frame poses (xpos, xquat), joints stacked as q;
-    wall_time s (not logged)."""
+    """MuJoCo twin trajectory sampled at N times, in coopsim's joint order (n joints stacked arm by arm).
+
+    Attributes:
+        t: (N,) s, the sample times.
+        q: (N, n) rad (m on a prismatic joint), the joint coordinates.
+        qd: (N, n) rad/s (m/s), the joint rates.
+        qdd: (N, n) rad/s² (m/s²), the joint accelerations (MuJoCo's qacc).
+        tau: (N, n) N·m (N on a prismatic joint), the motor torques applied (MuJoCo's ctrl).
+        object_pos: (N, 3) m, the object's centre of mass C, world.
+        object_quat: (N, 4) [w, x, y, z], the object's orientation (object frame to world).
+        object_twist: (N, 6) [v_C (m/s); ω (rad/s)], the object's twist at C, world axes.
+        weld_violation: (N,) m or rad, max |efc_pos| over the weld rows.
+        link_pos: (N, n, 3) m, MuJoCo's link frame positions (xpos), world, joints stacked as q.
+        link_quat: (N, n, 4) [w, x, y, z], MuJoCo's link frame orientations (xquat), joints stacked as q.
+        wall_time: s, the time the run took (not logged).
+    """
 
     weld_violation: np.ndarray
     link_pos: np.ndarray
@@ -71,9 +82,25 @@ def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
 
 
 def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
-    """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out (whole multiples of
-    model.mujoco.timestep); `progress(fraction)` is called after each sample. A `control:` section runs
-    its controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4 stage."""
+    """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out.
+
+    The sample intervals are whole multiples of model.mujoco.timestep. A `control:` section runs its
+    controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4
+    stage.
+
+    Args:
+        model: the scenario's Model (the twin is built from it, `coopsim.twin.mjcf.build_spec`).
+        q0: (n,) rad (m on a prismatic joint), the initial joint coordinates (the consistent state).
+        qd0: (n,) rad/s (m/s), the initial joint rates.
+        t_out: (N,) s, the sample times, from 0.
+        progress: called with the fraction done ((i + 1) / N) after each sample; None: no reports.
+
+    Returns:
+        TwinResult: the twin's samples at t_out, world axes, SI.
+
+    Raises:
+        CoopsimError: mujoco.timestep does not divide the output intervals into whole steps.
+    """
     model = closed_loop(model)
     m = build_spec(model).compile()
     d = mujoco.MjData(m)
