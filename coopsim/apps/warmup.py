@@ -34,10 +34,10 @@ from dataclasses import replace
 import numpy as np
 from numba import types
 
-from coopsim.compiled import api, chain
+from coopsim.compiled import api, closed_chain, gibbs_appell, grasp, kinematics
 from coopsim.compiled.api import compile_pending, compiled, is_cached
 from coopsim.compiled.capacity import min_energy_mass_interval
-from coopsim.compiled.chain import chain_forward
+from coopsim.compiled.closed_chain import chain_forward
 from coopsim.compiled.manifold import project_state
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T, _new_workspace
 from coopsim.control.controller import Controller
@@ -81,10 +81,11 @@ def _signatures() -> dict:
     indices and contiguous float64 vectors (a test checks that no caller compiles another one)."""
 
     vec, i = types.float64[::1], types.int64
-    return {chain.arm_kinematics: (i, vec), chain.arm_jacobian: (i,), chain.arm_bias: (i, vec),
-            chain.arm_mass_matrix: (i,), chain.object_pose: (), chain.object_dynamics: (vec,),
-            chain.constraint_jacobian: (), chain.constraint_bias: (), chain.baumgarte_rhs: (vec, vec),
-            chain.chain_solve: (vec, vec), chain.chain_forward: (vec, vec, vec, vec)}
+    return {kinematics.arm_kinematics: (i, vec), kinematics.arm_jacobian: (i,), gibbs_appell.arm_bias: (i, vec),
+            gibbs_appell.arm_mass_matrix: (i,), grasp.object_pose: (), grasp.object_dynamics: (vec,),
+            closed_chain.constraint_jacobian: (), closed_chain.constraint_bias: (),
+            closed_chain.baumgarte_rhs: (vec, vec), closed_chain.chain_solve: (vec, vec),
+            closed_chain.chain_forward: (vec, vec, vec, vec)}
 
 
 def _named(names) -> dict:

@@ -4,30 +4,33 @@ The plain-NumPy stages (`coopsim.dynamics`: kinematics, gibbs_appell, grasp, clo
 integrate) are the readable reference; this package runs the same equations compiled, with no
 Python and no allocation per evaluation, and is what the commands use. Stages, in the order they run:
 
-    toolchain/     how numba compiles the package, fenced off from the stages:
+    toolchain/      how numba compiles the package, fenced off from the stages:
       jit.py         the two compilation modes: internal kernels and entries called from Python
       linking.py     kernels compiled to LLVM IR only, made machine code inside the entries that call them
       resolution.py  numba's call-type resolution, remembered (each operation's signature found once)
       loading.py     compiled code loaded from numba's cache without numba's compiler registries
       numba_range.py the numba versions those three follow (they act on coopsim's functions only)
       scope.py       the per-thread scope that keeps them to coopsim's compiles
-    packing.py     Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
-    structs.py     both as numba StructRefs (passed by reference, fields read without reference
-                   counting), built by cached constructors
-    linalg.py      small in-place factorizations (pivoted Cholesky with a certified rank test, eigen
-                   fallback)
-    spatial.py     3-vector / 3×3 helpers, rotation log, quaternion
-    chain.py       kinematics → Gibbs–Appell arm terms → object/grasp terms → closed-chain solve
-    schur.py       the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
-                   three arms or more
-    manifold.py    loop-closure residual Φ, projection of positions and rates
-    control.py     controllers in the loop: joint PD, object-space computed torque, the linear
-                   distributions of the inverse dynamics, squeeze, grasp feedback, saturation
-    integrate.py   the DOP853 / DOPRI5 (dense output) / RK4 time loop (tableaux: coopsim.core.tableaux),
-                   torque tables, stabilization
-    sample.py      many states at once (θ̈, every reported quantity), inverse-dynamics terms
-    ik.py          one arm's inverse kinematics and rates
-    api.py         the Python entry points (batches on threads, parameter sets) and error reporting
+    packing.py      Model → PackedModel (frozen arrays) and a Workspace of preallocated buffers
+    structs.py      both as numba StructRefs (passed by reference, fields read without reference
+                    counting), built by cached constructors
+    linalg.py       small in-place factorizations (pivoted Cholesky with a certified rank test, eigen
+                    fallback)
+    spatial.py      3-vector / 3×3 helpers, rotation log, quaternion
+    kinematics.py   stage 1: joint frames, link and end-effector poses, the Jacobian
+    gibbs_appell.py stage 2: each arm's bias forces and mass matrix
+    grasp.py        stage 3: the object's pose and its terms joined to the carrier arm
+    closed_chain.py stage 4: the constraint Jacobian and bias, the closed-chain solve
+    schur.py        the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
+                    three arms or more
+    manifold.py     loop-closure residual Φ, projection of positions and rates
+    control.py      controllers in the loop: joint PD, object-space computed torque, the linear
+                    distributions of the inverse dynamics, squeeze, grasp feedback, saturation
+    integrate.py    the DOP853 / DOPRI5 (dense output) / RK4 time loop (tableaux: coopsim.core.tableaux),
+                    torque tables, stabilization
+    sample.py       many states at once (θ̈, every reported quantity), inverse-dynamics terms
+    ik.py           one arm's inverse kinematics and rates
+    api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 
 The first compile, on two cores with no kernel compiled twice, is `coopsim.apps.warmup`'s.
 Tested against the reference stages at random states of every bundled scenario (stage terms ≤ 1e-12
@@ -59,7 +62,8 @@ def _import_kernels() -> None:
     previous = _numba_config.CACHE_DIR
     _numba_config.CACHE_DIR = _cache_dir()
     try:
-        from coopsim.compiled import api, chain, control, ik, integrate, linalg, manifold, sample, spatial, structs  # noqa: F401
+        from coopsim.compiled import (api, closed_chain, control, gibbs_appell, grasp, ik, integrate,  # noqa: F401
+                                      kinematics, linalg, manifold, sample, spatial, structs)
     finally:
         _numba_config.CACHE_DIR = previous
 

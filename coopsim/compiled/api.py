@@ -17,19 +17,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.core.errors import ConstraintError
-from coopsim.core.results import Projection
-from coopsim.core.model import Model
-from coopsim.compiled import capacity, chain, control, ik, integrate, manifold, sample
+from coopsim.compiled import capacity, closed_chain, control, ik, integrate, manifold, sample
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
+from coopsim.core.errors import ConstraintError
+from coopsim.core.model import Model
+from coopsim.core.results import Projection
 
 _CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
 
 REASONS = {
-    chain.NOT_PD: "closed-chain mass matrix is not positive definite",
-    chain.RANK_DEFICIENT: "constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient",
-    chain.NON_FINITE: "non-finite joint accelerations",
+    closed_chain.NOT_PD: "closed-chain mass matrix is not positive definite",
+    closed_chain.RANK_DEFICIENT: "constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient",
+    closed_chain.NON_FINITE: "non-finite joint accelerations",
     control.CONTROL_SINGULAR: "controller: singular equations (an arm's S J or the wrench distribution)",
     integrate.NON_FINITE_STATE: "non-finite state",
     integrate.STEP_COLLAPSED: "step size collapsed",

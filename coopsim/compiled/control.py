@@ -31,12 +31,13 @@ import numpy as np
 from numba import njit
 from numba.experimental import structref
 
-from coopsim.compiled.chain import OK, arm_terms, object_dynamics, object_pose
-from coopsim.compiled.toolchain.jit import entry, kernel
+from coopsim.compiled.closed_chain import OK, arm_terms
+from coopsim.compiled.grasp import object_dynamics, object_pose
 from coopsim.compiled.linalg import bisect, copy1, copy2, gauss_solve
 from coopsim.compiled.sample import object_acceleration, object_wrench
 from coopsim.compiled.spatial import axis_rotation, matmul3, matmul3_T, rot_log
-from coopsim.compiled.structs import _F, _I, _f1, _f2, _f3, _i1, StructType
+from coopsim.compiled.structs import _F, _I, StructType, _f1, _f2, _f3, _i1
+from coopsim.compiled.toolchain.jit import entry, kernel
 
 JOINT_PD, COMPUTED_TORQUE = 0, 1
 COMP_NONE, COMP_GRAVITY, COMP_BIAS = 0, 1, 2

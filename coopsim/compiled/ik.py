@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.compiled.chain import arm_bias, arm_jacobian, arm_kinematics
-from coopsim.compiled.toolchain.jit import entry, kernel
+from coopsim.compiled.gibbs_appell import arm_bias
+from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
 from coopsim.compiled.linalg import lu_solve, singular_ratio
 from coopsim.compiled.manifold import max_abs
 from coopsim.compiled.spatial import matmul3_T, rot_log
+from coopsim.compiled.toolchain.jit import entry, kernel
 
 SOLVED, SINGULAR, NOT_CONVERGED = 0, 1, 2
 

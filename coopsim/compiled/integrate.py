@@ -30,13 +30,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.core import tableaux
-from coopsim.compiled.chain import OK, RANK_DEFICIENT, chain_forward
+from coopsim.compiled.closed_chain import OK, RANK_DEFICIENT, chain_forward
 from coopsim.compiled.control import feedback
-from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.compiled.linalg import bisect, copy1
 from coopsim.compiled.manifold import project_state
 from coopsim.compiled.packing import STAB_PROJECTION
+from coopsim.compiled.toolchain.jit import entry, kernel
+from coopsim.core import tableaux
 
 DOP853, DOPRI5, RK4 = 0, 1, 2
 NON_FINITE_STATE, STEP_COLLAPSED, MAX_STEPS = 4, 5, 6
@@ -250,7 +250,7 @@ def rhs(P, W, L, ctl, t, y, dy):
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef): W.tau ← the torques applied, and every term of the
-            evaluation (`chain.chain_forward`) written.
+            evaluation (`closed_chain.chain_forward`) written.
         L: the loop (Loop StructRef): L.count[0] counted, L.stab scratch for the Baumgarte term, the rank
             warning (L.warn, warn_t, warn_cond, warn_y) or a failure recorded.
         ctl: None, or (Pc, Wc, C): the controller's compiled model, a workspace of its own and its record

@@ -6,15 +6,16 @@ solution, numerical rank from eigenvalues above rank_tol·λ_max). The proof is 
 of λ_min/λ_max from the factor: A⁻¹ = Pᵀ L⁻ᵀ L⁻¹ P, so λ_min = 1/‖A⁻¹‖₂ ≥ 1/‖L⁻¹‖_F², and
 λ_max ≤ trace A; the bound 1/(‖L⁻¹‖_F² trace A) is at most K² times below the true ratio, so the
 eigen-decomposition runs only for matrices within K² of the rank threshold (cost: K³/6 flops).
-(The block-diagonal mass matrix is factored inside `chain.chain_solve`.) The factorization and the
+(The block-diagonal mass matrix is factored inside `closed_chain.chain_solve`.) The factorization and the
 solve borrow their array arguments on entry (`structs.borrow`): no reference counting on them.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from coopsim.compiled.toolchain.jit import kernel
+
 from coopsim.compiled.structs import borrow
+from coopsim.compiled.toolchain.jit import kernel
 
 
 @kernel

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.compiled.chain import arm_jacobian, arm_kinematics, loop_residual, object_pose, constraint_jacobian
-from coopsim.compiled.toolchain.jit import entry, kernel
+from coopsim.compiled.closed_chain import constraint_jacobian, loop_residual
+from coopsim.compiled.grasp import object_pose
+from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
 from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from coopsim.compiled.schur import constraint_trace, schur_factor, schur_solve
 from coopsim.compiled.structs import borrow
+from coopsim.compiled.toolchain.jit import entry, kernel
 
 PROJECTION_FAILED = 7
 

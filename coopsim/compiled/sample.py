@@ -15,12 +15,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled.chain import (arm_terms, chain_forward, constraint_matrix, loop_residual, object_dynamics,
-                                    object_pose)
-from coopsim.compiled.toolchain.jit import entry, kernel
+from coopsim.compiled.closed_chain import arm_terms, chain_forward, constraint_matrix, loop_residual
+from coopsim.compiled.grasp import object_dynamics, object_pose
 from coopsim.compiled.linalg import copy1, copy2, copy3, jacobi_eigh
 from coopsim.compiled.manifold import max_abs
 from coopsim.compiled.spatial import rot_to_quat
+from coopsim.compiled.toolchain.jit import entry, kernel
 
 
 class Samples(NamedTuple):
@@ -78,8 +78,8 @@ def object_acceleration(P, W, qdd, out):
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
-        W: the workspace (Workspace StructRef): W.J_o and W.Jd_o_qd (`chain.object_pose`,
-            `chain.object_dynamics`) read.
+        W: the workspace (Workspace StructRef): W.J_o and W.Jd_o_qd (`grasp.object_pose`,
+            `grasp.object_dynamics`) read.
         qdd: (N,) θ̈, rad/s² or m/s² (the carrier's rows read).
         out: (6,) written: [v̇_C; ω̇], m/s² and rad/s², world axes.
     """
@@ -139,7 +139,7 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
-        W: the workspace (Workspace StructRef): W.F (`chain.chain_solve`) and W.s read; W.vec6 scratch.
+        W: the workspace (Workspace StructRef): W.F (`closed_chain.chain_solve`) and W.s read; W.vec6 scratch.
         Y: (6,) the object wrench M_o v̇_o + b_o at C (`object_wrench`), N and N·m, world axes;
             overwritten.
         F_e: (r, 6) written: the grasp wrenches [f; n] at the end-effectors, N and N·m, world axes.
@@ -198,7 +198,7 @@ def reported(P, W, i, qd, out, Yw, ev, V):
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
-        W: the workspace (Workspace StructRef) after `chain.chain_forward` at (θ, qd): read; W.phi, W.A,
+        W: the workspace (Workspace StructRef) after `closed_chain.chain_forward` at (θ, qd): read; W.phi, W.A,
             W.vec6, W.v3 and W.m3 overwritten.
         i: the sample's row.
         qd: (N,) rad/s or m/s, the stacked joint rates of the evaluation.

@@ -2,7 +2,7 @@
 
 Row group g of Λ (rows g·k … g·k + k − 1; m_g the g-th arm other than the carrier c) is zero outside
 the columns of m_g and c, and so is every matrix Y = Λ B with B block diagonal per arm (Y = Λ L⁻ᵀ for
-Λ𝐈⁻¹Λᵀ in `chain.chain_solve`, Y = Λ for ΛΛᵀ in the manifold projection). Hence
+Λ𝐈⁻¹Λᵀ in `closed_chain.chain_solve`, Y = Λ for ΛΛᵀ in the manifold projection). Hence
 
     A = Y Yᵀ = D + U Uᵀ,   D = blockdiag_g(Y_g Y_gᵀ) (k × k blocks, Y_g = Y[g rows, m_g columns]),
                            U = Y[:, carrier columns] (K × n_c),
@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopsim.compiled.toolchain.jit import kernel
 from coopsim.compiled.linalg import inverse_factor_norm2
+from coopsim.compiled.toolchain.jit import kernel
 
 SCHUR_MIN_RATIO = 1e-10
 

@@ -438,10 +438,10 @@ class CompiledEngine:
 
         reason = api.REASONS.get(run.status, f"failure code {run.status}")
         n = model.n_total
-        if run.status == api.chain.RANK_DEFICIENT:
+        if run.status == api.closed_chain.RANK_DEFICIENT:
             W = api.compiled(model).W
             reason += f" (rank {int(W.rank[0])}, cond {float(W.cond[0]):.3g})"
-        if run.status == api.chain.NON_FINITE:
+        if run.status == api.closed_chain.NON_FINITE:
             tau = torque_at(model.torques, run.fail_t)
             reason += (f" (torques up to {np.max(np.abs(tau)):.3g} N·m, rates up to "
                        f"{np.max(np.abs(run.fail_y[n:])):.3g} rad/s)")
@@ -504,7 +504,7 @@ class StagesEngine:
             q, qd = y[:n], y[n:]
             _report(progress, model, t)
             ev = api.forward(model, q, qd, applied_torque(model.torques, t, q, qd))
-            if ev.status == api.chain.RANK_DEFICIENT and model.integrator.on_rank_deficiency != "error":
+            if ev.status == api.closed_chain.RANK_DEFICIENT and model.integrator.on_rank_deficiency != "error":
                 if not events:
                     events.append(rank_event(t, q, ev.rank, float(api.compiled(model).W.cond[0]), stacklevel=2))
             elif ev.status:

@@ -180,7 +180,7 @@ STOCK = textwrap.dedent('''
     import numpy as np
     from numba.core import caching, cpu
     from numba.core.types import functions
-    from coopsim.compiled import api, chain, ik
+    from coopsim.compiled import api, ik, kinematics
     from coopsim.compiled.toolchain import jit
     from coopsim.compiled.toolchain import linking
     from coopsim.io.scenario import load_scenario
@@ -192,7 +192,7 @@ STOCK = textwrap.dedent('''
     sol = api.solve_arm(model, m, *[np.array(a) for a in arrays], max_iter=20)
     out.update(status=sol.status, q=sol.q.tolist(), qd=sol.qd.tolist(), qdd=sol.qdd.tolist(),
                info=[sol.ratio, sol.det, sol.full_error])
-    (cres,) = chain.arm_kinematics.overloads.values()
+    (cres,) = kinematics.arm_kinematics.overloads.values()
     out["kernel_lazy"], out["kernel_finalized"] = linking.is_lazy(cres.library), cres.library._finalized
     out["cache_path"] = ik.arm_solve._cache.cache_path
     print(json.dumps(out))
