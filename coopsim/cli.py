@@ -667,8 +667,8 @@ def _closed_pipe() -> int:
 def console_main() -> None:
     """The `coopsim` console command (and `python -m coopsim.cli`): `main`, then leave at once.
 
-    Python's own shutdown costs about 0.4 s once the compiled kernels are loaded (numba's and LLVM's
-    modules, every module's cleanup) and does nothing a finished command needs: its outputs are
+    Python's own shutdown is slow once the compiled kernels are loaded (numba's and LLVM's modules,
+    every module's cleanup) and does nothing a finished command needs: its outputs are
     written, closed and renamed into place, its figure workers and clusters are joined. So after main
     returns, stdout and stderr are flushed and the process ends with os._exit(status). An exception
     that escapes main takes the normal way out (traceback, full shutdown)."""

@@ -44,9 +44,8 @@ from coopsim.report.inverse_report import json_safe
 
 CHECKPOINT = "points.jsonl"
 # Dask's housekeeping on the embedded cluster, made sparse for points that take about a second: no
-# statistical profiler (it takes the GIL every 10 ms: points ran up to 1.5x slower), no GIL monitor,
-# event-loop, system and memory checks every 0.2, 2 and 1 s instead of 20, 500 and 100 ms (measured on
-# 20 points of the paper capacity map: the cluster's own CPU time 2.6 s -> 1.0 s)
+# statistical profiler (it takes the GIL every 10 ms and slows the points), no GIL monitor, event-loop,
+# system and memory checks every 0.2, 2 and 1 s instead of 20, 500 and 100 ms.
 QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.system-monitor.gil.enabled": False,
          "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
          "distributed.worker.memory.monitor-interval": "1s"}

@@ -258,7 +258,7 @@ def _f(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-MIN_PER_THREAD = 200   # states per thread below which a batch runs on the calling thread (a pool costs ~0.5 ms)
+MIN_PER_THREAD = 200   # states per thread below which a batch runs on the calling thread (the pool's cost outweighs it)
 
 
 def threads(S: int | None = None) -> int:

@@ -232,8 +232,9 @@ def forward_dynamics(model: Model, terms: ChainTerms, tau: np.ndarray,
         ConstraintError: the closed-chain mass matrix 𝐈 is not positive definite.
     """
     # 𝐈 = L Lᵀ (LAPACK potrf: fails unless 𝐈 is positive definite) and both solves on that factor
-    # (potrs; scipy's solve_triangular would cost ~10× more on these tiny matrices). Imported here: the
-    # commands run the compiled engine and need not load scipy.linalg (about 0.3 s) to start.
+    # (potrs; scipy's solve_triangular costs far more on these tiny matrices). Imported here: the
+    # commands run the compiled engine and need not load scipy.linalg to start (DEFERRED,
+    # tests/cross/test_architecture.py).
     from scipy.linalg import cho_factor, cho_solve
 
     try:

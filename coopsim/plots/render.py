@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 DPI = 110
-PNG_COMPRESSION = 1   # zlib level: about 0.1 s less per figure than the default 6, files about 10 % larger
+PNG_COMPRESSION = 1   # zlib level: faster per figure than the default 6, for slightly larger files
 WORKER_NICENESS = 19   # the workers yield the CPU to the command while it computes
 # Margins and gaps (inches) around a grid of axes with 10-point tick labels, axis labels and titles of
 # up to two lines: matplotlib's tight_layout finds them by drawing every text once more (about half
