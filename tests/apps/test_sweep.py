@@ -22,7 +22,7 @@ pytest.importorskip("dask.distributed")
 pytest.importorskip("pyarrow")
 
 PAPER = SCENARIOS / "paper_planar_2x3.yaml"
-# a 2 × 3 grid of the paper scene's capacity over 1 s of its forward run (about 0.05 s a point)
+# a 2 × 3 grid of the paper scene's capacity over 1 s of its forward run
 GRID = {"name": "grid", "scenario": str(PAPER),
         "axes": [{"path": "object.box.density", "values": [2700, 7850]},
                  {"path": "arms[0].torque.constant[0]", "name": "tau1", "linspace": [0.3, 0.7, 3]}],
