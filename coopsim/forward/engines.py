@@ -213,7 +213,7 @@ def _torques_at(model: Model, t_out: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return np.array([applied_torque(model.torques, ti, y[:n], y[n:]) for ti, y in zip(t_out, Y)])
 
 
-class ReferenceEngine:
+class ReferenceEngine(Engine):
     """The plain-NumPy stages in the reference time loop (module docstring).
 
     Attributes:
@@ -225,16 +225,7 @@ class ReferenceEngine:
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
         """(q, qd) projected onto the loop-closure manifold (`coopsim.dynamics.manifold.consistent_state`).
 
-        Args:
-            model: the Model.
-            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
-            qd: (n,) rad/s (m/s), the joint rates.
-
-        Returns:
-            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
-
-        Raises:
-            ConstraintError: the positions do not converge onto the manifold.
+        Args, Returns, Raises: as `Engine.project`.
         """
         return consistent_state(model, q, qd)
 
@@ -245,18 +236,9 @@ class ReferenceEngine:
         ConstraintRankWarning and a 'rank_deficient' event) or, with integrator.on_rank_deficiency: error,
         stops the run.
 
-        Args:
-            model: the Model (its torques, integrator settings, duration).
-            init: the consistent initial state (Projection: q, qd (n,)).
-            t_out: (N,) s, the output times, from 0.
-            progress: called with the fraction done (0..1) as the run advances; None: no reports.
-            fixed_step: s, not used (the step is the integrator settings').
+        fixed_step is not used (the step is the integrator settings'); the Run's tau is None.
 
-        Returns:
-            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events (tau None).
-
-        Raises:
-            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        Args, Returns, Raises: as `Engine.run`.
         """
         n, events = model.n_total, []
 
@@ -291,16 +273,9 @@ class ReferenceEngine:
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         """Every reported quantity (SAMPLED) at the states Y, one reference evaluation per sample.
 
-        Args:
-            model: the Model.
-            t_out: (N,) s, the sample times.
-            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
-            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
-                at (t, q, qd).
+        tau None: the model's torques at (t, q, qd).
 
-        Returns:
-            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
-            name (`coopsim.forward.simulate.SimResult`), world axes.
+        Args, Returns, Raises: as `Engine.sample`.
         """
         n, N, r = model.n_total, len(t_out), model.r
         out = {k: np.zeros((N,) + shape) for k, shape in [
@@ -335,7 +310,7 @@ def _compiled_projection(model: Model, q: np.ndarray, qd: np.ndarray) -> Project
     return api.consistent_state(model, q, qd)
 
 
-class CompiledEngine:
+class CompiledEngine(Engine):
     """The whole time loop compiled (module docstring).
 
     With an in-the-loop controller the loop runs on the controller's model (its torque tables, the
@@ -351,16 +326,7 @@ class CompiledEngine:
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
         """(q, qd) projected onto the loop-closure manifold, compiled (`coopsim.compiled.api.consistent_state`).
 
-        Args:
-            model: the Model.
-            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
-            qd: (n,) rad/s (m/s), the joint rates.
-
-        Returns:
-            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
-
-        Raises:
-            ConstraintError: the positions do not converge onto the manifold.
+        Args, Returns, Raises: as `Engine.project`.
         """
         return _compiled_projection(model, q, qd)
 
@@ -376,20 +342,11 @@ class CompiledEngine:
         stage, the steps land on every output time, and the run returns the controller's torques at the
         samples and its evaluation counters.
 
-        Args:
-            model: the Model (its torques, integrator settings, duration).
-            init: the consistent initial state (Projection: q, qd (n,)).
-            t_out: (N,) s, the output times, from 0.
-            progress: called with the fraction done (0..1) as the run advances; None: no reports.
-            fixed_step: s, the method (DOP853 or DOPRI5 too) at fixed steps of at most this size; None: rk4 at
-                integrator.step, the others adaptive.
+        fixed_step: the method (DOP853 or DOPRI5 too) at fixed steps of at most this size; None: rk4 at
+        integrator.step, the others adaptive. With a controller in the loop the Run carries its torques
+        (N, n) N·m at t_out and its evaluation counters.
 
-        Returns:
-            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events, and with a controller in
-            the loop its torques (N, n) N·m at t_out and its evaluation counters.
-
-        Raises:
-            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        Args, Returns, Raises: as `Engine.run`.
         """
         from coopsim.compiled import api
 
@@ -418,16 +375,9 @@ class CompiledEngine:
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         """Every reported quantity (SAMPLED) at the states Y, compiled, on the model the loop ran on.
 
-        Args:
-            model: the Model.
-            t_out: (N,) s, the sample times.
-            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
-            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the torque tables of
-                the model the loop ran on, at t_out.
+        tau None: the torque tables of the model the loop ran on, at t_out.
 
-        Returns:
-            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
-            name (`coopsim.forward.simulate.SimResult`), world axes.
+        Args, Returns, Raises: as `Engine.sample`.
         """
         return _compiled_samples(self._kernel_model(model), t_out, Y, tau)
 
@@ -448,7 +398,7 @@ class CompiledEngine:
         return reason
 
 
-class StagesEngine:
+class StagesEngine(Engine):
     """The reference time loop over the compiled stage kernels (module docstring).
 
     The compiled closed-chain evaluation and projection at every stage, the torques evaluated in
@@ -463,16 +413,7 @@ class StagesEngine:
     def project(self, model: Model, q: np.ndarray, qd: np.ndarray) -> Projection:
         """(q, qd) projected onto the loop-closure manifold, compiled (`coopsim.compiled.api.consistent_state`).
 
-        Args:
-            model: the Model.
-            q: (n,) rad (m on a prismatic joint), the stacked joint coordinates.
-            qd: (n,) rad/s (m/s), the joint rates.
-
-        Returns:
-            Projection: the consistent (q, qd), the corrections, max |Φ| before and after, the steps taken.
-
-        Raises:
-            ConstraintError: the positions do not converge onto the manifold.
+        Args, Returns, Raises: as `Engine.project`.
         """
         return _compiled_projection(model, q, qd)
 
@@ -483,18 +424,9 @@ class StagesEngine:
         projects after each step (compiled); a rank-deficient Λ𝐈⁻¹Λᵀ warns once unless
         integrator.on_rank_deficiency is error, and any other failure code stops the run.
 
-        Args:
-            model: the Model (its torques, integrator settings, duration).
-            init: the consistent initial state (Projection: q, qd (n,)).
-            t_out: (N,) s, the output times, from 0.
-            progress: called with the fraction done (0..1) as the run advances; None: no reports.
-            fixed_step: s, not used (the step is the integrator settings').
+        fixed_step is not used (the step is the integrator settings'); the Run's tau is None.
 
-        Returns:
-            Run: the states Y (N, 2n) at t_out, the integrator's counts, the events (tau None).
-
-        Raises:
-            SimulationError: the run failed; the message gives the time, the configuration and the reason.
+        Args, Returns, Raises: as `Engine.run`.
         """
         from coopsim.compiled import api
 
@@ -521,16 +453,9 @@ class StagesEngine:
     def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
         """Every reported quantity (SAMPLED) at the states Y, compiled.
 
-        Args:
-            model: the Model.
-            t_out: (N,) s, the sample times.
-            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
-            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
-                at (t, q, qd), evaluated in Python.
+        tau None: the model's torques at (t, q, qd), evaluated in Python.
 
-        Returns:
-            dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
-            name (`coopsim.forward.simulate.SimResult`), world axes.
+        Args, Returns, Raises: as `Engine.sample`.
         """
         return _compiled_samples(model, t_out, Y, _torques_at(model, t_out, Y) if tau is None else tau)
 

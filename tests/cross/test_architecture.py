@@ -67,31 +67,20 @@ def modules() -> dict[str, Path]:
 
 def imports(name: str, path: Path, known: dict) -> list[tuple[str, int]]:
     """(module imported, line) for every import of a package module in `path` (top level or inside a
-    function; `from pkg import sub` counts as importing the submodule when it is one)."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    function, type-checking ones too; `from pkg import sub` counts as importing the submodule when it is
+    one)."""
     out = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            targets = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                up = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(up + ([base] if base else []))
-            targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in known else base for alias in node.names]
-        else:
-            continue
-        for target in targets:
-            while target and target not in known:
-                target = target.rpartition(".")[0]
-            if target and target != "coopsim" and target != name:
-                out.append((target, node.lineno))
+    for target, line, _ in import_sites(name, path, known, typing=True):
+        module = _package_module(target, known)
+        if module and module != "coopsim" and module != name:
+            out.append((module, line))
     return out
 
 
-def import_sites(name: str, path: Path, known: dict) -> list[tuple[str, int, bool]]:
+def import_sites(name: str, path: Path, known: dict, typing: bool = False) -> list[tuple[str, int, bool]]:
     """(module imported, line, inside a function) for every import in `path`, the package's and
-    others' (dotted names as written; a package module's `from pkg import sub` names the submodule)."""
+    others' (dotted names as written; a package module's `from pkg import sub` names the submodule);
+    with `typing`, the imports under `if TYPE_CHECKING:` too."""
     tree = ast.parse(path.read_text(), str(path))
     local = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
              for n in ast.walk(f)}
@@ -100,7 +89,7 @@ def import_sites(name: str, path: Path, known: dict) -> list[tuple[str, int, boo
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = []
     for node in ast.walk(tree):
-        if id(node) in guarded:
+        if id(node) in guarded and not typing:
             continue
         if isinstance(node, ast.Import):
             targets = [alias.name for alias in node.names]

@@ -1,6 +1,8 @@
 """Every public function, method and class of the package has a docstring a tool can render: an
 `Args:` block naming each argument, a `Returns:` (or `Yields:`) block when it returns a value, and an
-`Attributes:` block naming each field of a record (dataclass, NamedTuple, jitclass spec).
+`Attributes:` block naming each field of a record (dataclass, NamedTuple, jitclass spec). A method that
+implements one of a base class of its module (an engine's `run`, the Engine protocol's) may give its own
+summary and say "as `Base.method`" for the sections the base documents.
 
 Run as a script to list what is missing in some files: `python tests/cross/test_docstrings.py FILE…`.
 """
@@ -106,8 +108,24 @@ def _fields(cls: ast.ClassDef) -> list[str]:
             and "ClassVar" not in ast.unparse(n.annotation) and not n.target.id.startswith("_")]
 
 
-def class_problems(cls: ast.ClassDef, where: str) -> list[str]:
-    """What the docstring of one public class, and of its public methods, lacks."""
+def _documented_in_base(fn: ast.FunctionDef, cls: ast.ClassDef, classes: dict) -> bool:
+    """Whether `fn` points to the method it implements in a base class of the same module
+    ("as `Base.name`"), and that method's own docstring is complete."""
+    doc = ast.get_docstring(fn) or ""
+    for base in cls.bases:
+        name = ast.unparse(base)
+        parent = classes.get(name)
+        if parent is None or f"`{name}.{fn.name}`" not in doc:
+            continue
+        own = next((n for n in parent.body if isinstance(n, ast.FunctionDef) and n.name == fn.name), None)
+        if own is not None and not function_problems(own, name):
+            return True
+    return False
+
+
+def class_problems(cls: ast.ClassDef, where: str, classes: dict | None = None) -> list[str]:
+    """What the docstring of one public class, and of its public methods, lacks (`classes`: the module's
+    classes by name, for methods documented in a base)."""
     doc = ast.get_docstring(cls)
     if not doc:
         return [f"{where}: no docstring"]
@@ -121,6 +139,8 @@ def class_problems(cls: ast.ClassDef, where: str) -> list[str]:
             out.append(f"{where}: Attributes: lacks {', '.join(missing)}")
     for node in cls.body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not node.name.startswith("_"):
+            if ast.get_docstring(node) and _documented_in_base(node, cls, classes or {}):
+                continue
             out += function_problems(node, f"{where}.{node.name}")
     return out
 
@@ -129,6 +149,7 @@ def file_problems(path: Path) -> list[str]:
     """Every docstring problem of one module's public names."""
     tree = ast.parse(path.read_text(), str(path))
     rel = path.relative_to(ROOT)
+    classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef)}
     out = []
     for node in tree.body:
         if getattr(node, "name", "_").startswith("_"):
@@ -136,7 +157,7 @@ def file_problems(path: Path) -> list[str]:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             out += function_problems(node, f"{rel}:{node.lineno} {node.name}")
         elif isinstance(node, ast.ClassDef):
-            out += class_problems(node, f"{rel}:{node.lineno} {node.name}")
+            out += class_problems(node, f"{rel}:{node.lineno} {node.name}", classes)
     return out
 
 
@@ -170,12 +191,47 @@ def g(a, *rest):
         float: a.
     """
     return a
+
+class Base:
+    """An interface."""
+
+    def run(self, a):
+        """Run.
+
+        Args:
+            a: the input.
+
+        Returns:
+            int: a.
+        """
+
+
+class Impl(Base):
+    """One implementation."""
+
+    def run(self, a):
+        """Run fast.
+
+        Args, Returns: as `Base.run`.
+        """
+        return a
+
+
+class Other(Base):
+    """Another, pointing nowhere."""
+
+    def run(self, a):
+        """Run slow."""
+        return a
 '''
     tree = ast.parse(src)
-    f, r, g = tree.body
+    f, r, g, base, impl, other = tree.body
+    classes = {"Base": base, "Impl": impl, "Other": other}
     assert function_problems(f, "f") == ["f: Args: lacks b", "f: no Returns: block"]
     assert class_problems(r, "R") == ["R: Attributes: lacks x"]
     assert function_problems(g, "g") == []
+    assert class_problems(impl, "Impl", classes) == []
+    assert class_problems(other, "Other", classes) == ["Other.run: Args: lacks a", "Other.run: no Returns: block"]
 
 
 if __name__ == "__main__":
