@@ -24,8 +24,9 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     schur.py        the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
                     three arms or more
     manifold.py     loop-closure residual Φ, projection of positions and rates
-    control.py      controllers in the loop: joint PD, object-space computed torque, the linear
-                    distributions of the inverse dynamics, squeeze, grasp feedback, saturation
+    control/        controllers in the loop: the record, references, the distributions of the inverse
+                    dynamics and squeeze, the laws (joint PD, object-space computed torque, grasp
+                    feedback, saturation)
     integrate.py    the DOP853 / DOPRI5 (dense output) / RK4 time loop (tableaux: coopsim.core.tableaux),
                     torque tables, stabilization
     sample.py       many states at once (θ̈, every reported quantity), inverse-dynamics terms
