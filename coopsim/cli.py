@@ -288,7 +288,7 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_bench(args) -> int:
     from coopsim.apps.bench import FULL, QUICK, run_bench
-    from coopsim.apps.bench_report import json_text, markdown_report, write_outputs
+    from coopsim.apps.bench.report import json_text, markdown_report, write_outputs
     from coopsim.apps.progress import ProgressBar
 
     stage: list[str] = []

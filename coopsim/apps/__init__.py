@@ -2,8 +2,8 @@
 the first compile, progress bars.
 
     animate.py       a run rendered by MuJoCo's offscreen renderer → GIF/MP4
-    bench.py         the work-precision benchmark against MuJoCo and Pinocchio, start-up and commands
-    bench_report.py  the benchmark's report (JSON, CSV, figures)
+    bench/           the work-precision benchmark against MuJoCo and Pinocchio, start-up and commands,
+                     and its report (JSON, CSV, Markdown, figures)
     sweep.py         the sweep file, its points, one point's study (pure)
     sweep_run.py     sweeps run serially or on Dask, checkpoint and resume, results table, summary, MCAP
     warmup.py        the first compile of the native model, on two cores, no kernel compiled twice

@@ -1,4 +1,4 @@
-"""The work-precision benchmark (coopsim.apps.bench, coopsim.apps.bench_report, coopsim.plots.bench, `coopsim bench`):
+"""The work-precision benchmark (coopsim.apps.bench and its report, coopsim.plots.bench, `coopsim bench`):
 its pieces on tiny ladders and short runs. Correctness only: no timing is asserted."""
 
 from __future__ import annotations
@@ -8,15 +8,17 @@ import io
 import json
 import math
 import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from coopsim.apps import bench
-from coopsim.apps import bench_report
+from coopsim.apps.bench import measure, runs, scaling, startup, study
 from coopsim.apps.bench import Ladders, RunRow
-from coopsim.apps.bench_report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
+from coopsim.apps.bench import report as bench_report
+from coopsim.apps.bench.report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
 from coopsim.cli import build_parser, main
 from coopsim.core.errors import CoopsimError
 from helpers import SCENARIOS
@@ -29,14 +31,14 @@ TINY = Ladders(rtols=(1e-4, 1e-8), rk4_steps=(0.05, 0.025), mujoco=(("RK4", (5e-
 
 @pytest.fixture(scope="module")
 def peers():
-    return bench.load_peers()
+    return measure.load_peers()
 
 
 @pytest.fixture(scope="module")
 def spatial_short(spatial):
     """The spatial scene over 0.5 s and its reference (SimResult on the 0.05 s grid)."""
     model = replace(spatial, duration=0.5)
-    return model, bench.reference(model)
+    return model, runs.reference(model)
 
 
 @pytest.fixture(scope="module")
@@ -56,48 +58,48 @@ def test_pareto_front_keeps_exactly_the_undominated_points():
     err = [1e-3, 1e-6, 1e-6, 1e-9, 1e-3, math.nan, 1e-12]
     wall = [1.0, 2.0, 3.0, 5.0, 0.5, 0.1, math.inf]
     # 0 is dominated by 4 (same error, faster); 2 by 1 (same error, faster); NaN/inf never on it
-    assert bench.pareto_front(err, wall).tolist() == [False, True, False, True, True, False, False]
-    assert bench.pareto_front([1.0, 1.0], [2.0, 2.0]).tolist() == [True, True]  # ties dominate neither
+    assert measure.pareto_front(err, wall).tolist() == [False, True, False, True, True, False, False]
+    assert measure.pareto_front([1.0, 1.0], [2.0, 2.0]).tolist() == [True, True]  # ties dominate neither
 
 
 def test_power_fit_recovers_an_exact_power_law():
     x = np.array([6.0, 12.0, 14.0, 21.0])
-    fit = bench.power_fit(x, 0.3 * x ** 1.7)
+    fit = measure.power_fit(x, 0.3 * x ** 1.7)
     assert fit["exponent"] == pytest.approx(1.7) and fit["coefficient"] == pytest.approx(0.3)
     assert fit["rms_log10"] < 1e-12
 
 
 def test_best_time_repeats_and_returns_the_minimum():
     calls = []
-    out, wall = bench.best_time(lambda: calls.append(1) or len(calls), repeats=4)
+    out, wall = measure.best_time(lambda: calls.append(1) or len(calls), repeats=4)
     assert out == 4 and len(calls) == 4 and 0 <= wall < 1
 
 
 def test_max_joint_error_is_nan_for_a_diverged_run():
     ref = np.zeros((3, 2))
-    assert bench.max_joint_error(np.array([[0, 1e-3], [0, -2e-3], [0, 0]]), ref) == pytest.approx(2e-3)
-    assert math.isnan(bench.max_joint_error(np.array([[0, 0], [np.nan, 0], [0, 0]]), ref))
+    assert measure.max_joint_error(np.array([[0, 1e-3], [0, -2e-3], [0, 0]]), ref) == pytest.approx(2e-3)
+    assert math.isnan(measure.max_joint_error(np.array([[0, 0], [np.nan, 0], [0, 0]]), ref))
 
 
 def test_headline_picks_the_fastest_run_reaching_each_target():
     rows = [_row("native", 1e-4, 0.010, 0.002), _row("native", 1e-9, 0.020, 0.004),
             _row("native", 1e-7, 0.030, 0.001), _row("native", math.nan, 0.001, 0.0001),
             _row("mujoco", 1e-4, 0.050), _row("mujoco", 5e-7, 0.300), _row("mujoco", math.nan, 0.001)]
-    h = {e["target_rad"]: e for e in bench.headline("paper_planar_2x3", rows)}
+    h = {e["target_rad"]: e for e in study.headline("paper_planar_2x3", rows)}
     assert h[1e-3]["ratio_wall"] == pytest.approx(5.0)            # 0.050 / 0.010
     assert h[1e-3]["ratio_loop"] == pytest.approx(50.0)           # 0.050 / 0.001 (fastest loop: the 1e-7 run)
     assert h[1e-6]["native"]["wall_s"] == 0.020 and h[1e-6]["ratio_wall"] == pytest.approx(15.0)
     assert h[1e-6]["met_wall"] is True and h[1e-3]["met_wall"] is True   # issue: ≥ 10x, ≥ 1x
     assert h[1e-8]["mujoco"] is None and h[1e-8]["ratio_wall"] is None and h[1e-8]["met_wall"] is None
     assert h[1e-8]["note"] == "no MuJoCo run reaches this error" and h[1e-6]["note"] == ""
-    other = bench.headline("some_scene", rows)
+    other = study.headline("some_scene", rows)
     assert all(e["required_ratio"] is None and e["met_wall"] is None for e in other)
 
 
 def test_bench_duration_is_whole_output_intervals(paper):
-    assert bench.bench_duration(paper, bench.FULL) == pytest.approx(5.0)
-    assert bench.bench_duration(replace(paper, duration=1.23), bench.FULL) == pytest.approx(1.2)
-    assert bench.bench_duration(paper, bench.QUICK) == pytest.approx(0.5)
+    assert measure.bench_duration(paper, bench.FULL) == pytest.approx(5.0)
+    assert measure.bench_duration(replace(paper, duration=1.23), bench.FULL) == pytest.approx(1.2)
+    assert measure.bench_duration(paper, bench.QUICK) == pytest.approx(0.5)
 
 
 # ------------------------------------------------------------------------------------------------ runs
@@ -105,16 +107,16 @@ def test_bench_duration_is_whole_output_intervals(paper):
 
 def test_reference_converges_far_below_the_targets(spatial_short):
     _, ref = spatial_short
-    assert ref.result.t[1] - ref.result.t[0] == pytest.approx(bench.OUTPUT_DT)
+    assert ref.result.t[1] - ref.result.t[0] == pytest.approx(measure.OUTPUT_DT)
     assert 0 < ref.self_convergence < 1e-11  # measured 9e-14 rad
 
 
 def test_native_errors_decrease_along_the_ladders(spatial_short):
     model, ref = spatial_short
     one = replace(TINY, repeats=1)
-    dop = [bench.native_run(model, bench.adaptive_settings(model, "dop853", r), ref.result, one)
+    dop = [runs.native_run(model, measure.adaptive_settings(model, "dop853", r), ref.result, one)
            for r in (1e-3, 1e-6, 1e-9)]
-    rk4 = [bench.native_run(model, bench.rk4_settings(model, h), ref.result, one) for h in (0.05, 0.025, 0.0125)]
+    rk4 = [runs.native_run(model, measure.rk4_settings(model, h), ref.result, one) for h in (0.05, 0.025, 0.0125)]
     for rows in (dop, rk4):
         errs = [r.max_error for r in rows]
         assert errs == sorted(errs, reverse=True) and errs[-1] < 1e-6, errs
@@ -127,14 +129,14 @@ def test_native_errors_decrease_along_the_ladders(spatial_short):
 def test_mujoco_run_keeps_the_best_weld_time_constant(paper, peers, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     model = replace(paper, duration=0.3)
-    ref = bench.reference(model).result
-    rk4 = [bench.mujoco_run(model, ref, "RK4", dt, peers, TINY) for dt in (5e-3, 2.5e-3)]
+    ref = runs.reference(model).result
+    rk4 = [runs.mujoco_run(model, ref, "RK4", dt, peers, TINY) for dt in (5e-3, 2.5e-3)]
     assert rk4[0].max_error > rk4[1].max_error  # second order in the step (weld yield ∝ timeconst²)
     for row in rk4:
         errs = row.extra["errors_by_weld_factor"]
         assert row.max_error == min(errs.values()) == errs[str(row.extra["weld_factor"])]
         assert row.evals == 4 * row.extra["nstep"]
-    euler = bench.mujoco_run(model, ref, "Euler", 5e-3, peers, TINY)
+    euler = runs.mujoco_run(model, ref, "Euler", 5e-3, peers, TINY)
     assert math.isnan(euler.extra["errors_by_weld_factor"]["1"])  # one-step weld: unstable for Euler
     assert euler.extra["weld_factor"] in (2, 4) and np.isfinite(euler.max_error)
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # warnings collected, not written
@@ -144,19 +146,19 @@ def test_mujoco_run_keeps_the_best_weld_time_constant(paper, peers, tmp_path, mo
 
 
 def test_synthetic_scenes(peers):
-    planar, spatial = bench.synthetic_model(3, 3), bench.synthetic_model(3, 7)
+    planar, spatial = scaling.synthetic_model(3, 3), scaling.synthetic_model(3, 7)
     assert planar.plane is not None and planar.rows.shape == (3, 6) and planar.n_total == 9
     assert spatial.plane is None and spatial.rows.shape == (6, 6) and spatial.n_total == 21
-    p = bench.scaling_point(2, 6, 200, peers, repeats=1)
+    p = scaling.scaling_point(2, 6, 200, peers, repeats=1)
     assert (p["r"], p["n_total"], p["rows"], p["planar"], p["bad_states"]) == (2, 12, 6, False, 0)
     assert all(p[k] > 0 for k in ("native_amortised_us", "native_cholesky_us", "native_python_us", "mujoco_forward_us"))
     with pytest.raises(ValueError, match="n must be 3"):
-        bench.synthetic_scene(2, 2)
+        scaling.synthetic_scene(2, 2)
 
 
 def test_scaling_fits_group_by_arms_and_joints():
     pts = [{"r": r, "n": n, "n_total": r * n, "v": 2.0 * (r * n) ** 1.5} for r in (2, 3) for n in (3, 6)]
-    fits = bench.scaling_fits(pts, key="v")
+    fits = scaling.scaling_fits(pts, key="v")
     assert set(fits["in_total_joints"]) == {"2", "3"} and set(fits["in_arms"]) == {"3", "6"}
     assert fits["in_total_joints"]["3"]["exponent"] == pytest.approx(1.5)
     assert fits["all"]["exponent"] == pytest.approx(1.5)
@@ -169,11 +171,11 @@ def test_report_shape_tables_and_json(report):
     (sc,) = report["scenarios"]
     assert sc["name"] == "paper_planar_2x3" and sc["duration_s"] == pytest.approx(0.2)
     fams = [r["family"] for r in sc["runs"]]
-    n_pin = len(TINY.pin_rtols) if bench.have_pinocchio() else 0
+    n_pin = len(TINY.pin_rtols) if measure.have_pinocchio() else 0
     assert fams.count("native") == 2 * len(TINY.rtols) + len(TINY.rk4_steps)
     assert fams.count("mujoco") == sum(len(steps) for _, steps in TINY.mujoco) and fams.count("pinocchio") == n_pin
     assert any(r["pareto"] for r in sc["runs"])
-    assert [h["target_rad"] for h in sc["headline"]] == list(bench.TARGETS)
+    assert [h["target_rad"] for h in sc["headline"]] == list(measure.TARGETS)
     assert sc["reference"]["far_below_targets"] and sc["eval_us"]["native_amortised_us"] > 0
     assert len(report["scaling"]["points"]) == 4 and report["startup"] is None and report["commands"] is None
     data = json.loads(json_text(report))  # strict JSON: NaN written as the string "NaN"
@@ -196,9 +198,9 @@ def test_write_outputs_writes_every_file(report, tmp_path):
 
 
 def test_without_pinocchio_the_rows_are_skipped_with_a_note(paper, peers, monkeypatch):
-    monkeypatch.setattr(bench, "have_pinocchio", lambda: False)
+    monkeypatch.setitem(sys.modules, "pinocchio", None)   # as if pin were not installed
     one = replace(TINY, rtols=(1e-6,), rk4_steps=(), mujoco=(("RK4", (5e-3,)),), max_duration=0.1)
-    sc = bench.bench_scenario(paper, one, peers)
+    sc = study.bench_scenario(paper, one, peers)
     assert not [r for r in sc["runs"] if r["family"] == "pinocchio"]
     assert "pin" in sc["notes"][0] and sc["eval_us"]["pinocchio_us"] is None
 
@@ -218,14 +220,14 @@ def test_cli_bench_dispatches_and_defaults_to_out_bench(tmp_path, monkeypatch, c
 def test_startup_is_measured_again_when_sources_change_in_between(monkeypatch):
     stamps = iter([{"a": 1}, {"a": 2}, {"a": 2}, {"a": 2}])
     runs = []
-    monkeypatch.setattr(bench, "_source_stamps", lambda: next(stamps))
-    monkeypatch.setattr(bench, "_startup_once", lambda path: runs.append(path) or {"compile_s": 30.0, "cached_s": 1.0})
-    out = bench.startup_times(SCENARIOS / "paper_planar_2x3.yaml")
+    monkeypatch.setattr(startup, "_source_stamps", lambda: next(stamps))
+    monkeypatch.setattr(startup, "_startup_once", lambda path: runs.append(path) or {"compile_s": 30.0, "cached_s": 1.0})
+    out = startup.startup_times(SCENARIOS / "paper_planar_2x3.yaml")
     assert len(runs) == 2 and out["sources_changed"] is False and runs[0].endswith("paper_planar_2x3.yaml")
 
 
 def test_startup_script_reports_its_phases_from_a_filled_cache():
-    wall, phases = bench.startup_process(str(SCENARIOS / "paper_planar_2x3.yaml"), warm=False)
+    wall, phases = startup.startup_process(str(SCENARIOS / "paper_planar_2x3.yaml"), warm=False)
     assert set(phases) == {"imports", "first", "again"}, f"phases {phases}"
     assert 0 < phases["again"] < phases["first"] < wall, f"wall {wall:.3f} s, phases {phases}"
 
@@ -235,15 +237,25 @@ def test_command_times_take_the_minimum_and_judge_the_targets(monkeypatch):
     minimum over the repeats is compared with the target; exit 1 (a failed check) still counts, exit 2
     is an error naming the command. (Subprocesses replaced here: the real ones run in `coopsim bench`.)"""
     calls, clock = [], iter([0.0, 4.0, 10.0, 12.5, 20.0, 23.0, 30.0, 32.0])
-    monkeypatch.setattr(bench.time, "perf_counter", lambda: next(clock))
-    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or
+    monkeypatch.setattr(startup.time, "perf_counter", lambda: next(clock))
+    monkeypatch.setattr(startup.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or
                         subprocess.CompletedProcess(cmd, 1 if "capacity" in cmd else 0, "", ""))
-    times = bench.command_times("s.yaml", repeats=2, commands={"run": (["run"], 3.0), "capacity": (["capacity"], 1.5)})
+    times = startup.command_times("s.yaml", repeats=2, commands={"run": (["run"], 3.0), "capacity": (["capacity"], 1.5)})
     assert times == {"run": {"wall_s": 2.5, "target_s": 3.0, "met": True},
                      "capacity": {"wall_s": 2.0, "target_s": 1.5, "met": False}}
     assert calls[0][1:5] == ["-m", "coopsim.cli", "run", "s.yaml"] and calls[0][5:7] == ["--json", "--out"]
     assert "| `coopsim capacity` | 2.00 | 1.5 | NO |" in bench_report.command_lines(times)
-    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 2, "", "bad\n"))
-    monkeypatch.setattr(bench.time, "perf_counter", lambda: 0.0)
+    monkeypatch.setattr(startup.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 2, "", "bad\n"))
+    monkeypatch.setattr(startup.time, "perf_counter", lambda: 0.0)
     with pytest.raises(CoopsimError, match="coopsim run failed"):
-        bench.command_times("s.yaml", repeats=1, commands={"run": (["run"], 3.0)})
+        startup.command_times("s.yaml", repeats=1, commands={"run": (["run"], 3.0)})
+
+
+def test_the_sources_it_stamps_and_digests_are_the_package_s():
+    """The start-up stamps cover the compiled kernels' sources and the source digest the whole package
+    (paths found from the package, wherever the benchmark's own files sit)."""
+    stamps = startup._source_stamps()
+    assert any(p.endswith("compiled/api.py") for p in stamps) and all("/compiled/" in p for p in stamps)
+    state = bench.source_state()
+    assert len(state["sources_sha256"]) == 12 and (state["git_head"] is None or len(state["git_head"]) == 40)
+    assert bench.source_state()["sources_sha256"] == state["sources_sha256"]

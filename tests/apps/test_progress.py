@@ -141,7 +141,7 @@ def test_bench_shows_one_bar_per_stage(tmp_path, monkeypatch):
     it took) when the next begins or the benchmark ends (run_bench and its outputs are stand-ins here:
     the stages are what is checked); with --json nothing."""
     from coopsim.apps import bench
-    from coopsim.apps import bench_report
+    from coopsim.apps.bench import report as bench_report
     from coopsim.cli import main
 
     def fake_bench(paths, ladders, log):

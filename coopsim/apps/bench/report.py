@@ -10,14 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from coopsim.apps.bench import (
-    ATOL_RATIO,
-    EVAL_RATIO_SCENES,
-    EVAL_RATIO_TARGET,
-    OUTPUT_DT,
-    REFERENCE_ATOL,
-    REFERENCE_RTOL,
-)
+from coopsim.apps.bench.measure import (ATOL_RATIO, EVAL_RATIO_SCENES, EVAL_RATIO_TARGET, OUTPUT_DT, REFERENCE_ATOL,
+                                        REFERENCE_RTOL)
 from coopsim.io.atomic import write_text_atomic
 from coopsim.io.mcap_codec import nonfinite_name
 from coopsim.plots.bench import scaling_figure, work_precision_figure
@@ -114,10 +108,6 @@ def json_text(report: dict) -> str:
         str: the JSON text (`json_safe`), ending in a newline.
     """
     return json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n"
-
-
-# ------------------------------------------------------------------------------------------------
-# Markdown
 
 
 def _table(header: list[str], rows: list[list[str]], align: str | None = None) -> list[str]:
