@@ -49,7 +49,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from coopsim.core.errors import CoopsimError
+from coopsim.core.errors import CoopsimError, one_line
 from coopsim.core.model import Model
 from coopsim.io.log import file_sha256
 from coopsim.io.mcap_codec import read_mcap
@@ -62,16 +62,11 @@ class RenderUnavailable(CoopsimError):
     """No OpenGL backend for MuJoCo's offscreen renderer (one line naming MUJOCO_GL and the package)."""
 
 
-def _one_line(exc: BaseException, limit: int = 120) -> str:
-    reason = " ".join(str(exc).split()) or type(exc).__name__
-    return reason if len(reason) <= limit else reason[: limit - 3] + "..."
-
-
 try:
     import mujoco
 except Exception as _exc:   # MUJOCO_GL names a backend whose library is missing: mujoco's own import fails
     raise RenderUnavailable(f"import mujoco failed with MUJOCO_GL={os.environ.get('MUJOCO_GL', '')!r} "
-                            f"({_one_line(_exc)}); install that backend (EGL: Debian/Ubuntu libegl1 and "
+                            f"({one_line(_exc, 120)}); install that backend (EGL: Debian/Ubuntu libegl1 and "
                             f"libgl1-mesa-dri; OSMesa: libosmesa6) or unset MUJOCO_GL") from None
 
 from coopsim.io.atomic import atomic_path
@@ -156,7 +151,7 @@ def _read_log(log_path: Path):
     try:
         return read_mcap(log_path)
     except Exception as exc:            # mcap's own errors, a JSON or schema mismatch, ...
-        raise CoopsimError(f"{log_path}: not a readable coopsim MCAP log ({_one_line(exc)})") from None
+        raise CoopsimError(f"{log_path}: not a readable coopsim MCAP log ({one_line(exc, 120)})") from None
 
 
 def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, log=None) -> Motion:
@@ -420,7 +415,7 @@ class OffscreenRenderer:
                 with contextlib.suppress(Exception):
                     self.close()
         if failure is not None:
-            reason = _one_line(caught[0].message) if caught else _one_line(failure)
+            reason = one_line(caught[0].message, 120) if caught else one_line(failure, 120)
             reason = re.sub(r"^\(\d+\) b['\"](.*)['\"]$", r"\1", reason)      # GLFWError: (65550) b'...'
             raise _unavailable(self.backend, reason) from None
         self.viewport = mujoco.MjrRect(0, 0, width, height)
@@ -852,7 +847,7 @@ def _check_window() -> None:
         if ok:
             glfw.terminate()
     if not ok:
-        reason = _one_line(caught[0].message) if caught else "glfw.init() failed"
+        reason = one_line(caught[0].message, 120) if caught else "glfw.init() failed"
         reason = re.sub(r"^\(\d+\) b['\"](.*)['\"]$", r"\1", reason)
         raise CoopsimError(f"MuJoCo's interactive viewer cannot open a window ({reason}); without a display, "
                            f"`coopsim animate` renders the run into a GIF")

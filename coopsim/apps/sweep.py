@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from coopsim.control.controller import closed_loop
-from coopsim.core.errors import CoopsimError, ScenarioError
+from coopsim.core.errors import CoopsimError, ScenarioError, one_line
 from coopsim.forward.simulate import simulate
 from coopsim.inverse.resolutions import METHODS
 from coopsim.io.fields import Section
@@ -463,16 +463,17 @@ def study_row(summary: dict, study: Study) -> dict[str, Any]:
     return select(flatten(summary), study.columns)
 
 
-def one_line(exc: BaseException) -> str:
-    """An exception as one line: a coopsim error's own text, anything else prefixed by its type.
+def error_text(exc: BaseException) -> str:
+    """An exception as a row's one-line error: a coopsim error's own text, anything else prefixed by its
+    type (`coopsim.core.errors.one_line`).
 
     Args:
         exc: the exception.
 
     Returns:
-        str: its message with line breaks joined.
+        str: its message as one line.
     """
-    text = " ".join(part.strip() for part in str(exc).splitlines()).strip()
+    text = one_line(exc)
     return text if isinstance(exc, CoopsimError) else f"{type(exc).__name__}: {text}"
 
 
@@ -498,5 +499,5 @@ def evaluate_point(sweep: Sweep, index: int) -> dict[str, Any]:
         row["error"] = None
     except Exception as exc:            # noqa: BLE001 — a failing point is a row, the sweep goes on
         metrics = {}
-        row["error"] = one_line(exc)
+        row["error"] = error_text(exc)
     return row | metrics

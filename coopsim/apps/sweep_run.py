@@ -34,7 +34,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from coopsim.apps.sweep import Sweep, evaluate_point, matcher, one_line
+from coopsim.apps.sweep import Sweep, error_text, evaluate_point, matcher
 from coopsim.core.errors import CoopsimError
 from coopsim.core.labels import field_name
 from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
@@ -296,7 +296,7 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
-            raise CoopsimError(f"--scheduler {scheduler}: no Dask scheduler answers there ({one_line(exc)})") from None
+            raise CoopsimError(f"--scheduler {scheduler}: no Dask scheduler answers there ({error_text(exc)})") from None
         cluster = None
     else:
         with warnings.catch_warnings():     # "Port 8787 is already in use": the scheduler's HTTP routes move
@@ -314,7 +314,7 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
             except Exception as exc:     # noqa: BLE001 — the task itself failed (evaluate_point catches the point's)
                 yield {"point": futures[fut]} | {a.name: float(v) for a, v in
                                                  zip(sweep.axes, sweep.points[futures[fut]])} \
-                    | {"error": f"Dask: {one_line(exc)}"}
+                    | {"error": f"Dask: {error_text(exc)}"}
     finally:
         client.close()
         if cluster is not None:

@@ -47,7 +47,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from coopsim.core.errors import CoopsimError
+from coopsim.core.errors import CoopsimError, one_line
 from coopsim.core.model import PRISMATIC, REVOLUTE, ArmModel
 from coopsim.core.spatial import quat_to_rot
 
@@ -244,10 +244,6 @@ _STRIPPED = ("geoms", "sites", "cameras", "lights", "tendons", "sensors", "equal
              "meshes", "skins", "hfields", "materials", "textures", "flexes", "numerics", "texts", "tuples")
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
 def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
     """A robot file compiled by MuJoCo with only bodies, joints, inertials and joint motors left.
 
@@ -272,7 +268,7 @@ def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except Exception as exc:          # MuJoCo reports a bad file as ValueError (FatalError on some)
-        raise RobotFileError(f"MuJoCo cannot read {path.name}: {_one_line(exc)}") from None
+        raise RobotFileError(f"MuJoCo cannot read {path.name}: {one_line(exc)}") from None
     for kind in _STRIPPED:
         for element in list(getattr(spec, kind)):
             spec.delete(element)
@@ -290,7 +286,7 @@ def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
         return spec.compile(), floor
     except Exception as exc:
         raise RobotFileError(f"MuJoCo cannot compile {path.name} (meshes and geoms left out): "
-                             f"{_one_line(exc)}") from None
+                             f"{one_line(exc)}") from None
 
 
 def _urdf_velocity(path: Path) -> dict[str, float]:
