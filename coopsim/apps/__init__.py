@@ -1,7 +1,7 @@
 """The applications the commands run, built on the layers below: animation, the benchmark, sweeps,
 the first compile, progress bars.
 
-    animate.py       a run rendered by MuJoCo's offscreen renderer → GIF/MP4
+    animate/         a run rendered by MuJoCo's offscreen renderer → GIF/MP4; the interactive viewer
     bench/           the work-precision benchmark against MuJoCo and Pinocchio, start-up and commands,
                      and its report (JSON, CSV, Markdown, figures)
     sweep.py         the sweep file, its points, one point's study (pure)

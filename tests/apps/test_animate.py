@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -181,12 +182,25 @@ def test_errors_are_one_line(capsys, monkeypatch, paper_run, tmp_path):
     assert not (tmp_path / "no_gl.gif").exists()
 
 
+def test_a_mujoco_gl_that_breaks_import_mujoco_is_one_line(tmp_path):
+    """MUJOCO_GL naming a platform mujoco cannot load makes `import mujoco` itself fail: `coopsim animate`
+    reports that as one line naming MUJOCO_GL (exit 2), whichever of the package's modules imports
+    mujoco first."""
+    env = {**os.environ, "MUJOCO_GL": "no_such_platform"}
+    out = subprocess.run([sys.executable, "-m", "coopsim.cli", "animate", str(SCENARIOS / f"{PAPER}.yaml"), "--out",
+                          str(tmp_path / "a.gif")], capture_output=True, text=True, env=env, timeout=120, cwd=ROOT)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1, out.stderr
+    assert "import mujoco failed with MUJOCO_GL='no_such_platform'" in lines[0], lines
+    assert not (tmp_path / "a.gif").exists()
+
+
 def test_view_opens_the_twin_at_the_keyframe(monkeypatch, capsys):
     """`coopsim view SCENARIO` hands MuJoCo's viewer the twin loaded at its keyframe: the loop closed."""
     import mujoco
     import mujoco.viewer
 
-    import coopsim.apps.animate
+    from coopsim.apps.animate import viewer
 
     seen = []
 
@@ -195,8 +209,8 @@ def test_view_opens_the_twin_at_the_keyframe(monkeypatch, capsys):
         seen.append(float(np.max(np.abs(d.efc_pos[: d.nefc]))))
 
     monkeypatch.setattr(mujoco.viewer, "launch", launch)
-    monkeypatch.setattr(coopsim.apps.animate, "_has_display", lambda: True)
-    monkeypatch.setattr(coopsim.apps.animate, "_check_window", lambda: None)
+    monkeypatch.setattr(viewer, "has_display", lambda: True)
+    monkeypatch.setattr(viewer, "_check_window", lambda: None)
     assert cli.main(["view", str(SCENARIOS / f"{PAPER}.yaml")]) == 0
     assert cli.main(["view", str(ROOT / "models" / f"{PAPER}.xml")]) == 0
     assert len(seen) == 2 and max(seen) <= 1e-12, seen
