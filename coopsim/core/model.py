@@ -12,7 +12,7 @@ rate and effort are rad, rad/s, N·m (revolute) or m, m/s, N (prismatic).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -223,7 +223,30 @@ def loop_controller(model: "Model") -> LoopController | None:
         `model.torques.fn` when the torques are a TorqueFeedback whose function is a LoopController.
     """
     fn = getattr(model.torques, "fn", None)
-    return fn if isinstance(fn, LoopController) else None
+    return fn if is_loop_controller(fn) else None
+
+
+_LOOP_DATA = tuple(LoopController.__annotations__)
+_LOOP_METHODS = tuple(name for name, v in vars(LoopController).items()
+                      if callable(v) and (not name.startswith("_") or name == "__call__"))
+
+
+@lru_cache(maxsize=None)
+def _has_loop_methods(cls: type) -> bool:
+    return all(callable(getattr(cls, name, None)) for name in _LOOP_METHODS)
+
+
+def is_loop_controller(fn) -> bool:
+    """`isinstance(fn, LoopController)`, without the protocol check's cost on every call: the methods are
+    looked up once per class, the data members on the object.
+
+    Args:
+        fn: any object (a torque function, a controller, None).
+
+    Returns:
+        bool: whether `fn` has every method and attribute of LoopController.
+    """
+    return fn is not None and _has_loop_methods(type(fn)) and all(hasattr(fn, name) for name in _LOOP_DATA)
 
 
 # the control vocabulary (ControlSettings' choices), read by the scenario and the controller
