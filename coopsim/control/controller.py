@@ -50,11 +50,11 @@ from coopsim.core.model import COMPENSATIONS, COMPILED_DISTRIBUTIONS, LAWS, REFE
 from coopsim.core.spatial import rot_log
 from coopsim.forward.diagnostics import describe_state, run_warning
 from coopsim.inverse.problem import SampleFailureWarning, inverse_problem, torques_of
-from coopsim.inverse.solve import distribute, resolution_for
 from coopsim.inverse.trajectory import JointTrajectory, object_motion_at, object_motion_trajectory, trajectory_at
 
-# The compiled engine's modules are imported in the methods that use them (tests/cross/test_architecture.py,
-# DEFERRED): load_scenario imports this module for the control vocabulary, and most runs have no controller.
+# The compiled engine's modules and the distributions are imported in the methods that use them
+# (tests/cross/test_architecture.py, DEFERRED): every run imports this module for closed_loop, and most runs
+# have no controller.
 
 
 
@@ -133,6 +133,8 @@ class Controller:
     def resolution(self):
         """The distribution's resolution (`coopsim.inverse.solve.resolution_for`); 'bounded' with the bounds of
         inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
+        from coopsim.inverse.solve import resolution_for
+
         inv = self.plant.inverse
         bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
         return resolution_for(self.plant, self.settings.distribution, force_bound=bounds[0], moment_bound=bounds[1])
@@ -146,6 +148,8 @@ class Controller:
     def _distribute(self, prob, t: float):
         """Grasp wrenches f (1, rk) of the resolution at one state (`inverse_dynamics`); where 'bounded' has
         no solution, control.fallback's (recorded in `fallbacks`), or a ControlError with 'error'."""
+        from coopsim.inverse.solve import distribute, resolution_for
+
         failures: list = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SampleFailureWarning)     # reported as a RunWarning instead

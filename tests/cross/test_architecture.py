@@ -43,6 +43,8 @@ DEFERRED = {
     "scipy": "each SciPy solver loads on the path that solves with it; every run imports the inverse side",
     "matplotlib": "figures are drawn in the figure workers (plots.render): the process that lays out the "
                   "jobs never loads matplotlib",
+    "coopsim.inverse.solve": "the distributions (and HiGHS) load with a controller's first inverse dynamics: every run "
+                             "imports the controller module for closed_loop",
     "coopsim.inverse.distributions": "the CLI builds its argument parser from the resolutions' registry: "
                                      "`coopsim --help` starts without NumPy",
     "coopsim.io.robots": "robot files are read with MuJoCo, only for scenarios that name a robot:",
