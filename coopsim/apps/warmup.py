@@ -79,7 +79,6 @@ def _state(model):
 def _signatures() -> dict:
     """The kernels compiled by signature, as `chain_forward` calls them: the records' types, int64 arm
     indices and contiguous float64 vectors (a test checks that no caller compiles another one)."""
-
     vec, i = types.float64[::1], types.int64
     return {kinematics.arm_kinematics: (i, vec), kinematics.arm_jacobian: (i,), gibbs_appell.arm_bias: (i, vec),
             gibbs_appell.arm_mass_matrix: (i,), grasp.object_pose: (), grasp.object_dynamics: (vec,),
@@ -99,7 +98,6 @@ def compile_kernels(names) -> None:
     Args:
         names: the kernels' function names (e.g. `KINEMATICS`, `CHILD_KERNELS`).
     """
-
     for kernel, rest in _named(names).items():
         kernel.compile((PACKED_T, WORKSPACE_T, *rest))
 
@@ -117,7 +115,6 @@ def compile_loop(model) -> None:
     Args:
         model: the warm-up scene's Model (any model: kernels are compiled for argument types).
     """
-
     api.integrate_chain(model, _state(model), np.array([0.0, 0.01]), "dop853")
 
 
@@ -127,7 +124,6 @@ def compile_consistent(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     api.consistent_state(model, model.q0, model.qd0)
 
 
@@ -137,7 +133,6 @@ def compile_inverse_terms(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     y = _state(model)[None]
     n = model.n_total
     api.inverse_terms(model, y[:, :n], y[:, n:], np.zeros((1, n)), n_threads=1)
@@ -149,7 +144,6 @@ def compile_extras(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
     z = np.zeros((1, 1, 1))
     min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
@@ -162,7 +156,6 @@ def compile_evaluations(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     api.evaluate_states(model, _state(model)[None], np.zeros((1, model.n_total)), full=True, n_threads=1)
 
 
@@ -172,7 +165,6 @@ def compile_control(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     n = model.n_total
     y = _state(model)
     pd = Controller(replace(model, control=ControlSettings("joint_pd", np.zeros(n), np.zeros(n))))
@@ -188,7 +180,6 @@ def wait_for(kernel, child: subprocess.Popen | None = None) -> None:
         kernel: the compiled function waited for.
         child: the process compiling it; None: wait for the cache or WAIT_S alone.
     """
-
     deadline = time.monotonic() + WAIT_S
     while not is_cached(kernel) and time.monotonic() < deadline and (child is None or child.poll() is None):
         time.sleep(0.05)
@@ -200,7 +191,6 @@ def chain_free_child(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     compile_kernels(CHILD_KERNELS)
     wait_for(_new_workspace)
     compile_inverse_terms(model)
@@ -216,7 +206,6 @@ def control_child(model) -> None:
     Args:
         model: the warm-up scene's Model.
     """
-
     wait_for(chain_forward)
     compile_extras(model)
     compile_control(model)
@@ -231,7 +220,6 @@ def warm_up(control: bool = False) -> None:
     Args:
         control: also compile the extras and the controllers, on a third process.
     """
-
     if not compile_pending():
         if control:
             warm_up_group("extras")
@@ -268,7 +256,6 @@ def warm_up_group(group: str) -> None:
         group: "base" (by :func:`warm_up`), or "extras" or "control" (in this process, a no-op when
             cached).
     """
-
     if group == "base":
         warm_up()
     elif compile_pending(group):

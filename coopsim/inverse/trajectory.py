@@ -350,7 +350,6 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             singular, det(S J) changes sign between samples (a singularity is crossed), or a target
             leaves the plane of motion.
     """
-
     S = model.rows
     redundant = _check_joint_counts(model, S)
     t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)

@@ -564,7 +564,6 @@ def inverse_series(study: InverseStudy) -> list:
     Returns:
         list[Series]: the series, sampled at the trajectory's times (N,) s, SI units.
     """
-
     t = study.traj.t
     lo, hi = study.limits
     out = [Series("/inverse/trajectory", "coopsim.inverse.Trajectory", t,
@@ -600,7 +599,6 @@ def capacity_series(study: CapacityStudy) -> list:
     Returns:
         list[Series]: the series, sampled at the trajectory's times (N,) s, SI units (masses kg).
     """
-
     t = study.traj.t
     lo, hi = study.limits
     out = [Series("/capacity/limits", "coopsim.capacity.Limits", t,

@@ -371,7 +371,6 @@ def write_outputs(report: dict, out: str | Path) -> list[Path]:
     Returns:
         list[Path]: the paths, in that order.
     """
-
     out = Path(out)
     paths = [write_text_atomic(out / "bench.json", json_text(report)),
              write_text_atomic(out / "bench.md", markdown_report(report)),
