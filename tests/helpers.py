@@ -117,6 +117,11 @@ class MujocoReference:
 
     def site_jacobian(self, name):
         """(J (6, n) of the site's point [v; ω], J̇q̇ (6,)) in coopsim's joint order."""
+        J, Jd = self.site_jacobian_and_rate(name)
+        return J, Jd @ self.d.qvel[self.dadr]
+
+    def site_jacobian_and_rate(self, name):
+        """(J, J̇) (6, n) each, of the site's point [v; ω] (mj_jac, mj_jacDot), in coopsim's joint order."""
         sid = self.m.site(name).id
         body = self.m.site_bodyid[sid]
         point = self.d.site_xpos[sid].copy()
@@ -124,9 +129,7 @@ class MujocoReference:
         mujoco.mj_jac(self.m, self.d, jp, jr, point, body)
         dp, dr = np.zeros((3, self.m.nv)), np.zeros((3, self.m.nv))
         mujoco.mj_jacDot(self.m, self.d, dp, dr, point, body)
-        J = np.vstack([jp, jr])[:, self.dadr]
-        Jd = np.vstack([dp, dr])[:, self.dadr]
-        return J, Jd @ self.d.qvel[self.dadr]
+        return np.vstack([jp, jr])[:, self.dadr], np.vstack([dp, dr])[:, self.dadr]
 
 
 def random_states(model, count: int, seed: int):

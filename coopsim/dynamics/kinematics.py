@@ -207,26 +207,30 @@ def point_jacobian(pose: ArmPose, point: np.ndarray) -> np.ndarray:
 def point_jacobian_rate(pose: ArmPose, point: np.ndarray, qd: np.ndarray) -> np.ndarray:
     """Time derivative J̇ of `point_jacobian` at rates qd (P fixed in the last link).
 
-    Columns [ż_j × (P − p_j) + z_j × (v_P − v_j); ż_j] with ż_j = ω_{j−1} × z_j, v_P = J_v θ̇ and v_j the
-    velocity of joint origin j (fixed in link j−1): v_0 = 0, v_j = v_{j−1} + ω_{j−1} × (p_j − p_{j−1}).
-    J̇ θ̇ is `ee_bias_acceleration` for P = p_EE.
+    Revolute columns [ż_j × (P − p_j) + z_j × (v_P − v_j); ż_j], prismatic columns [ż_j; 0], with
+    ż_j = ω_{j−1} × z_j, v_P = J_v θ̇ and v_j the velocity of frame j's origin p_j (fixed in link j):
+    v_j = v_{j−1} + ω_{j−1} × (p_j − p_{j−1}) + z_j θ̇_j for a prismatic joint j (its slide moves p_j),
+    without the last term for a revolute one (v_{−1} = 0, p_{−1} the base point); ω_j sums the revolute
+    joints' z θ̇ up to j. J̇ θ̇ is `ee_bias_acceleration` for P = p_EE.
 
     Args:
         pose: the arm's ArmPose.
         point: (3,) m, P relative to the arm's base point (pose.origin), world axes.
-        qd: (n,) rad/s, joint rates θ̇.
+        qd: (n,) rad/s or m/s, joint rates θ̇.
 
     Returns:
         np.ndarray: (6, n), J̇ (rows [v; ω], per unit rate and time), world axes.
     """
-    z, p = pose.z, pose.p_rel
-    w = np.cumsum(z * qd[:, None], axis=0)
+    z, p, rev = pose.z, pose.p_rel, revolute_mask(pose.joint_type)
+    w = np.cumsum(z * (rev * qd[:, None]), axis=0)
     w_prev = np.vstack([np.zeros(3), w[:-1]])
-    v_joint = np.vstack([np.zeros(3), np.cumsum(cross(w_prev[1:], p[1:] - p[:-1]), axis=0)])
+    slide = z * ((1.0 - rev) * qd[:, None])
+    lever = np.vstack([np.zeros(3), cross(w_prev[1:], p[1:] - p[:-1])])
+    v_joint = np.cumsum(lever + slide, axis=0)
     dz = cross(w_prev, z)
     v_point = point_jacobian(pose, point)[:3] @ qd
-    dJv = cross(dz, point - p) + cross(z, v_point - v_joint)
-    return np.vstack([dJv.T, dz.T])
+    dJv = rev * (cross(dz, point - p) + cross(z, v_point - v_joint)) + (1.0 - rev) * dz
+    return np.vstack([dJv.T, (rev * dz).T])
 
 
 def ee_jacobian(pose: ArmPose) -> np.ndarray:

@@ -1,9 +1,9 @@
 """The joint model (coopsim.core.joints): prismatic joints beside revolute ones, end to end.
 
 Against MuJoCo's own algorithms (the twin built with slide joints): link frames ≤ 1e-12 m, each open
-arm's mass matrix (mj_fullM) and bias forces (qfrc_bias) ≤ 1e-10 relative, end-effector Jacobians and
-J̇θ̇ (mj_jac, mj_jacDot) ≤ 1e-12, closed-chain accelerations against the KKT solve built from MuJoCo's
-open chain ≤ 1e-9 relative — both engines, on the bundled `gantry_prismatic` (prismatic first joints,
+arm's mass matrix (mj_fullM) and bias forces (qfrc_bias) ≤ 1e-10 relative, end-effector Jacobians,
+J̇θ̇ and the whole J̇ of `point_jacobian_rate` (mj_jac, mj_jacDot) ≤ 1e-12, closed-chain accelerations
+against the KKT solve built from MuJoCo's open chain ≤ 1e-9 relative — both engines, on the bundled `gantry_prismatic` (prismatic first joints,
 planar, gravity in the plane) and on `spatial_6r_pair` with joints 3 and 5 of each arm made prismatic
 (spatial: a prismatic joint behind a turning link, whose Coriolis term 2ω × zθ̇ the planar scene never
 exercises). Compiled against reference ≤ 1e-12 relative (the bundled scenario is also in
@@ -25,7 +25,7 @@ from coopsim.compiled import api
 from coopsim.dynamics.gibbs_appell import bias_forces, mass_matrix
 from coopsim.report.inverse_report import capacity_study, inverse_study
 from coopsim.core.joints import joint_units
-from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, reach_check
+from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.io.scenario import load_scenario, model_from_dict
 from coopsim.core.errors import ScenarioError
@@ -85,6 +85,8 @@ def test_open_arms_equal_mujocos_algorithms(scene):
             add("link origins", float(np.max(np.abs(pose.p - ref.d.xpos[bodies]))))
             add("link frames", float(np.max(np.abs(pose.R - ref.d.xmat[bodies].reshape(-1, 3, 3)))))
             J, Jd_qd = ref.site_jacobian(f"a{m}_ee")
+            add("J̇ (reference)", rel_err(point_jacobian_rate(pose, pose.p_ee_rel, qd[sl]),
+                                          ref.site_jacobian_and_rate(f"a{m}_ee")[1][:, sl]))
             n = arm.n
             for engine, (Mm, hm, Jm, Jdm) in {
                     "reference": (mass_matrix(arm, pose), bias_forces(arm, pose, qd[sl], scene.gravity),
