@@ -1,16 +1,16 @@
 """The joint model (coopsim.core.joints): prismatic joints beside revolute ones, end to end.
 
-Against MuJoCo's own algorithms (the twin built with slide joints): link frames ≤ 1e-12 m, each open
-arm's mass matrix (mj_fullM) and bias forces (qfrc_bias) ≤ 1e-10 relative, end-effector Jacobians,
-J̇θ̇ and the whole J̇ of `point_jacobian_rate` (mj_jac, mj_jacDot) ≤ 1e-12, closed-chain accelerations
-against the KKT solve built from MuJoCo's open chain ≤ 1e-9 relative — both engines, on the bundled
-`gantry_prismatic` (prismatic first joints, planar, gravity in the plane) and on `spatial_6r_pair` with joints 3 and 5 of each arm made prismatic
-(spatial: a prismatic joint behind a turning link, whose Coriolis term 2ω × zθ̇ the planar scene never
-exercises). Compiled against reference ≤ 1e-12 relative (the bundled scenario is also in
-tests/compiled/test_compiled.py, tests/cross/test_independent.py (Pinocchio), tests/twin/test_harness.py (twin agreement
-and a wrong twin), tests/cross/test_inverse_mujoco.py and tests/inverse/test_capacity.py, which cover every bundled
-scenario). Inverse dynamics replay, capacities on the force–speed lines of the prismatic motors, and
-the scenario's one-line refusals.
+Against MuJoCo's own algorithms (the twin built with slide joints): link frames ≤ 1e-12 m, each open arm's
+mass matrix (mj_fullM) and bias forces (qfrc_bias) ≤ 1e-10 relative, end-effector Jacobians, J̇θ̇ and the
+whole J̇ of `point_jacobian_rate` (mj_jac, mj_jacDot) ≤ 1e-12, closed-chain accelerations against the KKT
+solve built from MuJoCo's open chain ≤ 1e-9 relative — both engines, on the bundled `gantry_prismatic`
+(prismatic first joints, planar, gravity in the plane) and on `spatial_6r_pair` with joints 3 and 5 of each
+arm made prismatic (spatial: a prismatic joint behind a turning link, whose Coriolis term 2ω × zθ̇ the planar
+scene never exercises). Compiled against reference ≤ 1e-12 relative (the bundled scenario is also in
+tests/compiled/test_compiled.py, tests/cross/test_independent.py (Pinocchio), tests/twin/test_harness.py (twin
+agreement and a wrong twin), tests/cross/test_inverse_mujoco.py and tests/inverse/test_capacity.py, which
+cover every bundled scenario). Inverse dynamics replay, capacities on the force–speed lines of the prismatic
+motors, and the scenario's one-line refusals.
 """
 
 from __future__ import annotations
