@@ -19,7 +19,7 @@ from yaml.events import (
     StreamEndEvent,
 )
 
-from coopsim.core.errors import ScenarioError
+from coopsim.core.errors import ScenarioError, one_line
 
 MAX_FILE_BYTES = 64 << 20       # a scenario or a torque CSV
 MAX_DEPTH = 32                  # YAML nesting (the bundled scenarios use 8)
@@ -31,16 +31,19 @@ def read_text(path: Path, fail) -> str:
 
     Args:
         path: the file.
-        fail: called as fail(reason) with a one-line reason (the size, or the first byte that is not UTF-8
-            and its line) when the file breaks a rule; expected to raise.
+        fail: called as fail(reason) with a one-line reason (missing or unreadable, the size, or the first
+            byte that is not UTF-8 and its line) when the file breaks a rule; expected to raise.
 
     Returns:
         str: the decoded text.
     """
-    size = path.stat().st_size
-    if size > MAX_FILE_BYTES:
-        fail(f"{size / 2 ** 20:.0f} MiB: larger than the {MAX_FILE_BYTES >> 20} MiB a file may hold")
-    raw = path.read_bytes()
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            fail(f"{size / 2 ** 20:.0f} MiB: larger than the {MAX_FILE_BYTES >> 20} MiB a file may hold")
+        raw = path.read_bytes()
+    except OSError as exc:
+        fail(f"cannot be read ({one_line(exc.strerror or exc)})")
     if raw.startswith(codecs.BOM_UTF8):
         raw = raw[len(codecs.BOM_UTF8):]
     try:

@@ -62,3 +62,12 @@ def test_load_yaml_names_the_file(tmp_path):
     path.write_bytes(b"name: caf\xe9\n")
     with pytest.raises(ScenarioError, match=r"s\.yaml: "):
         load_yaml(path)
+
+
+def test_a_path_that_cannot_be_read_is_one_line(tmp_path):
+    """A missing file, or a folder given as the file, is the same one-line ScenarioError as any other
+    refusal (the commands check for a file first; library callers of load_yaml get the same)."""
+    for path, why in ((tmp_path / "missing.yaml", "No such file or directory"), (tmp_path, "Is a directory")):
+        with pytest.raises(ScenarioError) as exc:
+            load_yaml(path)
+        assert str(exc.value) == f"{path}: cannot be read ({why})"
