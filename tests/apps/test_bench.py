@@ -259,3 +259,21 @@ def test_the_sources_it_stamps_and_digests_are_the_package_s():
     state = bench.source_state()
     assert len(state["sources_sha256"]) == 12 and (state["git_head"] is None or len(state["git_head"]) == 40)
     assert bench.source_state()["sources_sha256"] == state["sources_sha256"]
+
+
+@pytest.mark.parametrize("diverged_at, note", [
+    (None, "no finite error for any weld time constant"),
+    (0.25, "no finite error for any weld time constant (at t = 0.25 s)")])
+def test_a_twin_with_no_finite_error_is_a_row_with_a_note(paper, diverged_at, note):
+    """Every weld time constant leaving NaN angles (a reset by MuJoCo, or NaN without one) is one row
+    with max_error NaN and a note, never an exception (peers stubbed: no MuJoCo run here)."""
+    from types import SimpleNamespace
+
+    t = np.array([0.0, 0.5])
+    ref = SimpleNamespace(initial=SimpleNamespace(q=paper.q0, qd=np.zeros(paper.n_total)), t=t,
+                          q=np.zeros((2, paper.n_total)))
+    roll = SimpleNamespace(q=np.full((2, paper.n_total), np.nan), wall_time=0.0, diverged_at=diverged_at, nstep=10,
+                           weld_violation=np.array([0.0, np.nan]))
+    peers = SimpleNamespace(mujoco_twin=lambda *a: None, twin_rollout=lambda *a: roll)
+    row = runs.mujoco_run(paper, ref, "RK4", 5e-3, peers, replace(TINY, repeats=1))
+    assert math.isnan(row.max_error) and row.note == note and row.family == "mujoco"

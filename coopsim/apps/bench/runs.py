@@ -151,7 +151,8 @@ def mujoco_run(model: Model, ref, integrator: str, dt: float, peers, ladders: La
         k = min(finite, key=lambda j: tried[j][0]) if finite else WELD_FACTORS[0]
         err, twin, roll = tried[k]
         wall = repeat_walls(lambda: peers.twin_rollout(twin, q0, qd0, t), roll.wall_time, ladders)
-    note = "" if finite else f"diverged at t = {roll.diverged_at:g} s for every weld time constant"
+    when = "" if roll.diverged_at is None else f" (at t = {roll.diverged_at:g} s)"
+    note = "" if finite else f"no finite error for any weld time constant{when}"
     extra = {"weld_factor": k, "weld_timeconst_s": k * dt, "nstep": roll.nstep,
              "errors_by_weld_factor": {str(j): tried[j][0] for j in WELD_FACTORS}}
     return RunRow("mujoco", integrator, f"step {dt:g} s, weld timeconst {k}·step", dt, f"{1e3 * dt:g}ms",
