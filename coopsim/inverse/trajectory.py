@@ -18,10 +18,12 @@ Between samples a trajectory is the quintic Hermite interpolant of (θ, θ̇, θ
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, fields
 
 import numpy as np
 
+from coopsim.core.digest import content_digest
 from coopsim.core.errors import ConstraintError, CoopsimError
 from coopsim.core.model import ArmModel, Model, ObjectMotion
 from coopsim.core.results import output_times
@@ -379,6 +381,50 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
                                       f"t={t_out[i - 1]:.6g} s and t={t:.6g} s (det S J changes sign)")
     _check_joint_limits(model, t_out, q)
     return JointTrajectory(t_out, q, qd, qdd, "object_motion")
+
+
+# The fields of a Model that the object-motion trajectory does not depend on: what a sweep may change
+# between points that share one trajectory (payload, motors, distributions' settings, the twin).
+TRAJECTORY_INDEPENDENT = frozenset({"name", "torques", "motors", "mujoco", "validation", "control",
+                                    "inverse.payload_position", "inverse.internal_force_bound",
+                                    "inverse.internal_moment_bound", "inverse.nonsqueezing_masses"})
+SHARED_TRAJECTORIES = 8           # the most trajectories a process keeps for sharing
+_shared: OrderedDict[tuple[str, str], JointTrajectory] = OrderedDict()
+
+
+def shared_object_motion_trajectory(model: Model, motion: ObjectMotion) -> JointTrajectory:
+    """`object_motion_trajectory`, computed once per content of what determines it and shared.
+
+    Models that differ only in TRAJECTORY_INDEPENDENT fields (a sweep over the payload's position, the
+    motors, the distributions' bounds) get the same trajectory object, its arrays read-only; the last
+    SHARED_TRAJECTORIES are kept. A model holding a Python callable where the trajectory depends on it
+    is not shared.
+
+    Args:
+        model: the Model whose arms carry the object.
+        motion: the object's waypoints and time law.
+
+    Returns:
+        JointTrajectory: as `object_motion_trajectory` (its arrays read-only).
+
+    Raises:
+        TrajectoryError: as `object_motion_trajectory`.
+    """
+    key = (content_digest(model, TRAJECTORY_INDEPENDENT), content_digest(motion))
+    if None in key:
+        return object_motion_trajectory(model, motion)
+    if key in _shared:
+        _shared.move_to_end(key)
+        return _shared[key]
+    traj = object_motion_trajectory(model, motion)
+    for f in fields(traj):
+        value = getattr(traj, f.name)
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+    _shared[key] = traj
+    while len(_shared) > SHARED_TRAJECTORIES:
+        _shared.popitem(last=False)
+    return traj
 
 
 def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:

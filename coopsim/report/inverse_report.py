@@ -26,7 +26,7 @@ from coopsim.inverse.replay import replay
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
 from coopsim.inverse.solve import default_bounds, energy, nan_peak, resolution_for, resolve, result_of
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
-from coopsim.inverse.trajectory import JointTrajectory, from_simulation, object_motion_trajectory
+from coopsim.inverse.trajectory import JointTrajectory, from_simulation, shared_object_motion_trajectory
 from coopsim.io.mcap_codec import Series, nonfinite_name
 
 DEFINITIONS = ("paper", "nonsqueezing")
@@ -52,13 +52,12 @@ def trajectory_of(model: Model, duration: float | None = None, progress: Progres
     """
     if model.inverse.trajectory == "object_motion":
         _report(progress, "ik", 0.0)
-        traj = object_motion_trajectory(model, model.inverse.object_motion)
+        traj = shared_object_motion_trajectory(model, model.inverse.object_motion)
         _report(progress, "ik", 1.0)
         return traj, None
     res = simulate(closed_loop(model), duration=duration,
                    progress=None if progress is None else lambda f: progress("forward", f))
     return from_simulation(res), res
-
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,8 +13,10 @@ from coopsim.io.scenario import model_from_dict
 from coopsim.core.errors import ScenarioError
 from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import rot_log, rpy_to_rot
+from coopsim.inverse import trajectory as trajectory_module
 from coopsim.inverse.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
-                                object_pose_of, time_law, trajectory_at)
+                                object_pose_of, shared_object_motion_trajectory, time_law, trajectory_at)
+from coopsim.report.inverse_report import capacity_study, capacity_summary
 from helpers import SCENARIOS, mutated
 from inverse_cases import model, run
 
@@ -149,3 +151,41 @@ def test_inverse_section_defaults_and_values():
     om = model_from_dict(data, where="carry.yaml").inverse.object_motion
     assert om.rest_gain == 3.0 and om.rest_posture == pytest.approx([np.pi / 2] * 6, rel=1e-15)
     assert model("paper_planar_2x3").inverse.trajectory == "forward"
+
+
+def test_points_that_differ_only_in_the_payload_share_one_trajectory(monkeypatch):
+    """Two models that differ in the payload's position and the motors get the same trajectory object,
+    read-only and equal to a recomputation bit for bit; a longer link gets a trajectory of its own."""
+    monkeypatch.setattr(trajectory_module, "_shared", type(trajectory_module._shared)())
+    m = model(CARRY)
+    here = replace(m, inverse=replace(m.inverse, payload_position=np.array([0.1, 0.02, 0.0])))
+    there = replace(m, inverse=replace(m.inverse, payload_position=np.array([-0.2, 0.0, 0.0])),
+                    motors=replace(m.motors, stall_torque=2 * m.motors.stall_torque))
+    a = shared_object_motion_trajectory(here, here.inverse.object_motion)
+    b = shared_object_motion_trajectory(there, there.inverse.object_motion)
+    fresh = object_motion_trajectory(m, m.inverse.object_motion)
+    assert a is b and not a.q.flags.writeable
+    for name in ("t", "q", "qd", "qdd"):
+        assert np.array_equal(getattr(a, name), getattr(fresh, name)), name
+    arm = m.arms[0]
+    longer = replace(m, arms=(replace(arm, ee_pos=arm.ee_pos * 1.01),) + m.arms[1:])
+    c = shared_object_motion_trajectory(longer, longer.inverse.object_motion)
+    assert c is not a and not np.array_equal(c.q, a.q)
+
+
+def test_a_capacity_study_on_a_shared_trajectory_equals_one_computed_afresh(monkeypatch):
+    """The capacity of two payload positions, the second on the first's shared trajectory, equals the
+    same study with nothing shared (every number of the summary, to the last bit)."""
+    m = model(CARRY)
+    summaries = {}
+    for sharing in (True, False):
+        monkeypatch.setattr(trajectory_module, "_shared", type(trajectory_module._shared)())
+        out = []
+        for x in (0.1, -0.15):
+            if not sharing:
+                trajectory_module._shared.clear()
+            pm = replace(m, inverse=replace(m.inverse, payload_position=np.array([x, 0.0, 0.0])))
+            out.append(capacity_summary(capacity_study(pm, payload_position=pm.inverse.payload_position,
+                                                       with_lp=False, optimise=False)))
+        summaries[sharing] = out
+    assert summaries[True] == summaries[False]
