@@ -80,6 +80,19 @@ def _cmd_mjcf(args) -> int:
     return 0
 
 
+def _cmd_urdf(args) -> int:
+    from pathlib import Path
+
+    from coopsim.io.atomic import write_text_atomic
+    from coopsim.io.scenario import load_scenario
+    from coopsim.io.urdf import urdf_text
+
+    model = load_scenario(args.scenario, overrides=_overrides(args))
+    path = write_text_atomic(Path(args.out or Path("out") / model.name / f"{model.name}.urdf"), urdf_text(model))
+    print(path)
+    return 0
+
+
 def _cmd_run(args) -> int:
     from pathlib import Path
 
@@ -428,8 +441,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The `coopsim` argument parser: one subcommand per command, each with its options and help.
 
-    The commands are simulate, run, plot, validate, mjcf, inverse, capacity, sweep, bench, animate and
-    view; each sets `func` (its handler, called with the parsed arguments) and, when it runs the native
+    The commands are simulate, run, plot, validate, mjcf, urdf, inverse, capacity, sweep,
+    bench, animate and view; each sets `func` (its handler, called with the parsed arguments) and, when it runs the native
     model, `native` (then `main` announces a first run's compilation). Usage errors print one line and
     exit 2.
 
@@ -481,6 +494,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="models", help="output folder (default: models)")
     _add_set(p)
     p.set_defaults(func=_cmd_mjcf)
+
+    p = sub.add_parser("urdf", help="write the scene as a URDF (each arm an open chain, the object on the carrier)",
+                       description=("Write SCENARIO as a URDF: each arm an open chain of its links (inertias, box "
+                                    "visuals) from the link 'world', the object a link fixed to the carrier's end "
+                                    "effector; the robot_description of `coopsim run --ros2`'s bag."))
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--out", default=None, help="output file (default: out/NAME/NAME.urdf)")
+    _add_set(p)
+    p.set_defaults(func=_cmd_urdf)
 
     p = sub.add_parser("inverse", help="inverse dynamics with redundancy resolution, internal wrench, object stress",
                        description=("Invert SCENARIO's trajectory (its forward run, or its prescribed object motion "

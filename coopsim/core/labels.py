@@ -132,3 +132,22 @@ def field_name(column: str) -> str:
         str: the field name ('_' when nothing else is left).
     """
     return re.sub(r"[^A-Za-z0-9_]+", "_", column).strip("_") or "_"
+
+
+def ros_arm_names(names: Sequence[str]) -> list[str]:
+    """Each arm's name as a ROS name token, for topics and frames (`/native/left/joint_states`).
+
+    A name becomes its letters and digits, each other run of characters one '_' (none at either end).
+    When that leaves a name empty or starting with a digit, or two arms with one token, every arm takes its
+    default name 'arm{m + 1}' instead (a token must not start with a digit, and topics must stay apart).
+
+    Args:
+        names: (r,) the arms' names in the scenario, in stacking order.
+
+    Returns:
+        list[str]: (r,) the tokens, each matching [A-Za-z][A-Za-z0-9_]*.
+    """
+    tokens = [re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") for name in names]
+    if any(not t or t[0].isdigit() for t in tokens) or len(set(tokens)) < len(tokens):
+        return [f"arm{m + 1}" for m in range(len(names))]
+    return tokens

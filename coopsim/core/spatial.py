@@ -54,6 +54,27 @@ def rpy_to_rot(rpy: np.ndarray) -> np.ndarray:
     ])
 
 
+def rot_to_rpy(R: np.ndarray) -> np.ndarray:
+    """Roll-pitch-yaw angles of a rotation matrix, the inverse of `rpy_to_rot` (URDF's `rpy`).
+
+    Pitch comes from the first column; yaw from it too (any yaw at pitch ±π/2, where only roll ∓ yaw is
+    determined: yaw 0 there); roll from what Rz(yaw) Ry(pitch) leaves, so rpy_to_rot(rot_to_rpy(R))
+    equals R to rounding at every pitch, the gimbal lock included.
+
+    Args:
+        R: (3, 3) rotation matrix, body-frame coordinates to world coordinates.
+
+    Returns:
+        np.ndarray: (3,) rad, (roll, pitch, yaw), pitch in [−π/2, π/2], roll and yaw in (−π, π].
+    """
+    R = np.asarray(R, dtype=float)
+    c = float(np.hypot(R[0, 0], R[1, 0]))
+    pitch = float(np.arctan2(-R[2, 0], c))
+    yaw = float(np.arctan2(R[1, 0], R[0, 0])) if c > 1e-300 else 0.0
+    X = rpy_to_rot(np.array([0.0, pitch, yaw])).T @ R     # Rx(roll)
+    return np.array([float(np.arctan2(X[2, 1], X[1, 1])), pitch, yaw])
+
+
 def quat_to_rot(q: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion q = [w, x, y, z] (normalised here).
 

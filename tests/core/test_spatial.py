@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coopsim.core.spatial import axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rots_to_quats, rpy_to_rot, skew
+from coopsim.core.spatial import (axis_angle_to_rot, cross, quat_to_rot, rot_log, rot_to_quat, rot_to_rpy, rots_to_quats,
+                                   rpy_to_rot, skew)
 
 RNG_SEED = 20240508
 PI = np.pi
@@ -114,6 +115,20 @@ def test_rpy_is_fixed_axis_x_then_y_then_z():
     R = rpy_to_rot(np.array([PI / 2, 0.0, PI / 2]))
     assert _max(R @ [0.0, 1.0, 0.0] - [0.0, 0.0, 1.0]) <= 1e-15, "roll π/2 then yaw π/2 should take ŷ to ẑ"
     assert _max(R @ [1.0, 0.0, 0.0] - [0.0, 1.0, 0.0]) <= 1e-15, "roll π/2 then yaw π/2 should take x̂ to ŷ"
+
+
+def test_rot_to_rpy_inverts_rpy_to_rot_at_every_pitch():
+    """rpy_to_rot(rot_to_rpy(R)) = R to rounding for random rotations (SciPy's), at pitch ±π/2 exactly and
+    within 1e-9 of it (where the naive roll atan2(R21, R22) of two tiny entries loses digits), and the
+    angles themselves where they are unique (|pitch| < π/2)."""
+    rng = np.random.default_rng(RNG_SEED + 4)
+    mats = list(Rotation.random(200, random_state=RNG_SEED + 4).as_matrix())
+    mats += [rpy_to_rot(np.array([0.7, s * (PI / 2 - d), -2.1])) for s in (1, -1) for d in (0.0, 1e-9, 1e-13)]
+    worst = max(_max(rpy_to_rot(rot_to_rpy(R)) - R) for R in mats)
+    assert worst <= 4e-15, f"rpy_to_rot(rot_to_rpy(R)) vs R: max entry error {worst:.3g}"
+    rpys = [rng.uniform([-PI, -PI / 2 + 1e-3, -PI], [PI, PI / 2 - 1e-3, PI]) for _ in range(100)]
+    worst_angles = max(_max(rot_to_rpy(rpy_to_rot(rpy)) - rpy) for rpy in rpys)
+    assert worst_angles <= 1e-12, f"rot_to_rpy(rpy_to_rot(rpy)) vs rpy: max error {worst_angles:.3g} rad"
 
 
 def test_quat_to_rot_is_wxyz_and_normalises():
