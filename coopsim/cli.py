@@ -35,19 +35,22 @@ def _print_warnings(res) -> None:
         print(f"coopsim: warning: {w.message()}", file=sys.stderr)
 
 
-def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None):
+def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, summarize, during=lambda: None,
+               also=lambda stage, log: None):
     """Write a command's outputs into folder `out` as one set (`staged_folder`: all of them or none, the
     previous set listed in `index` replaced): the MCAP log `log_name` of (streams, meta), the figures of
     draw(log, folder, workers=workers) drawn from the in-memory log meanwhile (`render_while`), and
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
-    hold). Returns (log path, plot paths)."""
+    hold); also(stage folder, in-memory log) then writes any further outputs of the set (the ROS 2 bag).
+    Returns (log path, plot paths)."""
     from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
     from coopsim.io.mcap_codec import log_data, write_mcap
     from coopsim.plots.render import render_while
 
     def work():
         during()
+        also(stage, log_data(streams, meta, messages=False))
         return write_mcap(stage / log_name, streams, meta)
 
     with staged_folder(out, replaces=previous_set(index)) as stage:
@@ -99,6 +102,7 @@ def _cmd_run(args) -> int:
     from coopsim.twin.compare import format_comparison
     from coopsim.twin.harness import control_series, cross_validate
     from coopsim.io.log import file_sha256, run_log
+    from coopsim.io.ros2 import VERDICT_RECORD, write_bag
     from coopsim.plots.run import comparison_plots
     from coopsim.apps.progress import ProgressBar
     from coopsim.plots.render import FigureWorkers
@@ -114,15 +118,24 @@ def _cmd_run(args) -> int:
         streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "native_engine": cv.native.engine,
-            "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()}})
+            "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()},
+            VERDICT_RECORD: {"passed": cv.comparison.passed, "failures": cv.comparison.failures(),
+                             "metrics": cv.comparison.as_dict()["metrics"]}})
         summary: dict = {}
+        bag = f"{model.name}_ros2"
 
         def summarize(log_path, plots) -> str:
             summary.update(run_summary(cv, log_path, plots))
+            if args.ros2:
+                summary["files"]["ros2"] = str(out / bag)
             return json.dumps(summary, indent=2) + "\n"
 
+        def ros2(stage, log) -> None:
+            if args.ros2:
+                write_bag(stage / bag, model, log)
+
         log_path, plots = _write_set(out, "summary.json", f"{model.name}.mcap", streams, meta, comparison_plots,
-                                     workers, summarize)
+                                     workers, summarize, also=ros2)
     _print_warnings(cv.native)
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -131,8 +144,23 @@ def _cmd_run(args) -> int:
         for failure in cv.comparison.failures():
             print(f"  FAIL: {failure}")
         print(f"wall time: native {cv.native.wall_time:.2f} s, MuJoCo {cv.twin.wall_time:.2f} s")
-        print(f"wrote {log_path}, {out / 'summary.json'} and {len(plots)} plots in {out}")
+        bag_note = f", the ROS 2 bag {out / bag}" if args.ros2 else ""
+        print(f"wrote {log_path}, {out / 'summary.json'}{bag_note} and {len(plots)} plots in {out}")
     return 0 if cv.comparison.passed else 1
+
+
+def _cmd_export_ros2(args) -> int:
+    from pathlib import Path
+
+    from coopsim.io.log import log_model, read_run_log
+    from coopsim.io.ros2 import export_bag
+
+    log_path = Path(args.log)
+    if not log_path.is_file():
+        raise CoopsimError(f"{log_path}: log file not found")
+    log = read_run_log(log_path)
+    print(export_bag(Path(args.out), log_model(log_path, log, args.scenario), log))
+    return 0
 
 
 def _cmd_plot(args) -> int:
@@ -441,10 +469,10 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The `coopsim` argument parser: one subcommand per command, each with its options and help.
 
-    The commands are simulate, run, plot, validate, mjcf, urdf, inverse, capacity, sweep,
-    bench, animate and view; each sets `func` (its handler, called with the parsed arguments) and, when it runs the native
-    model, `native` (then `main` announces a first run's compilation). Usage errors print one line and
-    exit 2.
+    The commands are simulate, run, export-ros2, plot, validate, mjcf, urdf, inverse, capacity, sweep,
+    bench, animate and view; each sets `func` (its handler, called with the parsed arguments) and, when it
+    runs the native model, `native` (then `main` announces a first run's compilation). Usage errors print
+    one line and exit 2.
 
     Returns:
         argparse.ArgumentParser: the parser (prog 'coopsim').
@@ -469,8 +497,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: out/NAME)")
     p.add_argument("--duration", type=float, default=None, help="override the scenario's duration (s)")
     p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    p.add_argument("--ros2", action="store_true",
+                   help="also write the run as a ROS 2 bag (rosbag2 folder DIR/NAME_ros2: metadata.yaml and "
+                        "one MCAP file of standard messages, the scene's URDF on /robot_description)")
     _add_set(p)
     p.set_defaults(func=_cmd_run, native=True)
+
+    p = sub.add_parser("export-ros2", help="convert a run log (LOG.mcap) into a ROS 2 bag folder",
+                       description=("Write LOG (an MCAP log of `coopsim run`) as a rosbag2 folder OUT_DIR "
+                                    "(metadata.yaml and OUT_DIR_0.mcap: joint states, TF, object pose and twist, "
+                                    "wrenches, the URDF, diagnostics, /clock; simulation time from 0), as "
+                                    "`coopsim run --ros2` does. The geometry comes from the scenario file the log "
+                                    "names (checked against its sha256) or --scenario."))
+    p.add_argument("log", help="MCAP log file of `coopsim run`")
+    p.add_argument("out", metavar="OUT_DIR", help="the bag folder to write (its other files are kept)")
+    p.add_argument("--scenario", default=None, help="the scenario file to take the geometry from, in place of "
+                                                   "the one the log names (no sha256 check)")
+    p.set_defaults(func=_cmd_export_ros2)
 
     p = sub.add_parser("plot", help="comparison plots from an existing MCAP log",
                        description="Draw the comparison plots of LOG (an MCAP file written by `coopsim run`).")

@@ -9,5 +9,8 @@
     mcap_codec.py  MCAP files of JSON series and topics with their JSON Schemas, read back bit for bit
     foxglove.py    the Foxglove 3D view: published schemas, /tf frames and /scene boxes of a model
     log.py         run logs: a run (and its twin) as series, metadata records, written and read
+    urdf.py        the scene as a URDF (each arm an open chain, the object fixed to the carrier)
+    ros2_msgs.py   the ROS 2 message definitions a bag uses, as MCAP ros2msg schemas, and their type hashes
+    ros2.py        a run as a ROS 2 bag: a rosbag2 folder of standard CDR messages (joint states, TF, …)
     atomic.py      atomic outputs: each file, and each command's files as one set
 """

@@ -167,7 +167,7 @@ def previous_set(index: str):
 
     Args:
         index: the summary's file name in the output folder; its "files" entry is a list of names, or
-            {"log": name, "plots": [names]}.
+            {"log": name, "plots": [names]} and optionally "ros2": the bag folder's name.
 
     Returns:
         Callable[[Path], set[str]]: folder `out` → the names (last path component) of the previous set
@@ -177,7 +177,8 @@ def previous_set(index: str):
     def names(out) -> set[str]:
         try:
             files = json.loads((Path(out) / index).read_text(encoding="utf-8"))["files"]
-            listed = [files["log"], *files["plots"]] if isinstance(files, dict) else list(files)
+            listed = [files["log"], *files["plots"], *([files["ros2"]] if "ros2" in files else [])] \
+                if isinstance(files, dict) else list(files)
             return {index} | {str(n).replace("\\", "/").rsplit("/", 1)[-1] for n in listed}
         except (OSError, ValueError, KeyError, TypeError):
             return {index}

@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from coopsim.core.errors import CoopsimError
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.core.model import Model
@@ -25,6 +26,7 @@ from coopsim.core.model import Model
 # identifiers of the format, not module paths, so they stay as the first logs wrote them.
 from coopsim.io.foxglove import frame_transforms, scene_update
 from coopsim.io.mcap_codec import LogData, Series, UnreadableLogError, read_mcap, write_mcap
+from coopsim.io.scenario import load_scenario
 
 
 # what the comparison plots draw: topic -> {field: trailing shape, "n": the joint count}
@@ -293,3 +295,50 @@ def run_log(model: Model, native=None, twin=None, extra_series: Sequence = (),
     if native is not None or twin is not None:
         streams += [frame_transforms(model, native, twin), scene_update(model, native is not None, twin is not None)]
     return streams, run_metadata(model, native, metadata_extra)
+
+
+def _log_scenario_path(log_path: Path, file: str) -> Path | None:
+    """The scenario file named in a log's metadata: absolute, or relative to the current folder or to
+    a folder above the log (a log in out/NAME/ names scenarios/X.yaml relative to the project)."""
+    p = Path(file)
+    if p.is_absolute():
+        return p if p.is_file() else None
+    for base in [Path.cwd(), *log_path.resolve().parents]:
+        if (base / p).is_file():
+            return base / p
+    return None
+
+
+def log_model(log_path: str | Path, log: LogData, scenario: str | Path | None = None) -> Model:
+    """The Model a run log was written from: the geometry is not in the log, it comes from a scenario file.
+
+    That is the file named in the log's "scenario" record (found relative to the current folder or a folder
+    above the log, and checked against the recorded sha256), or `scenario` when given (no check).
+
+    Args:
+        log_path: the log file (for the messages and the search).
+        log: the log as read (`read_mcap`, `read_run_log`).
+        scenario: the scenario file to take instead of the one the log names; None: the log's.
+
+    Returns:
+        Model: the scenario's Model.
+
+    Raises:
+        CoopsimError: the log names no scenario, or one that is not found or has changed since (sha256);
+            a ScenarioError when that file is not a valid scenario.
+    """
+    log_path = Path(log_path)
+    if scenario is None:
+        info = log.metadata.get("scenario", {})
+        file = info.get("file")
+        if file is None:
+            raise CoopsimError(f"{log_path}: the log names no scenario file, and the model's geometry is not "
+                               f"in the log: pass the scenario with --scenario FILE")
+        scenario = _log_scenario_path(log_path, file)
+        if scenario is None:
+            raise CoopsimError(f"{log_path}: its scenario {file} was not found (relative to the current folder "
+                               f"or the log's); the model's geometry is not in the log: pass --scenario FILE")
+        if "sha256" in info and file_sha256(scenario) != info["sha256"]:
+            raise CoopsimError(f"{scenario}: changed since {log_path} was written (sha256 differs); run the "
+                               f"scenario again, or pass --scenario FILE to take the log with it anyway")
+    return load_scenario(scenario)

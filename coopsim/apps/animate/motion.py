@@ -15,7 +15,7 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError, one_line
 from coopsim.core.model import Model
-from coopsim.io.log import file_sha256
+from coopsim.io.log import file_sha256, log_model
 from coopsim.io.mcap_codec import read_mcap
 from coopsim.io.scenario import load_scenario
 from coopsim.twin.harness import cross_validate
@@ -72,18 +72,6 @@ def _interp(t: np.ndarray, q: np.ndarray | None, times: np.ndarray) -> np.ndarra
     return out
 
 
-def _log_scenario_path(log_path: Path, file: str) -> Path | None:
-    """The scenario file named in a log's metadata: absolute, or relative to the current folder or to
-    a folder above the log (a log in out/NAME/ names scenarios/X.yaml relative to the project)."""
-    p = Path(file)
-    if p.is_absolute():
-        return p if p.is_file() else None
-    for base in [Path.cwd(), *log_path.resolve().parents]:
-        if (base / p).is_file():
-            return base / p
-    return None
-
-
 def _read_log(log_path: Path):
     try:
         return read_mcap(log_path)
@@ -122,21 +110,7 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
     if all(s is None for s in states.values()):
         raise CoopsimError(f"{log_path}: no /native/joint_state or /mujoco/joint_state topic "
                            f"(animate takes the log of `coopsim run`)")
-    info = log.metadata.get("scenario", {})
-    if scenario is None:
-        file = info.get("file")
-        if file is None:
-            raise CoopsimError(f"{log_path}: the log names no scenario file, and the model's geometry is not "
-                               f"in the log: pass the scenario with --scenario FILE")
-        found = _log_scenario_path(log_path, file)
-        if found is None:
-            raise CoopsimError(f"{log_path}: its scenario {file} was not found (relative to the current folder "
-                               f"or the log's); the model's geometry is not in the log: pass --scenario FILE")
-        if "sha256" in info and file_sha256(found) != info["sha256"]:
-            raise CoopsimError(f"{found}: changed since {log_path} was written (sha256 differs); run the "
-                               f"scenario again, or pass --scenario FILE to draw the log with it anyway")
-        scenario = found
-    model = load_scenario(scenario)
+    model = log_model(log_path, log, scenario)
     n = model.n_total
     t = None
     q = {}
@@ -146,7 +120,7 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
             continue
         if s["angle"].ndim != 2 or s["angle"].shape[1] != n:
             raise CoopsimError(f"{log_path}: /{k}/joint_state has {s['angle'].shape[-1]} joints, the scenario "
-                               f"{scenario} {n}")
+                               f"{model.name} {n}")
         if t is not None and (len(s["t"]) != len(t) or np.any(s["t"] != t)):
             raise CoopsimError(f"{log_path}: /native and /mujoco joint states are sampled at different times")
         t, q[k] = s["t"], s["angle"]
