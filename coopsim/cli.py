@@ -116,7 +116,8 @@ def _cmd_run(args) -> int:
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
         streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
-            "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
+            "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
+            | ({"overrides": list(args.set)} if args.set else {}),
             "native_engine": cv.native.engine,
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()},
             VERDICT_RECORD: {"passed": cv.comparison.passed, "failures": cv.comparison.failures(),

@@ -26,6 +26,7 @@ from coopsim.core.model import Model
 # identifiers of the format, not module paths, so they stay as the first logs wrote them.
 from coopsim.io.foxglove import frame_transforms, scene_update
 from coopsim.io.mcap_codec import LogData, Series, UnreadableLogError, read_mcap, write_mcap
+from coopsim.io.overrides import parse_assignment
 from coopsim.io.scenario import load_scenario
 
 
@@ -200,7 +201,8 @@ def file_sha256(path: str | Path) -> str:
 def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str, dict[str, str]]:
     """MCAP metadata records of a run (all values strings; numbers and arrays as JSON, floats exact).
 
-    The records: scenario (name; file and sha256 when extra["scenario_file"] is given), versions, model
+    The records: scenario (name; file and sha256 when extra["scenario_file"] is given; `coopsim run` adds the
+    file, its sha256 and the --set overrides it was given), versions, model
     (arm names, joints per arm, joint names, joint types (revolute / prismatic)), native.integrator,
     mujoco, validation, and for a native result native.initial_projection (dq, dqd, residual
     before/after, iterations), native.integrator_stats and native.warnings (count; "1", "2", …: each
@@ -309,11 +311,26 @@ def _log_scenario_path(log_path: Path, file: str) -> Path | None:
     return None
 
 
+def log_overrides(log: LogData) -> list[str]:
+    """The `--set PATH=VALUE` texts a run log was written with (its "scenario" record's "overrides").
+
+    Args:
+        log: the log as read.
+
+    Returns:
+        list[str]: the texts in order; empty for a run without any (or a log written before they were
+            recorded).
+    """
+    text = log.metadata.get("scenario", {}).get("overrides")
+    return [] if text is None else [str(x) for x in json.loads(text)]
+
+
 def log_model(log_path: str | Path, log: LogData, scenario: str | Path | None = None) -> Model:
     """The Model a run log was written from: the geometry is not in the log, it comes from a scenario file.
 
     That is the file named in the log's "scenario" record (found relative to the current folder or a folder
-    above the log, and checked against the recorded sha256), or `scenario` when given (no check).
+    above the log, and checked against the recorded sha256), or `scenario` when given (no check), with the
+    `--set` overrides the run was given (`log_overrides`) applied again.
 
     Args:
         log_path: the log file (for the messages and the search).
@@ -325,7 +342,7 @@ def log_model(log_path: str | Path, log: LogData, scenario: str | Path | None = 
 
     Raises:
         CoopsimError: the log names no scenario, or one that is not found or has changed since (sha256);
-            a ScenarioError when that file is not a valid scenario.
+            a ScenarioError when that file (with the overrides) is not a valid scenario.
     """
     log_path = Path(log_path)
     if scenario is None:
@@ -341,4 +358,4 @@ def log_model(log_path: str | Path, log: LogData, scenario: str | Path | None = 
         if "sha256" in info and file_sha256(scenario) != info["sha256"]:
             raise CoopsimError(f"{scenario}: changed since {log_path} was written (sha256 differs); run the "
                                f"scenario again, or pass --scenario FILE to take the log with it anyway")
-    return load_scenario(scenario)
+    return load_scenario(scenario, overrides=[parse_assignment(text) for text in log_overrides(log)])

@@ -226,10 +226,12 @@ def test_a_log_without_a_verdict_converts_with_a_stale_status(paper):
 
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory):
-    """`coopsim run --ros2` of the paper scene (0.05 s) in a folder of its own: (folder, output folder)."""
+    """`coopsim run --ros2` of the paper scene (0.05 s) with an aluminium bar (`--set`) in a folder of its own:
+    (folder, output folder)."""
     work = tmp_path_factory.mktemp("cli")
     shutil.copytree(SCENARIOS, work / "scenarios")
-    res = run_cli("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.05", "--ros2", cwd=work)
+    res = run_cli("run", "scenarios/paper_planar_2x3.yaml", "--duration", "0.05", "--ros2",
+                  "--set", "object.box.density=2700", cwd=work)
     assert res.returncode == 0, res.stderr
     return work, work / "out" / "paper_planar_2x3"
 
@@ -249,6 +251,11 @@ def test_run_ros2_and_export_ros2_write_the_same_bag(cli_run):
     for f in bag.iterdir():
         assert (work / "exported" / bag.name / f.name).read_bytes() == f.read_bytes(), f.name
     assert (work / "exported" / "notes.txt").read_text() == "mine"
+    mass = 2700 * 0.4 * 0.06 * 0.1    # the run's --set, recorded in the log and applied again by export-ros2
+    reader = make_reader(io.BytesIO((bag / "paper_planar_2x3_ros2_0.mcap").read_bytes()),
+                         decoder_factories=[DecoderFactory()])
+    (urdf,) = [d.data for _, _, _, d in reader.iter_decoded_messages(topics=["/robot_description"])]
+    assert f'<mass value="{mass!r}"/>' in urdf
 
 
 def test_export_ros2_refuses_with_one_line_and_writes_nothing(cli_run, tmp_path):

@@ -15,7 +15,7 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError, one_line
 from coopsim.core.model import Model
-from coopsim.io.log import file_sha256, log_model
+from coopsim.io.log import file_sha256, log_model, log_overrides
 from coopsim.io.mcap_codec import read_mcap
 from coopsim.io.scenario import load_scenario
 from coopsim.twin.harness import cross_validate
@@ -161,8 +161,8 @@ def default_log_path(model: Model) -> Path:
 def reusable_log(path: str | Path, model: Model, duration: float | None = None):
     """The scenario's log `out/NAME/NAME.mcap` (relative to the current folder) when it can stand in for a run.
 
-    It can when it was written from this very file (same sha256), holds both models and covers `duration`
-    (its last sample at or after it). An unreadable or foreign file there is not reused.
+    It can when it was written from this very file (same sha256) without `--set` overrides, holds both models
+    and covers `duration` (its last sample at or after it). An unreadable or foreign file there is not reused.
 
     Args:
         path: the scenario file (its sha256 is compared with the one the log records).
@@ -179,7 +179,7 @@ def reusable_log(path: str | Path, model: Model, duration: float | None = None):
     try:
         log = _read_log(log_path)
         t = log.topics["/native/joint_state"]["t"]
-        ok = (log.metadata.get("scenario", {}).get("sha256") == file_sha256(path)
+        ok = (log.metadata.get("scenario", {}).get("sha256") == file_sha256(path) and not log_overrides(log)
               and "/mujoco/joint_state" in log.topics and t[-1] >= want - 1e-9)
     except (CoopsimError, KeyError, IndexError):    # an unreadable or foreign file there: run instead
         return None
