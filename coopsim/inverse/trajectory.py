@@ -19,7 +19,7 @@ Between samples a trajectory is the quintic Hermite interpolant of (θ, θ̇, θ
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -396,16 +396,16 @@ def shared_object_motion_trajectory(model: Model, motion: ObjectMotion) -> Joint
     """`object_motion_trajectory`, computed once per content of what determines it and shared.
 
     Models that differ only in TRAJECTORY_INDEPENDENT fields (a sweep over the payload's position, the
-    motors, the distributions' bounds) get the same trajectory object, its arrays read-only; the last
-    SHARED_TRAJECTORIES are kept. A model holding a Python callable where the trajectory depends on it
-    is not shared.
+    motors, the distributions' bounds) get the trajectory computed once, each caller its own copy of the
+    arrays (writable, as the compiled kernels take them); the last SHARED_TRAJECTORIES are kept. A model
+    holding a Python callable where the trajectory depends on it is not shared.
 
     Args:
         model: the Model whose arms carry the object.
         motion: the object's waypoints and time law.
 
     Returns:
-        JointTrajectory: as `object_motion_trajectory` (its arrays read-only).
+        JointTrajectory: as `object_motion_trajectory`.
 
     Raises:
         TrajectoryError: as `object_motion_trajectory`.
@@ -415,16 +415,13 @@ def shared_object_motion_trajectory(model: Model, motion: ObjectMotion) -> Joint
         return object_motion_trajectory(model, motion)
     if key in _shared:
         _shared.move_to_end(key)
-        return _shared[key]
-    traj = object_motion_trajectory(model, motion)
-    for f in fields(traj):
-        value = getattr(traj, f.name)
-        if isinstance(value, np.ndarray):
-            value.setflags(write=False)
-    _shared[key] = traj
-    while len(_shared) > SHARED_TRAJECTORIES:
-        _shared.popitem(last=False)
-    return traj
+    else:
+        _shared[key] = object_motion_trajectory(model, motion)
+        while len(_shared) > SHARED_TRAJECTORIES:
+            _shared.popitem(last=False)
+    kept = _shared[key]
+    return replace(kept, **{f.name: getattr(kept, f.name).copy() for f in fields(kept)
+                            if isinstance(getattr(kept, f.name), np.ndarray)})
 
 
 def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
