@@ -1,7 +1,7 @@
 """Helpers the tests share (not fixtures): the repository's paths, the real CLI in this process or a
-fresh one, scenario data mutated at a path, random and consistent states, a relative error, MuJoCo's
-own open-chain quantities and its KKT acceleration as an independent reference, and the check of the
-compiled stage terms against the reference ones.
+fresh one, the processes of a process group (from /proc), scenario data mutated at a path, random and
+consistent states, a relative error, MuJoCo's own open-chain quantities and its KKT acceleration as an
+independent reference, and the check of the compiled stage terms against the reference ones.
 """
 
 from __future__ import annotations
@@ -9,9 +9,12 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 import warnings
 from pathlib import Path
 
@@ -49,6 +52,33 @@ def run_cli(*args, cwd, process: bool = False):
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     return subprocess.CompletedProcess(["coopsim", *argv], code, out.getvalue(), err.getvalue())
+
+
+def running_processes(group: int) -> dict[int, int]:
+    """The processes of process group `group` that have not ended (a zombie has), from /proc: pid → its
+    parent's pid."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()   # after "pid (name)"
+            except OSError:                  # ended meanwhile
+                continue
+            if int(fields[2]) == group and fields[0] != "Z":
+                found[int(entry.name)] = int(fields[1])
+    return found
+
+
+def survivors(group: int, within_s: float = 5.0) -> dict[int, int]:
+    """The processes of group `group` still running `within_s` seconds from now (none: returns as soon as
+    there are none); each one found is then killed, so that a failing test leaves none behind."""
+    deadline = time.monotonic() + within_s
+    while (left := running_processes(group)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    return left
 
 
 def mutated(base: dict, path: list, value) -> dict:

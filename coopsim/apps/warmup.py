@@ -20,12 +20,14 @@ waiting for what the other one compiles:
 Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
 it needs itself. Without `control` the extras compile on their first use (`capacity`, object-motion
-trajectories), the controllers on the first closed-loop run (`warm_up_group`).
+trajectories), the controllers on the first closed-loop run (`warm_up_group`). The children end with
+this process however it ends (`coopsim.io.processes`), and are stopped when it is interrupted.
 `python -m coopsim.apps.warmup` compiles everything.
 """
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -42,6 +44,7 @@ from coopsim.compiled.manifold import project_state
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T, _new_workspace
 from coopsim.control.controller import Controller
 from coopsim.core.model import ControlSettings
+from coopsim.io.processes import end_with_parent
 from coopsim.io.scenario import model_from_dict
 
 
@@ -226,7 +229,7 @@ def warm_up(control: bool = False) -> None:
             warm_up_group("control")
         return
     names = [name for name in CHILDREN if control or name != "control"]
-    children = [subprocess.Popen([sys.executable, "-m", "coopsim.apps.warmup", name],
+    children = [subprocess.Popen([sys.executable, "-m", "coopsim.apps.warmup", name, str(os.getpid())],
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in names]
     model = _model()
     try:
@@ -236,6 +239,10 @@ def warm_up(control: bool = False) -> None:
             wait_for(kernel, children[0])
         compile_kernels(("chain_forward",))
         compile_loop(model)
+    except BaseException:         # e.g. the command interrupted: its compile processes stop with it
+        for child in children:
+            child.kill()
+        raise
     finally:
         for child in children:
             child.wait()
@@ -264,7 +271,8 @@ def warm_up_group(group: str) -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:2] and sys.argv[1] in CHILDREN:
+    if sys.argv[1:2] and sys.argv[1] in CHILDREN:     # a child of `warm_up`: NAME PARENT_PID
+        end_with_parent(int(sys.argv[2]))            # `warm_up` waits for it on the thread that started it
         CHILDREN[sys.argv[1]](_model())
     else:
         warm_up(control=True)

@@ -7,18 +7,22 @@ core, they import matplotlib and draw a throw-away figure (font cache, mathtext 
 priority on the other; the command's figures are then drawn on both. A job is (builder, args, path):
 the worker writes save_figure(builder(*args), path). Builders and their arguments travel by pickle,
 so builders are module-level functions. This module does not import matplotlib itself.
-"""
+The workers leave SIGINT and SIGTERM to the command, which stops them, and end with it however it ends
+(`coopsim.io.processes`: killed, too)."""
 
 from __future__ import annotations
 
 import io
 import multiprocessing
 import os
+import signal
+import threading
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, TypeVar
 
 from coopsim.io.atomic import atomic_path
+from coopsim.io.processes import end_with_parent
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -77,9 +81,21 @@ def save_figure(fig: Figure, path: Path) -> Path:
     return path
 
 
+def _start_worker(parent: int, kernel: bool, warm: bool) -> None:
+    """Worker initializer: ignore SIGINT and SIGTERM (a Ctrl-C or a stop reaches the whole process group;
+    the command stops its workers itself), end with the command (`end_with_parent`, its process id
+    `parent`; `kernel`: the workers were started on its main thread) and, with `warm`, warm up
+    (`_warm_up`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    end_with_parent(parent, kernel=kernel)
+    if warm:
+        _warm_up()
+
+
 def _warm_up() -> None:
-    """Worker initializer: lower the priority, import matplotlib and draw a small figure with a log
-    axis and a legend into memory (what a worker would otherwise do on its first job)."""
+    """Lower the priority, import matplotlib and draw a small figure with a log axis and a legend into
+    memory (what a worker would otherwise do on its first job)."""
     os.nice(WORKER_NICENESS)
     from matplotlib.figure import Figure
 
@@ -117,8 +133,9 @@ class FigureWorkers:
     def __init__(self, n: int = 2, warm: bool = True):
         self.pool = None
         if _can_fork(n):
+            on_main = threading.current_thread() is threading.main_thread()
             self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"),
-                                            initializer=_warm_up if warm else None)
+                                            initializer=_start_worker, initargs=(os.getpid(), on_main, warm))
             self.pool.submit(int)   # a fork-context pool starts all its workers at the first submit
 
     def render(self, jobs: list, first: tuple[int, ...] = ()) -> list[Path]:
@@ -148,9 +165,9 @@ class FigureWorkers:
         """
         if self.pool is None:
             return
-        if stop:
+        if stop:   # SIGKILL: the workers ignore SIGTERM
             for proc in list(getattr(self.pool, "_processes", {}).values()):
-                proc.terminate()
+                proc.kill()
         self.pool.shutdown(wait=True, cancel_futures=True)
         self.pool = None
 

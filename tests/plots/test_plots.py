@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import signal
+import time
+from pathlib import Path
 
 import matplotlib.image as mpimg
 import numpy as np
@@ -219,3 +222,31 @@ def test_costly_figures_are_handed_out_first_and_paths_keep_job_order():
     assert [p.name for p in workers.render(jobs, first=(2,))] == ["angles.png", "rates.png", "object.png", "constraint.png"]
     assert submitted == ["object.png", "angles.png", "rates.png", "constraint.png"]
     workers.pool = None
+
+
+def _ignored_signals(pid: int) -> int:
+    """The mask of signals process `pid` ignores (bit n - 1 for signal n), from /proc."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    return int(next(ln.split()[1] for ln in status.splitlines() if ln.startswith("SigIgn:")), 16)
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the workers' signal masks from /proc")
+def test_figure_workers_leave_signals_to_the_command_and_stop_at_once():
+    """The workers ignore SIGINT and SIGTERM (a terminal's Ctrl-C and a service stop reach the whole process
+    group; the command stops its workers itself), and `close(stop=True)` ends them in the middle of a job."""
+    from coopsim.plots.render import FigureWorkers
+
+    workers = FigureWorkers(warm=False)
+    if workers.pool is None:
+        pytest.skip("no fork or a single core: no worker processes")
+    both = (1 << (signal.SIGINT - 1)) | (1 << (signal.SIGTERM - 1))
+    try:
+        workers.pool.submit(time.sleep, 60)
+        pids = list(workers.pool._processes)
+        deadline = time.monotonic() + 30
+        while not all(_ignored_signals(pid) & both == both for pid in pids):   # each worker's initializer ran
+            assert time.monotonic() < deadline, [hex(_ignored_signals(pid)) for pid in pids]
+            time.sleep(0.02)
+    finally:
+        workers.close(stop=True)
+    assert len(pids) == 2 and not any(Path(f"/proc/{pid}").exists() for pid in pids)
