@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import warnings
 
@@ -685,17 +686,51 @@ def _announce_compile() -> None:
 INTERRUPTED = 130   # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)
 
 
+class Stopped(KeyboardInterrupt):
+    """A stop signal (SIGTERM: what `timeout`, systemd, Slurm and `docker stop` send), raised in the main
+    thread as Ctrl-C's KeyboardInterrupt is, so that it takes the same way out (no partial set, the
+    workers stopped).
+
+    Args:
+        signum: the signal's number.
+
+    Attributes:
+        signum: the signal's number; the command's exit status is 128 + signum.
+    """
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, frame) -> None:
+    """SIGTERM's handler: raise `Stopped` once; a repeated SIGTERM is ignored while the command cleans up."""
+    signal.signal(signum, signal.SIG_IGN)
+    raise Stopped(signum)
+
+
+def _stopped(exc: KeyboardInterrupt) -> int:
+    """Say on stderr, in one line, that the command was interrupted (Ctrl-C) or stopped (`Stopped`), and
+    return its exit status, 128 + the signal's number."""
+    if isinstance(exc, Stopped):
+        print(f"coopsim: stopped by {signal.Signals(exc.signum).name}", file=sys.stderr)
+        return 128 + exc.signum
+    print("coopsim: interrupted", file=sys.stderr)
+    return INTERRUPTED
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command and return its exit status. `coopsim` alone prints the help.
 
     A CoopsimError or OSError prints one line `coopsim: error: …` on stderr (status 2); a closed stdout
-    pipe ends quietly (status 1).
+    pipe ends quietly (status 1); Ctrl-C (or a `Stopped`) prints one line and leaves no partial set.
 
     Args:
         argv: the command-line arguments after the program name; None: sys.argv[1:].
 
     Returns:
-        int: 0, 1 (a check failed), 2 (bad input or a failure with a one-line reason), 130 (interrupted).
+        int: 0, 1 (a check failed), 2 (bad input or a failure with a one-line reason), 130 (interrupted),
+            128 + the signal's number (stopped by a signal, `Stopped`).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -716,9 +751,8 @@ def main(argv: list[str] | None = None) -> int:
             one_line = " ".join(part.strip() for part in str(exc).splitlines())
             print(f"coopsim: error: {one_line}", file=sys.stderr)
             return 2
-        except KeyboardInterrupt:
-            print("coopsim: interrupted", file=sys.stderr)
-            return INTERRUPTED
+        except KeyboardInterrupt as exc:
+            return _stopped(exc)
 
 
 def _closed_pipe() -> int:
@@ -737,10 +771,16 @@ def console_main() -> None:
     every module's cleanup) and does nothing a finished command needs: its outputs are
     written, closed and renamed into place, its figure workers and clusters are joined. So after main
     returns, stdout and stderr are flushed and the process ends with os._exit(status). An exception
-    that escapes main takes the normal way out (traceback, full shutdown)."""
+    that escapes main takes the normal way out (traceback, full shutdown). SIGTERM stops the command as
+    Ctrl-C does (`Stopped`: one line, no partial set, the workers stopped; status 143)."""
     import os
 
-    status = main()
+    signal.signal(signal.SIGTERM, _stop)
+    try:
+        status = main()
+    except KeyboardInterrupt as exc:   # before main's own handling (while the arguments are read)
+        status = _stopped(exc)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)   # the command has ended: it leaves at once
     try:
         sys.stdout.flush()
     except BrokenPipeError:

@@ -1,12 +1,10 @@
 """What the command line says when there is nothing to do, when asked its version, when its reader
-goes away, and when it is interrupted (the real CLI in a subprocess)."""
+goes away (the real CLI in a subprocess); when it is interrupted or stopped: test_cli_stop."""
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
-import time
 
 import coopsim
 from helpers import SCENARIOS, run_cli
@@ -31,19 +29,3 @@ def test_closed_pipe_is_quiet(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 1, err
     assert "Traceback" not in err and "BrokenPipe" not in err, err
-
-
-def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "coopsim.cli", "run", str(SCENARIOS / "paper_planar_2x3.yaml"),
-                             "--out", str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=tmp_path)
-    deadline = time.monotonic() + 60
-    while not any(tmp_path.glob(".out.*.tmp")) and time.monotonic() < deadline:   # the outputs' staging folder
-        time.sleep(0.02)
-    time.sleep(0.1)                           # inside the writing of the outputs
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("\r")]
-    assert proc.returncode == 130, (proc.returncode, err)
-    assert lines[-1] == "coopsim: interrupted" and "Traceback" not in err, err
-    assert sorted(p.name for p in tmp_path.iterdir()) == [], "no partial set, no temporaries"

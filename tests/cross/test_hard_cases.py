@@ -318,7 +318,7 @@ with staged_folder(Path(sys.argv[1])) as stage:      # as `coopsim run` writes i
 
 def test_a_killed_run_leaves_nothing_and_the_next_run_cleans_up(tmp_path, monkeypatch, capsys):
     """A process SIGKILLed while it writes a run's outputs (coopsim.io.atomic.staged_folder, as `coopsim run`
-    does; the real command under SIGINT: test_cli_text) leaves no `out`, only a hidden temporary,
+    does; the real command under SIGINT and SIGTERM: test_cli_stop) leaves no `out`, only a hidden temporary,
     which the next `coopsim run` removes."""
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-c", _KILLED_WRITER, str(out)], cwd=tmp_path, stdout=subprocess.PIPE,
