@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -44,7 +45,7 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
     the JSON summary `index`, summarize(log path, plot paths) (their final paths) → its text. `during()`
     runs here while the figures are drawn, before the log is written (work that the log does not
     hold); also(stage folder, in-memory log) then writes any further outputs of the set (the ROS 2 bag).
-    Returns (log path, plot paths)."""
+    Returns (log path, plot paths); a failure to write is one line naming --out (`_writing`)."""
     from coopsim.io.atomic import previous_set, staged_folder, write_text_atomic
     from coopsim.io.mcap_codec import log_data, write_mcap
     from coopsim.plots.render import render_while
@@ -54,12 +55,33 @@ def _write_set(out, index: str, log_name: str, streams, meta, draw, workers, sum
         also(stage, log_data(streams, meta, messages=False))
         return write_mcap(stage / log_name, streams, meta)
 
-    with staged_folder(out, replaces=previous_set(index)) as stage:
+    with _writing(out), staged_folder(out, replaces=previous_set(index)) as stage:
         plots, log_path = render_while(lambda: draw(log_data(streams, meta, messages=False), stage, workers=workers),
                                        work)
         log_path, plots = out / log_path.name, [out / p.name for p in plots]
         write_text_atomic(stage / index, summarize(log_path, plots))
     return log_path, plots
+
+
+def _check_out(out) -> None:
+    """Refuse an output folder `out` that cannot take a command's set of files, before the work: one line
+    naming --out (`coopsim.io.atomic.folder_problem`)."""
+    from coopsim.io.atomic import folder_problem
+
+    if problem := folder_problem(out):
+        raise CoopsimError(f"--out {out}: {problem}")
+
+
+@contextlib.contextmanager
+def _writing(out):
+    """Re-raise an OSError of the block, which writes a set of files as folder `out`, as one line naming --out
+    and why (what is in the way, else the system's reason), never a temporary's name."""
+    from coopsim.io.atomic import folder_problem
+
+    try:
+        yield
+    except OSError as exc:
+        raise CoopsimError(f"--out {out}: {folder_problem(out) or exc.strerror or exc}") from exc
 
 
 def _cmd_mjcf(args) -> int:
@@ -112,6 +134,7 @@ def _cmd_run(args) -> int:
 
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     out = Path(args.out or Path("out") / model.name)   # made by the first write: a failed run leaves none
+    _check_out(out)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
@@ -227,11 +250,12 @@ def _cmd_inverse(args) -> int:
     methods = METHODS if args.method == "all" else (args.method,)
     if args.torques_csv is not None and args.method == "all":
         raise CoopsimError("--torques-csv: name the resolution to export with --method")
+    out = Path(args.out or Path("out") / model.name)
+    _check_out(out)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         study = solve_study(model, methods, duration=args.duration, bounds=(args.bound_force, args.bound_moment),
                             progress=bar)
-        out = Path(args.out or Path("out") / model.name)
         streams, meta = inverse_series(study), run_metadata(model, study.sim, {
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)},
             "inverse": {"methods": list(methods), "force_bound_N": study.bounds[0],
@@ -282,13 +306,14 @@ def _cmd_capacity(args) -> int:
     model = load_scenario(args.scenario, duration=args.duration, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
     payload = None if args.payload is None else np.array(args.payload, dtype=float)
+    out = Path(args.out or Path("out") / model.name)
+    _check_out(out)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         study = capacity_study(model, duration=args.duration, payload_position=payload, with_lp=not args.no_lp,
                                optimise=not args.no_optimise, check=args.check, progress=bar)
         bar.close()
         summary = capacity_summary(study)
-        out = Path(args.out or Path("out") / model.name)
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
         streams, meta = capacity_series(study), run_metadata(model, None, meta | capacity_metadata(summary))
         log_path, plots = _write_set(out, "capacity.json", "capacity.mcap", streams, meta, capacity_plots, workers,
@@ -313,10 +338,12 @@ def _cmd_sweep(args) -> int:
     require_packages(dask=not args.serial)
     sweep = load_sweep(args.sweep, overrides=_overrides(args))
     out = Path(args.out or Path("out") / sweep.name)
+    _check_out(out)
     with ProgressBar(enabled=not args.json) as bar:
         run = run_sweep(sweep, out, serial=args.serial, scheduler=args.scheduler, workers=args.workers,
                         resume=args.resume, progress=lambda f: bar("sweep", f))
-    paths = write_outputs(sweep, run, out)
+    with _writing(out):
+        paths = write_outputs(sweep, run, out)
     summary = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
     if args.json:
         print(json.dumps(summary, indent=2))

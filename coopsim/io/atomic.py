@@ -2,7 +2,9 @@
 (a run's outputs) is written into a temporary sibling folder and swapped into place as a whole.
 
 Temporaries are hidden and named `.{target name}.{process id}.{random}.tmp`; one left behind by a process
-that no longer runs (killed, or the machine stopped) is removed by the next atomic write beside it.
+that no longer runs (killed, or the machine stopped) is removed by the next atomic write beside it. A
+failure of the writing itself names the target, never a temporary (`naming`); `folder_problem` says what
+stands in the way of an output folder before anything is written.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
+import errno
 import json
 import os
 import re
@@ -70,8 +73,8 @@ def sweep_stale(folder: str | Path) -> list[Path]:
         list[Path]: what was removed.
     """
     removed = []
-    with contextlib.suppress(FileNotFoundError, NotADirectoryError):
-        for entry in os.scandir(folder):
+    with contextlib.suppress(FileNotFoundError, NotADirectoryError), os.scandir(folder) as entries:
+        for entry in entries:
             if is_stale_temporary(entry.path):
                 path = Path(entry.path)
                 if entry.is_dir(follow_symlinks=False):
@@ -99,16 +102,70 @@ def atomic_path(path: str | Path):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(path.parent)
-    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path.name), suffix=".tmp", dir=path.parent)
+    with naming(path):
+        fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path.name), suffix=".tmp", dir=path.parent)
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the mode open() would
     try:
         yield Path(tmp)
-        os.replace(tmp, path)
+        with naming(path):
+            os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def naming(path: str | Path):
+    """Context manager re-raising an OSError of the block (e.g. the rename of a temporary) as the same
+    error about `path`, what the caller gave, so that its message never names a temporary.
+
+    Args:
+        path: the file or folder the block writes.
+
+    Yields:
+        None.
+
+    Raises:
+        OSError: the block's, with `path` as its only file name (the same errno and subclass); one without
+            an errno passes unchanged.
+    """
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno is None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from exc
+
+
+def folder_problem(out: str | Path) -> str | None:
+    """What stands in the way of writing a set of files as folder `out` (`staged_folder`), in words.
+
+    Args:
+        out: the output folder.
+
+    Returns:
+        str | None: "is a file, not a folder"; "PATH is a file, not a folder" (a folder above `out`);
+            that `out` is a mount point (a set replaces its folder by a rename, which a mount point
+            refuses); "cannot write in PATH: Read-only file system" (or "Permission denied"), PATH the
+            folder the set is staged in (`out`'s parent, or the nearest folder above it that exists);
+            None when none of these is seen.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        return "is a file, not a folder"
+    if out.is_dir() and os.path.ismount(out):
+        return "is a mount point, which a new set of files cannot replace as a whole: name a folder inside it"
+    base = next((p for p in out.parents if p.exists()), None)
+    if base is None:
+        return None
+    if not base.is_dir():
+        return f"{base} is a file, not a folder"
+    if not os.access(base, os.W_OK | os.X_OK):
+        code = errno.EROFS if os.statvfs(base).f_flag & os.ST_RDONLY else errno.EACCES
+        return f"cannot write in {'the current folder' if base == Path('.') else base}: {os.strerror(code)}"
+    return None
 
 
 def _umask() -> int:
@@ -150,16 +207,17 @@ def _exchange(a: Path, b: Path) -> bool:
 def _keep_others(old: Path, new: Path, replaced: set[str]) -> None:
     """Hard-link into `new` every entry of `old` that is not in `replaced`, not in `new` and not a
     temporary (files another command wrote there: they stay; the old ones are left untouched)."""
-    for entry in os.scandir(old):
-        if entry.name in replaced or _TEMP.match(entry.name) or (new / entry.name).exists():
-            continue
-        src, dst = Path(entry.path), new / entry.name
-        if entry.is_dir(follow_symlinks=False):
-            shutil.copytree(src, dst, symlinks=True, copy_function=os.link)
-        elif entry.is_symlink():
-            os.symlink(os.readlink(src), dst)
-        else:
-            os.link(src, dst)
+    with os.scandir(old) as entries:
+        for entry in entries:
+            if entry.name in replaced or _TEMP.match(entry.name) or (new / entry.name).exists():
+                continue
+            src, dst = Path(entry.path), new / entry.name
+            if entry.is_dir(follow_symlinks=False):
+                shutil.copytree(src, dst, symlinks=True, copy_function=os.link)
+            elif entry.is_symlink():
+                os.symlink(os.readlink(src), dst)
+            else:
+                os.link(src, dst)
 
 
 def previous_set(index: str):
@@ -206,21 +264,37 @@ def staged_folder(out: str | Path, replaces=lambda old: set()):
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(out.parent)
     sweep_stale(out)
-    tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
+    with naming(out):
+        tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
     os.chmod(tmp, 0o777 & ~_umask())   # mkdtemp creates 0700; give the folder the mode mkdir would
     try:
         yield tmp
-        if out.is_dir():
-            _keep_others(out, tmp, set(replaces(out)))
-            if _exchange(tmp, out):
-                shutil.rmtree(tmp)
-                return
-            old = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
-            os.replace(out, old / "old")
-            os.replace(tmp, out)
-            shutil.rmtree(old)
-        else:
-            os.replace(tmp, out)
+        with naming(out):
+            _swap_in(tmp, out, replaces)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _swap_in(tmp: Path, out: Path, replaces) -> None:
+    """Make the complete folder `tmp` folder `out` (`staged_folder`, its `replaces`)."""
+    if not out.is_dir():
+        os.replace(tmp, out)
+        return
+    _keep_others(out, tmp, set(replaces(out)))
+    if _exchange(tmp, out):
+        shutil.rmtree(tmp)
+        return
+    old = Path(tempfile.mkdtemp(prefix=_temp_prefix(out.name), suffix=".tmp", dir=out.parent))
+    try:
+        os.replace(out, old / "old")
+        try:
+            os.replace(tmp, out)
+        except BaseException:
+            os.replace(old / "old", out)     # the previous set back in its place
+            raise
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.rmdir(old)                    # empty: nothing was moved, or it was moved back
+        raise
+    shutil.rmtree(old)
