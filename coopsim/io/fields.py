@@ -299,22 +299,22 @@ class Section:
             return np.deg2rad(self.array(deg, shape))
         return self.array(key, shape, default=default)
 
-    def angles(self, key, shape, default=REQUIRED, is_angle=None) -> np.ndarray:
+    def angles(self, key, shape, default=REQUIRED) -> np.ndarray:
         """Angles under `key` (rad) or `key_deg` (deg), in radians.
 
         Both keys at once, or rad values that look like degrees (|x| > 2π), are rejected.
 
-        `rad_or_deg` is for quantities that are not angles, such as rates, which may exceed a turn.
+        `rad_or_deg` is for quantities that are not angles, such as rates, which may exceed a turn (and
+        the scenario reads joint coordinates with it, checking them against a turn by the joint's range,
+        `coopsim.io.scenario`).
 
         Args:
             key: the key in radians; `key_deg` is the same angles in degrees.
             shape: the expected shape, as for `array`.
             default: the value when neither key is given (rad); REQUIRED: one of them must be given.
-            is_angle: bool array of `shape`: which values are angles (the others, prismatic joints'
-                coordinates in m, are not checked against a turn); None: all.
 
         Returns:
-            np.ndarray: the values of `shape`, rad (m where is_angle is False).
+            np.ndarray: the values of `shape`, rad.
 
         Raises:
             ScenarioError: both keys are given, a value under `key` exceeds a turn, or the value is refused
@@ -323,8 +323,6 @@ class Section:
         deg = f"{key}_deg"
         a = self.rad_or_deg(key, shape, default)
         big = np.abs(a) > 2 * np.pi + 1e-9
-        if is_angle is not None:
-            big &= is_angle
         if not self.has(deg) and np.any(big):
             self.fail(key, f"{np.max(np.abs(a[big])):g} rad is more than a turn: degrees? use {deg}")
         return a

@@ -21,6 +21,7 @@ import io
 import math
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -211,20 +212,45 @@ def _robot_arm(sec: Section, name: str, base_pos, base_rot, base_dir: Path) -> t
                  "joint_names": chain.joint_names}
 
 
-def _joint_values(sec: Section, key: str, types: np.ndarray, labels: list[str], rates: bool = False,
-                  default=REQUIRED) -> np.ndarray:
+def _joint_values(sec: Section, key: str, types: np.ndarray, labels: list[str], ranges: np.ndarray | None = None,
+                  rates: bool = False, default=REQUIRED) -> np.ndarray:
     """Joint coordinates (rates: joint rates) under `key`, per joint type: rad or m (rad/s or m/s); the
     degree form `key_deg` only where no joint is prismatic (ScenarioError naming the field and the
-    first prismatic joint, labels[j]); a revolute angle over a turn is refused as in `angles`."""
+    first prismatic joint, labels[j]); radians that look like degrees are refused (`_check_turns`, with
+    the joints' ranges (n, 2), ±inf: none)."""
     deg, n = f"{key}_deg", len(types)
     prismatic = np.flatnonzero(types == PRISMATIC)
     if sec.has(deg) and prismatic.size:
         unit = "m/s" if rates else "m"
         sec.fail(deg, f"{labels[prismatic[0]]} is prismatic ({unit}): give {key} in {'rad/s' if rates else 'rad'} "
                       f"and {unit}, not {deg}")
-    if rates:
-        return sec.rad_or_deg(key, (n,), default)
-    return sec.angles(key, (n,), default, is_angle=types == REVOLUTE)
+    values = sec.rad_or_deg(key, (n,), default)
+    if not rates and not sec.has(deg):
+        _check_turns(sec, key, values, types, labels, np.tile([-np.inf, np.inf], (n, 1)) if ranges is None else ranges)
+    return values
+
+
+def _check_turns(sec: Section, key: str, q: np.ndarray, types: np.ndarray, labels: list[str], ranges: np.ndarray):
+    """Refuse revolute joint angles given in rad (q (n,)) that are more than a turn where that can only be
+    degrees: outside the joint's range (ranges (n, 2) rad) when it has one, a whole number when it has
+    none (a joint without limits may turn past 2π: 6.5 rad is an angle, 90 is taken for degrees)."""
+    lo, hi = ranges.T
+    past = (types == REVOLUTE) & (np.abs(q) > 2 * np.pi + 1e-9)
+    ranged = np.isfinite(lo) | np.isfinite(hi)
+    suspect = past & np.where(ranged, (q < lo) | (q > hi), q == np.round(q))
+    if np.any(suspect):
+        j = int(np.flatnonzero(suspect)[0])
+        why = f"outside its range [{lo[j]:.6g}, {hi[j]:.6g}] rad" if ranged[j] else "a whole number of radians"
+        sec.fail(key, f"{labels[j]} at {q[j]:g} rad is more than a turn, {why}: degrees? use {key}_deg")
+
+
+class _Joints(NamedTuple):
+    """The joints of every arm, stacked: types (n,) (`JOINT_TYPES` values), labels (n,) as error lines name
+    them, ranges (n, 2) rad (m on a prismatic joint; ±inf: none)."""
+
+    types: np.ndarray
+    labels: list[str]
+    ranges: np.ndarray
 
 
 def _arm_state(sec: Section, arm: ArmModel, info: dict):
@@ -233,7 +259,7 @@ def _arm_state(sec: Section, arm: ArmModel, info: dict):
     n, types, names = info["n"], arm.joint_type, info["joint_names"]
     labels = [f"joint {j + 1}" + ("" if names is None else f" ({names[j]})") for j in range(n)]
     init = sec.section("initial")
-    q0 = _joint_values(init, "angles", types, labels)
+    q0 = _joint_values(init, "angles", types, labels, info["joint_range"])
     qd0 = _joint_values(init, "rates", types, labels, rates=True, default=np.zeros(n))   # no turn limit
     lo, hi = info["joint_range"].T
     outside = np.flatnonzero((q0 < lo) | (q0 > hi))
@@ -408,10 +434,10 @@ def _validation(sec: Section | None) -> ValidationThresholds:
     return s
 
 
-def _inverse(sec: Section | None, n: int, r: int, arms: list[ArmModel] = ()) -> InverseSettings:
+def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
     """The optional `inverse` section: trajectory to invert, object motion, non-squeezing virtual
-    masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion); arms
-    give the joint types of the stacked initial guess."""
+    masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion); `joints`
+    are the stacked joints the initial guess and rest posture are read for."""
     if sec is None:
         return InverseSettings()
     trajectory = sec.string("trajectory", ("forward", "object_motion"), "forward")
@@ -420,9 +446,7 @@ def _inverse(sec: Section | None, n: int, r: int, arms: list[ArmModel] = ()) -> 
     if om is not None:
         law = om.string("time_law", ("quintic", "cubic"), "quintic")
         dt = om.number("output_dt", 1e-2, positive=True)
-        types = np.concatenate([a.joint_type for a in arms]) if arms else np.full(n, REVOLUTE)
-        labels = [f"arm {a.name!r} joint {j + 1}" for a in arms for j in range(a.n)]
-        guess, rest = (_joint_values(om, key, types, labels) if om.has(key) or om.has(f"{key}_deg") else None
+        guess, rest = (_joint_values(om, key, *joints) if om.has(key) or om.has(f"{key}_deg") else None
                        for key in ("initial_guess", "rest_posture"))
         gain = om.number("rest_gain", 1.0, nonneg=True)
         times, pos, rot = [], [], []
@@ -460,10 +484,13 @@ def _gains(sec: Section, key: str, n: int) -> np.ndarray:
     return sec.array(key, (n,), nonneg=True)
 
 
-def _control(sec: Section | None, n: int, inverse: InverseSettings, passive: np.ndarray) -> ControlSettings | None:
-    """The optional `control` section (see ControlSettings; the fields a law does not read are refused)."""
+def _control(sec: Section | None, joints: "_Joints", inverse: InverseSettings,
+             passive: np.ndarray) -> ControlSettings | None:
+    """The optional `control` section (see ControlSettings; the fields a law does not read are refused);
+    `joints` are the stacked joints the setpoint is read for (rad, m on a prismatic joint)."""
     if sec is None:
         return None
+    n = len(joints.types)
     law = sec.string("law", LAWS)
     if np.any(passive):
         sec.fail("law", "a controller needs every joint actuated (arms[].passive has a passive joint)")
@@ -483,7 +510,7 @@ def _control(sec: Section | None, n: int, inverse: InverseSettings, passive: np.
         if sec.has("setpoint") or sec.has("setpoint_deg"):
             if reference != "setpoint":
                 sec.fail("setpoint", "only with reference: setpoint")
-            setpoint = sec.angles("setpoint", (n,))
+            setpoint = _joint_values(sec, "setpoint", *joints)
         opts.update(compensation=sec.string("compensation", COMPENSATIONS, "gravity"), reference=reference,
                     setpoint=setpoint)
     else:
@@ -692,9 +719,11 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     integrator = _integrator(root.section("integrator", default=None))
     mujoco_settings = _mujoco(root.section("mujoco", default=None))
     validation = _validation(root.section("validation", default=None))
-    inverse = _inverse(root.section("inverse", default=None), sum(a.n for a in arms), len(arms), arms)
+    joints = _Joints(np.concatenate([a.joint_type for a in arms]),
+                     [f"arm {a.name!r} joint {j + 1}" for a in arms for j in range(a.n)], np.concatenate(ranges))
+    inverse = _inverse(root.section("inverse", default=None), len(arms), joints)
     motors = Motors(*(np.concatenate([m[k] for m in motor_parts]) for k in range(4)))
-    control = _control(root.section("control", default=None), sum(a.n for a in arms), inverse, motors.passive)
+    control = _control(root.section("control", default=None), joints, inverse, motors.passive)
     root.done()
     _check_work(where, duration, duration_field, integrator, mujoco_settings, inverse)
     q0, qd0 = np.concatenate(q0), np.concatenate(qd0)

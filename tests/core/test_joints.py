@@ -199,7 +199,8 @@ def test_a_long_slide_is_not_taken_for_degrees():
     far = mutated(GANTRY, ["arms", 0, "initial", "angles"], [7.0, 1.784505, -1.633337])
     assert model_from_dict(far).q0[0] == 7.0
     wrong = mutated(GANTRY, ["arms", 0, "initial", "angles"], [0.1, 7.0, -1.633337])
-    assert _error(wrong) == "<scenario>: arms[0].initial.angles: 7 rad is more than a turn: degrees? use angles_deg"
+    assert _error(wrong) == ("<scenario>: arms[0].initial.angles: joint 2 at 7 rad is more than a turn, a whole number "
+                             "of radians: degrees? use angles_deg")
 
 
 def test_a_slides_range_is_in_metres():

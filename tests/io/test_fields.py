@@ -72,8 +72,6 @@ def test_angles_in_radians_or_degrees_never_both():
              "s.yaml: arms[0].q: give either q (rad) or q_deg (deg), not both")
     _refused(lambda: _sec(q=[90.0]).angles("q", (1,)),
              "s.yaml: arms[0].q: 90 rad is more than a turn: degrees? use q_deg")
-    # a prismatic coordinate (m) is not an angle: no turn check
-    assert _sec(q=[90.0]).angles("q", (1,), is_angle=np.array([False]))[0] == 90.0
 
 
 def test_nested_sections_items_and_unknown_fields():

@@ -56,4 +56,45 @@ def test_initial_rates_above_a_turn_per_second_are_rates_not_degrees():
         "<scenario>: arms[0].initial.rates: must be finite"
     # angles still flag radians that look like degrees
     angles = mutated(PAPER, ["arms", 0, "initial"], {"angles": [7.0, 0.0, 0.0]})
-    assert _error(angles) == "<scenario>: arms[0].initial.angles: 7 rad is more than a turn: degrees? use angles_deg"
+    assert _error(angles) == ("<scenario>: arms[0].initial.angles: joint 1 at 7 rad is more than a turn, a whole "
+                              "number of radians: degrees? use angles_deg")
+
+
+GANTRY = yaml.safe_load((SCENARIOS / "gantry_prismatic.yaml").read_text())
+
+
+def _with_setpoint(data: dict, **setpoint) -> dict:
+    """`data` with a joint PD controller holding the given `setpoint` or `setpoint_deg` (one per joint)."""
+    return mutated(data, ["control"], {"law": "joint_pd", "kp": 10.0, "kd": 1.0, **setpoint})
+
+
+def test_a_setpoint_is_read_per_joint_type():
+    """control.setpoint is a joint coordinate: rad on a revolute joint, m on a prismatic one. Its degree
+    form was converted by π/180 on every joint, a prismatic one's metres too, and 7 m on a prismatic joint
+    was refused as 'degrees?'."""
+    far = [7.0, 1.784505, -1.633337, 0.3, -1.387819, 2.039118]
+    assert model_from_dict(_with_setpoint(GANTRY, setpoint=far)).control.setpoint.tolist() == far
+    assert _error(_with_setpoint(GANTRY, setpoint_deg=[5.7, 102.2, -93.6, 17.2, -79.5, 116.8])) == (
+        "<scenario>: control.setpoint_deg: arm 'gantry' joint 1 is prismatic (m): give setpoint in rad and m, not "
+        "setpoint_deg")
+    wrong = mutated(far, [1], 102.0)
+    assert _error(_with_setpoint(GANTRY, setpoint=wrong)) == (
+        "<scenario>: control.setpoint: arm 'gantry' joint 2 at 102 rad is more than a turn, a whole number of "
+        "radians: degrees? use setpoint_deg")
+    deg = [10.0, -20.0, 30.0, 5.0, 15.0, -25.0]
+    m = model_from_dict(_with_setpoint(PAPER, setpoint_deg=deg))
+    assert m.control.setpoint == pytest.approx(np.deg2rad(deg), rel=1e-15)
+
+
+def test_an_angle_past_a_turn_within_a_joints_range():
+    """A hand-written revolute joint whose range passes a turn takes angles up to its range in rad (the
+    paper's 90° as π/2 + 2π within [−10°, 450°]: the same posture); past a turn and outside it, the
+    degrees hint."""
+    data = mutated(PAPER, ["arms", 0, "links", 0, "joint", "range_deg"], [-10, 450])
+    angles = np.deg2rad([90.0, 303.56, 326.44])
+    turned = model_from_dict(mutated(data, ["arms", 0, "initial"], {"angles": (angles + [2 * np.pi, 0, 0]).tolist()}))
+    plain = model_from_dict(mutated(data, ["arms", 0, "initial"], {"angles": angles.tolist()}))
+    assert turned.q0[0] == angles[0] + 2 * np.pi and np.array_equal(turned.q0[1:], plain.q0[1:])
+    assert _error(mutated(data, ["arms", 0, "initial"], {"angles": [8.0, 5.3, 5.7]})) == (
+        "<scenario>: arms[0].initial.angles: joint 1 at 8 rad is more than a turn, outside its range [-0.174533, "
+        "7.85398] rad: degrees? use angles_deg")
