@@ -5,7 +5,12 @@ The file is parsed by `mujoco.MjSpec.from_file` (URDF and MJCF alike); everythin
 need is deleted from the spec before it is compiled (geoms, meshes, textures, materials, sites,
 tendons, sensors, equalities, contact pairs, keyframes, and actuators other than joint motors), and
 inertia comes from the file's inertials only (`inertiafromgeom` off): a missing mesh file never stops a
-scenario. Fixed bodies are kept apart (`fusestatic` off) so that every link keeps its name.
+scenario. Fixed bodies are kept apart (`fusestatic` off) so that every link keeps its name. The masses
+and inertias are read from the parsed file, not from MuJoCo's compiled model, and MuJoCo compiles unit
+stand-ins in their place (`compile_dynamics`): a link the scene does not use (a head camera, an antenna of
+the base) never stops it, whatever its inertial says. A link the chain uses whose inertial is no rigid
+body's (a negative mass or principal moment, a moment above the sum of the other two) is refused, naming
+it.
 
 The chain runs from the `base` body (link) to the `tip` body, which must lie below it. Along it:
 - a body with one hinge joint (URDF revolute or continuous) or one slide joint (URDF prismatic) starts
@@ -22,7 +27,10 @@ The chain runs from the `base` body (link) to the `tip` body, which must lie bel
   the world and plays no part.
 Ball and free joints, several joints in one body, a joint with a reference position other than 0,
 a link without mass, a name not in the file and a tip that is not below the base are refused with one
-line naming them (`RobotFileError`; the scenario adds the file and field).
+line naming them (`RobotFileError`; the scenario adds the file and field), and so is a chain joint that
+a joint equality couples to another (a URDF `<mimic>` joint, or the joint it mimics: MuJoCo's
+`equality/joint`): an arm's joints are independent, and taking it as one would change the robot; the line
+says how to lock the pair.
 
 What comes along per joint: the position range (rad, m for a slide; ±inf where the file gives none or
 the joint is continuous), the effort limit (N·m, a force in N for a slide: MuJoCo's `actuatorfrcrange`
@@ -89,6 +97,21 @@ class Robot:
     lock: tuple[str, ...] = ()
 
 
+def _hey5(side: str) -> tuple[str, ...]:
+    """The 36 finger joints of TIAGo's Hey5 hand on `side` ('left' or 'right'), to lock."""
+    phalanges = {"thumb": 2, "index": 3, "middle": 3, "ring": 3, "little": 3}
+    names = ["thumb", "index", "mrl"] + [f"{finger}_{kind}" for finger, k in phalanges.items()
+                                         for kind in ["abd"] + [f"{v}_{i}" for i in range(1, k + 1)
+                                                                for v in ("virtual", "flex")]]
+    return tuple(f"hand_{side}_{name}_joint" for name in names)
+
+
+def _pr2_gripper(side: str) -> tuple[str, ...]:
+    """The 6 joints of PR2's gripper on `side` ('l' or 'r'): the finger and the five that mimic it, to lock."""
+    return tuple(f"{side}_gripper_{name}_joint" for name in ("l_finger", "r_finger", "l_parallel_root",
+                                                             "r_parallel_root", "l_finger_tip", "r_finger_tip"))
+
+
 ROBOTS: dict[str, Robot] = {
     "ur3": Robot("ur_description/urdf/ur3_robot.urdf", "base_link", "tool0"),
     "ur5": Robot("ur_description/urdf/ur5_robot.urdf", "base_link", "tool0"),
@@ -101,6 +124,12 @@ ROBOTS: dict[str, Robot] = {
                          ("l_gripper_l_finger_joint", "l_gripper_r_finger_joint")),
     "baxter_right": Robot("baxter_description/urdf/baxter.urdf", "base", "right_gripper",
                           ("r_gripper_l_finger_joint", "r_gripper_r_finger_joint")),
+    "tiago_dual_left": Robot("tiago_description/robots/tiago_dual.urdf", "torso_lift_link", "hand_left_grasping_frame",
+                             _hey5("left")),
+    "tiago_dual_right": Robot("tiago_description/robots/tiago_dual.urdf", "torso_lift_link",
+                              "hand_right_grasping_frame", _hey5("right")),
+    "pr2_left": Robot("pr2_description/urdf/pr2.urdf", "torso_lift_link", "l_gripper_tool_frame", _pr2_gripper("l")),
+    "pr2_right": Robot("pr2_description/urdf/pr2.urdf", "torso_lift_link", "r_gripper_tool_frame", _pr2_gripper("r")),
     "so100": Robot("so_arm_description/urdf/so100.urdf", "base", "gripper", ("gripper",)),
     "so101": Robot("so_arm_description/urdf/so101.urdf", "base_link", "gripper_frame_link", ("gripper",)),
 }
@@ -244,18 +273,72 @@ _STRIPPED = ("geoms", "sites", "cameras", "lights", "tendons", "sensors", "equal
              "meshes", "skins", "hfields", "materials", "textures", "flexes", "numerics", "texts", "tuples")
 
 
-def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
-    """A robot file compiled by MuJoCo with only bodies, joints, inertials and joint motors left.
+@dataclass(frozen=True, eq=False)
+class Coupling:
+    """A joint equality of the file (a URDF `<mimic>`, an MJCF `<equality><joint>`): θ_joint =
+    c0 + c1 θ_master + c2 θ_master² + c3 θ_master³ + c4 θ_master⁴.
 
-    See the module docstring for what is deleted and the compiler settings.
+    Attributes:
+        joint: the joint it moves (URDF: the mimic joint).
+        master: the joint it follows ("" for none: the joint is held at c0).
+        coef: (5,) c0 (rad, m for a slide) … c4, MuJoCo's polycoef.
+    """
+
+    joint: str
+    master: str
+    coef: np.ndarray
+
+    def relation(self) -> str:
+        """The coupling as text, e.g. "r_finger = 1·l_finger + 0".
+
+        Returns:
+            str: joint = c0, or joint = c1·master + c0 (and the higher powers that are not zero).
+        """
+        if not self.master:
+            return f"{self.joint} = {self.coef[0]:g}"
+        terms = [f"{c:g}·{self.master}" + (f"^{k}" if k > 1 else "") for k, c in enumerate(self.coef[1:], 1)
+                 if c != 0 or k == 1]
+        return f"{self.joint} = {' + '.join(terms)} + {self.coef[0]:g}"
+
+
+@dataclass(frozen=True, eq=False)
+class RobotDynamics:
+    """A robot file compiled for its kinematics, with the inertials read from the file (not from MuJoCo).
+
+    Attributes:
+        model: the compiled model: bodies, joints and joint motors; every body's mass and inertia in it
+            are stand-ins (see `compile_dynamics`), its inertial frames (body_ipos, body_iquat) are the
+            file's.
+        mass: (nbody,) kg, each body's mass as the file gives it (its compiler's boundmass and
+            settotalmass applied; 0 for a body without an inertial).
+        inertia: (nbody, 3, 3) kg·m², each body's inertia about its centre of mass, in its inertial frame
+            (body_iquat), as the file gives it (boundinertia and balanceinertia applied).
+        problem: per body, None, or why its inertial is not a rigid body's (refused where the scene
+            uses it).
+        couplings: the active joint equalities (URDF mimic joints).
+    """
+
+    model: mujoco.MjModel
+    mass: np.ndarray
+    inertia: np.ndarray
+    problem: tuple[str | None, ...]
+    couplings: tuple[Coupling, ...]
+
+
+def compile_dynamics(path: Path) -> RobotDynamics:
+    """A robot file compiled by MuJoCo with only bodies, joints, inertial frames and joint motors left.
+
+    See the module docstring for what is deleted and the compiler settings. The inertials are read from
+    the file's specification before compiling and replaced in it by a unit stand-in (mass 1 kg, inertia
+    diag(1, 1, 1) kg·m², in the same inertial frame), so that no body's inertial, used by the scene or
+    not, can stop MuJoCo's compiler: `read_chain` checks those it uses (`RobotDynamics.problem`).
 
     Args:
         path: the URDF or MJCF file.
 
     Returns:
-        tuple[mujoco.MjModel, float]: (model, floor): the compiled model, and the mass and principal
-            inertia (kg, kg·m²) that stand for zero in it (MuJoCo's MINVAL, given to massless bodies so that it
-            compiles; 0 where the file sets its own bounds).
+        RobotDynamics: the compiled model, the file's masses and inertias per body, and its joint
+            couplings.
 
     Raises:
         RobotFileError: with MuJoCo's message when the file cannot be read or compiled, or when it is larger
@@ -269,6 +352,8 @@ def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
         spec = mujoco.MjSpec.from_file(str(path))
     except Exception as exc:          # MuJoCo reports a bad file as ValueError (FatalError on some)
         raise RobotFileError(f"MuJoCo cannot read {path.name}: {one_line(exc)}") from None
+    couplings = tuple(Coupling(e.name1, e.name2 or "", np.array(e.data[:5], dtype=float))
+                      for e in spec.equalities if e.type == mujoco.mjtEq.mjEQ_JOINT and e.active)
     for kind in _STRIPPED:
         for element in list(getattr(spec, kind)):
             spec.delete(element)
@@ -277,16 +362,73 @@ def compile_dynamics(path: Path) -> tuple[mujoco.MjModel, float]:
             spec.delete(act)
     spec.compiler.fusestatic = False
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    floor = 0.0
-    if spec.compiler.boundmass == 0 and spec.compiler.boundinertia == 0:
-        # MuJoCo refuses a moving body without mass anywhere in the file (a dummy link, one whose mass
-        # sits on a fixed child): let it compile with MINVAL, read back as exactly zero (`_Link.add`)
-        floor = spec.compiler.boundmass = spec.compiler.boundinertia = mujoco.mjMINVAL
+    bodies = spec.bodies[1:]          # [0] is the world
+    mass, inertia = _file_inertials(spec, bodies)
     try:
-        return spec.compile(), floor
+        model = spec.compile()
     except Exception as exc:
         raise RobotFileError(f"MuJoCo cannot compile {path.name} (meshes and geoms left out): "
                              f"{one_line(exc)}") from None
+    ids = [b.id for b in bodies]
+    full_mass, full_inertia = np.zeros(model.nbody), np.zeros((model.nbody, 3, 3))
+    full_mass[ids], full_inertia[ids] = mass, inertia
+    problem = [None] * model.nbody
+    for i, mi, Ii in zip(ids, mass, inertia):
+        problem[i] = _inertia_problem(mi, Ii, spec.compiler.balanceinertia)
+        if problem[i] is None and spec.compiler.balanceinertia:
+            full_inertia[i] = _balanced(Ii)
+    return RobotDynamics(model, full_mass, full_inertia, tuple(problem), couplings)
+
+
+def _file_inertials(spec: mujoco.MjSpec, bodies: list) -> tuple[np.ndarray, np.ndarray]:
+    """(mass (k,) kg, inertia (k, 3, 3) kg·m² in each body's inertial frame) of the bodies as the file
+    gives them, MuJoCo's boundmass, boundinertia and settotalmass applied as its compiler would; each
+    body's inertial is then replaced in the spec by the unit stand-in (same frame)."""
+    c = spec.compiler
+    mass, inertia = np.zeros(len(bodies)), np.zeros((len(bodies), 3, 3))
+    for k, b in enumerate(bodies):
+        if b.explicitinertial:
+            f = np.array(b.fullinertia, dtype=float)
+            I = np.array([[f[0], f[3], f[4]], [f[3], f[1], f[5]], [f[4], f[5], f[2]]]) if np.isfinite(f[0]) \
+                else np.diag(np.array(b.inertia, dtype=float))
+            mass[k], inertia[k] = b.mass, I
+        else:                          # no inertial: nothing from geoms (inertiafromgeom off), at the body frame
+            b.ipos, b.iquat = [0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]
+        if c.boundinertia > 0:
+            ev, V = np.linalg.eigh(inertia[k])
+            inertia[k] = V @ np.diag(np.maximum(ev, c.boundinertia)) @ V.T
+        b.explicitinertial, b.mass, b.fullinertia, b.inertia = True, 1.0, [np.nan] + [0.0] * 5, [1.0, 1.0, 1.0]
+    if c.boundmass > 0:
+        mass = np.maximum(mass, c.boundmass)
+    if c.settotalmass > 0 and mass.sum() > 0:
+        scale = c.settotalmass / mass.sum()
+        mass, inertia = mass * scale, inertia * scale
+        c.settotalmass = -1.0
+    return mass, inertia
+
+
+def _inertia_problem(mass: float, inertia: np.ndarray, balance: bool) -> str | None:
+    """Why (mass, inertia) is no rigid body's, None when it is one: a negative mass, a principal moment
+    below zero, or one above the sum of the other two (unless the file asks MuJoCo to balance them),
+    each beyond 1e-9 of the largest moment (a thin rod sits on the bound)."""
+    if mass < 0:
+        return f"its mass is negative ({mass:g} kg)"
+    ev = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    tol = 1e-9 * max(float(np.max(np.abs(ev))), np.finfo(float).tiny)
+    moments = ", ".join(f"{x:.6g}" for x in ev)
+    if ev[0] < -tol:
+        return f"its principal moments {moments} kg·m² are not all ≥ 0 (the matrix is not positive semi-definite)"
+    if ev[0] + ev[1] < ev[2] - tol and not balance:
+        return (f"its principal moments {moments} kg·m² break the triangle inequality (the largest is more than "
+                f"the sum of the other two)")
+    return None
+
+
+def _balanced(inertia: np.ndarray) -> np.ndarray:
+    """MuJoCo's balanceinertia: principal moments that break the triangle inequality all become their
+    mean (the inertia unchanged when they do not)."""
+    ev = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    return np.eye(3) * ev.mean() if ev[0] + ev[1] < ev[2] else inertia
 
 
 def _urdf_velocity(path: Path) -> dict[str, float]:
@@ -331,19 +473,23 @@ def _body_pose(m: mujoco.MjModel, b: int) -> _Pose:
 
 
 class _Link:
-    """Mass properties being merged into one link: point masses and inertias in the link frame."""
+    """Mass properties being merged into one link (the one joint `joint` moves): point masses and inertias
+    in the link frame."""
 
-    def __init__(self, floor: float):
+    def __init__(self, dyn: RobotDynamics, joint: str, path: Path):
         self.parts: list[tuple[float, np.ndarray, np.ndarray]] = []
-        self.floor = floor
+        self.dyn, self.joint, self.path = dyn, joint, path
 
-    def add(self, m: mujoco.MjModel, b: int, X: _Pose):
-        """Body b, whose frame is X in the link frame (a mass or principal moment at the floor is zero)."""
-        mass = float(m.body_mass[b])
-        if mass > self.floor:
+    def add(self, b: int, X: _Pose):
+        """Body b, whose frame is X in the link frame; a body whose inertial is no rigid body's is refused."""
+        m, dyn = self.dyn.model, self.dyn
+        if dyn.problem[b] is not None:
+            raise RobotFileError(f"link {_name(m, mujoco.mjtObj.mjOBJ_BODY, b)!r} of {self.path.name}, part of the "
+                                 f"link moved by joint {self.joint!r}, has an inertia no rigid body has: "
+                                 f"{dyn.problem[b]}")
+        if dyn.mass[b] > 0:
             R = X.R @ quat_to_rot(m.body_iquat[b])
-            moments = np.where(m.body_inertia[b] > self.floor, m.body_inertia[b], 0.0)
-            self.parts.append((mass, X.p + X.R @ m.body_ipos[b], R @ np.diag(moments) @ R.T))
+            self.parts.append((float(dyn.mass[b]), X.p + X.R @ m.body_ipos[b], R @ dyn.inertia[b] @ R.T))
 
     def combined(self) -> tuple[float, np.ndarray, np.ndarray]:
         """(mass, centre of mass, inertia about it): parallel-axis theorem, exact."""
@@ -447,7 +593,7 @@ def _merge_branch(m, kids, link: _Link, top: int, X_top: _Pose, locked: set[int]
                 f"the chain branches at link {_name(m, mujoco.mjtObj.mjOBJ_BODY, top)!r}: joint {jname!r} "
                 f"(link {_name(m, mujoco.mjtObj.mjOBJ_BODY, b)!r}) of {path.name} moves a branch off the chain "
                 f"(lock it, or choose a tip past it)")
-        link.add(m, b, X)
+        link.add(b, X)
         stack.extend((c, X * _body_pose(m, c)) for c in kids[b])
 
 
@@ -484,7 +630,8 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
     path = Path(path)
     if not path.is_file():
         raise RobotFileError(f"robot file not found: {path}")
-    m, floor = compile_dynamics(path)
+    dyn = compile_dynamics(path)
+    m = dyn.model
     b0, bt = _body_id(m, base, "base", path), _body_id(m, tip, "tip", path)
     locked = _locked_ids(m, lock, path)
     chain = _path(m, b0, bt, (base, tip), path)
@@ -499,10 +646,10 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
             anchor = m.jnt_pos[j].copy()
             placements.append(_Pose(X.R, X.p + X.R @ anchor))
             joints.append(j)
-            links.append(_Link(floor))
+            links.append(_Link(dyn, _name(m, mujoco.mjtObj.mjOBJ_JOINT, j), path))
             X = _Pose(np.eye(3), -anchor)             # body frame in the new link frame
         if links:
-            links[-1].add(m, b, X)
+            links[-1].add(b, X)
             _merge_branch(m, kids, links[-1], b, X, locked, on_chain, path)
     if not joints:
         raise RobotFileError(f"no moving joint between base link {base!r} and tip link {tip!r} in {path.name}")
@@ -512,6 +659,7 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
             raise RobotFileError(f"the link moved by joint {_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r} in {path.name} "
                                  f"has no mass or a singular inertia (mass {mass:g} kg): give it an <inertial>")
     names = tuple(_name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
+    _check_couplings(dyn.couplings, names, path)
     velocity = _urdf_velocity(path)
     links = ArmModel("", np.zeros(3), np.eye(3), np.array([P.p for P in placements]),
                      np.array([P.R for P in placements]),
@@ -521,6 +669,22 @@ def read_chain(path: str | Path, base: str, tip: str, lock: tuple[str, ...] | li
                      np.array([_JOINT_TYPE[int(m.jnt_type[j])] for j in joints]))
     return Chain(path, base, tip, names, links, np.array([_range(m, j) for j in joints]),
                  np.array([_effort(m, j) for j in joints]), np.array([velocity.get(name, np.inf) for name in names]))
+
+
+def _check_couplings(couplings: tuple[Coupling, ...], names: tuple[str, ...], path: Path):
+    """Refuse a chain joint that a joint equality couples (a URDF mimic joint, or the joint it mimics):
+    an arm's joints are independent, so taking it would change the robot."""
+    for c in couplings:
+        on = c.joint if c.joint in names else c.master if c.master in names else None
+        if on is None:
+            continue
+        how = f"mimics joint {c.master!r}" if on == c.joint and c.master else \
+            "is held by an equality" if on == c.joint else f"is mimicked by joint {c.joint!r}"
+        pair = [x for x in (c.joint, c.master) if x]
+        fix = (f"lock {' and '.join(map(repr, pair))} (chain.lock), which holds {'them' if len(pair) > 1 else 'it'} "
+               f"at 0, or end the chain before {on!r}") if c.coef[0] == 0 else f"end the chain before {on!r}"
+        raise RobotFileError(f"joint {on!r} on the chain of {path.name} {how} ({c.relation()}): coopsim does not "
+                             f"model coupled joints; {fix}")
 
 
 def _range(m: mujoco.MjModel, j: int) -> tuple[float, float]:

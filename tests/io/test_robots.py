@@ -7,9 +7,14 @@ relative (max |Δ| / max(1, max |reference|)), and for the bundled robot scenari
 with a URDF prismatic joint (tests/data/robots/slide.urdf) the closed-chain accelerations and grasp
 wrenches at 10 random consistent states (closed by Pinocchio-side Newton steps) ≤ 1e-9 relative
 (test_independent's checks). An MJCF file whose joints sit off their bodies'
-origins reads the same as the URDF written with each link frame at its joint (≤ 1e-15). The bundled
-robot scenarios pass `coopsim validate`'s checks (their own thresholds) over their first 0.1 s. Every
-refused robot file or chain gets one line naming the scenario field and the element.
+origins reads the same as the URDF written with each link frame at its joint (≤ 1e-15). The inertials,
+read from the parsed file, are MuJoCo's own compile of them where MuJoCo compiles the file (≤ 1e-14
+relative); links off the chain whose inertials MuJoCo refuses (tests/data/robots/bad_inertia.urdf, TIAGo
+dual's and PR2's URDFs) do not stop it, and the chain reads as Pinocchio reads it. The bundled robot
+scenarios pass `coopsim validate`'s checks (their own thresholds) over their first 0.1 s. Every refused
+robot file or chain gets one line naming the scenario field and the element: among them a used link
+whose inertial no rigid body has, and a chain joint coupled by a mimic joint (tests/data/robots/mimic.urdf).
+A continuous joint may be given past a turn in rad.
 
 The bundled robots come from the optional example-robot-data package: their tests skip without it.
 The small robots under tests/data/robots/ need nothing beyond the test extra.
@@ -93,7 +98,8 @@ def test_bundled_scenario_twin_agrees(robot_scenario):
 @pytest.mark.parametrize("name", sorted(ROBOTS))
 def test_every_listed_robot_reads(name):
     chain = read_chain(*bundled(name))
-    assert chain.n == {"panda": 7, "xarm7": 7, "baxter_left": 7, "baxter_right": 7, "so100": 5,
+    assert chain.n == {"panda": 7, "xarm7": 7, "baxter_left": 7, "baxter_right": 7, "tiago_dual_left": 7,
+                       "tiago_dual_right": 7, "pr2_left": 7, "pr2_right": 7, "so100": 5,
                        "so101": 5}.get(name, 6)
     assert np.all(chain.links.link_mass > 0) and np.all(np.isfinite(chain.effort)) and np.all(np.isfinite(chain.velocity))
 
@@ -134,7 +140,7 @@ TINY = {
 
 @pytest.fixture
 def tiny_dir(tmp_path) -> Path:
-    for name in ("tiny.urdf", "anchor.urdf", "anchor.xml"):
+    for name in ("tiny.urdf", "anchor.urdf", "anchor.xml", "bad_inertia.urdf", "mimic.urdf"):
         shutil.copy(DATA / name, tmp_path / name)
     return tmp_path
 
@@ -258,6 +264,14 @@ BALL = """<mujoco><worldbody><body name="b"><joint name="knuckle" type="ball"/>
 SLIDE_REF = """<mujoco><worldbody><body name="b"><joint name="s" type="slide" axis="1 0 0" ref="0.05"/>
 <inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
 
+NEGATIVE_MASS = """<mujoco><worldbody><body name="b"><joint name="h" axis="0 0 1"/>
+<inertial pos="0 0 0" mass="-1" diaginertia="1 1 1"/></body></worldbody></mujoco>"""
+COUPLED = """<mujoco><worldbody><body name="a"><joint name="ha" axis="0 0 1"/>
+<inertial pos="0.1 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+<body name="b" pos="0.2 0 0"><joint name="hb" axis="0 1 0"/>
+<inertial pos="0.1 0 0" mass="1" diaginertia="0.01 0.01 0.01"/></body></body></worldbody>
+<equality><joint joint1="hb" joint2="ha" polycoef="0.1 2 0 0 0"/></equality></mujoco>"""
+
 REFUSED = [
     # (what is changed in arm 0, extra file, the error's end)
     ({"chain": {"base": "nope", "tip": "tool"}}, None,
@@ -284,6 +298,24 @@ REFUSED = [
      "give it an <inertial>"),
     ({"chain": {"base": "flange", "tip": "tool"}}, None,
      "arms[0].file: no moving joint between base link 'flange' and tip link 'tool' in tiny.urdf"),
+    ({"file": "bad_inertia.urdf", "chain": {"base": "base_link", "tip": "camera"}, "initial": {"angles": [0.0]}}, None,
+     "arms[0].file: link 'camera' of bad_inertia.urdf, part of the link moved by joint 'head_pan', has an inertia no "
+     "rigid body has: its principal moments 0.001, 0.001, 0.01 kg·m² break the triangle inequality (the largest is "
+     "more than the sum of the other two)"),
+    ({"file": "negative.xml", "chain": {"base": "world", "tip": "b"}}, ("negative.xml", NEGATIVE_MASS),
+     "arms[0].file: link 'b' of negative.xml, part of the link moved by joint 'h', has an inertia no rigid body has: "
+     "its mass is negative (-1 kg)"),
+    ({"file": "mimic.urdf", "chain": {"base": "world", "tip": "tool", "lock": ["finger_joint", "finger_r_joint"]}},
+     None, "arms[0].file: joint 'j3' on the chain of mimic.urdf mimics joint 'j2' (j3 = -1·j2 + 0): coopsim does not "
+     "model coupled joints; lock 'j3' and 'j2' (chain.lock), which holds them at 0, or end the chain before 'j3'"),
+    ({"file": "mimic.urdf", "initial": {"angles": [0.1, 0.2]},
+      "chain": {"base": "world", "tip": "link2", "lock": ["j3", "finger_joint", "finger_r_joint"]}}, None,
+     "arms[0].file: joint 'j2' on the chain of mimic.urdf is mimicked by joint 'j3' (j3 = -1·j2 + 0): coopsim does "
+     "not model coupled joints; lock 'j3' and 'j2' (chain.lock), which holds them at 0, or end the chain before 'j2'"),
+    ({"file": "coupled.xml", "chain": {"base": "world", "tip": "b"}, "initial": {"angles": [0.1, 0.2]}},
+     ("coupled.xml", COUPLED),
+     "arms[0].file: joint 'hb' on the chain of coupled.xml mimics joint 'ha' (hb = 2·ha + 0.1): coopsim does not "
+     "model coupled joints; end the chain before 'hb'"),
     ({"initial": {"angles": [2.6, 0.9, 0.4]}}, None,
      "arms[0].initial.angles: joint 1 (j1) at 2.6 rad is outside its range [-2, 2.5] rad"),
     ({"file": "floating.urdf", "chain": {"base": "world", "tip": "arm"}}, ("floating.urdf", FLOATING),
@@ -316,6 +348,160 @@ def test_refused_robot_files(tiny_dir, change, extra, expected):
     msg = str(err.value)
     assert "\n" not in msg
     assert msg.startswith("s.yaml: " + expected) if expected.endswith(": ") else msg == "s.yaml: " + expected
+
+
+NONPD = """<robot name="nonpd"><link name="world"/>
+<joint name="j" type="continuous"><parent link="world"/><child link="b"/><axis xyz="0 0 1"/></joint>
+<link name="b"><inertial><mass value="0.000001"/><inertia ixx="0.00000002371" ixy="0.00000006119" ixz="0.00000001179"
+iyy="0.00000002833" iyz="0.00000000774" izz="0.00000003849"/></inertial></link></robot>"""
+
+
+def test_a_used_inertia_that_is_not_positive_semi_definite_is_refused(tmp_path):
+    """TIAGo's antenna inertia (eigenvalues about −3.5e-8, 3.5e-8, 9.1e-8 kg·m²) on a moving link."""
+    (tmp_path / "nonpd.urdf").write_text(NONPD)
+    expected = (r"^link 'b' of nonpd\.urdf, part of the link moved by joint 'j', has an inertia no rigid body has: "
+                r"its principal moments -3\.\d+e-08, .* kg·m² are not all ≥ 0 \(the matrix is not positive "
+                r"semi-definite\)$")
+    with pytest.raises(robots.RobotFileError, match=expected):
+        read_chain(tmp_path / "nonpd.urdf", "world", "b")
+
+
+BAD = {
+    "name": "bad_inertia_pair", "duration": 0.1,
+    "arms": [
+        {"name": "left", "file": "bad_inertia.urdf", "chain": {"base": "world", "tip": "tool"},
+         "initial": {"angles": [0.3, 0.9, -0.4]}},
+        {"name": "right", "file": "bad_inertia.urdf", "chain": {"base": "world", "tip": "tool"},
+         "base": {"position": [0.9, 0.1, 0.0], "rpy_deg": [0, 0, 180]}, "initial": {"angles": [-0.2, 1.0, -0.6]}},
+    ],
+    "object": {"box": {"size": [0.2, 0.05, 0.05], "density": 500}, "grasps": "derive"},
+}
+
+
+def test_bad_inertias_off_the_chain_do_not_stop_it(tiny_dir):
+    """bad_inertia.urdf carries an antenna (inertia not positive semi-definite) and a camera on a panning
+    head (moments breaking the triangle inequality) that MuJoCo refuses to compile; the arm's chain uses
+    neither and reads as Pinocchio's buildModelFromUrdf does (poses and arm dynamics at the initial and
+    10 random states, ≤ 1e-10)."""
+    with pytest.raises(ValueError, match="inertia must have positive eigenvalues"):
+        _mujoco_inertials(DATA / "bad_inertia.urdf")
+    path = _write(tiny_dir, BAD)
+    model, S = load_scenario(path), RobotScene(path)
+    report = Report(model.name)
+    states = [("initial", model.q0, model.qd0)] + random_states(S.n, 10, seed=19)
+    check_poses(model, S, states, report)
+    check_arm_dynamics(model, S, states, report)
+    report.check()
+    assert model.arms[0].link_mass.tolist() == [1.5, 1.2, 0.7]
+
+
+def _mujoco_inertials(path: Path):
+    """MuJoCo's own compile of the file's inertials (geoms and meshes deleted, inertia from the inertials,
+    MINVAL for massless bodies where the file sets no bounds): per body the mass, centre of mass and inertia
+    about it in the body frame."""
+    spec = mujoco.MjSpec.from_file(str(path))
+    for element in list(spec.geoms) + list(spec.meshes):
+        spec.delete(element)
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.fusestatic = False
+    if spec.compiler.boundmass == 0 and spec.compiler.boundinertia == 0:
+        spec.compiler.boundmass = spec.compiler.boundinertia = mujoco.mjMINVAL
+    m = spec.compile()
+    R = np.array([quat_to_rot(q) for q in m.body_iquat])
+    return m.body_mass, m.body_ipos, R @ (m.body_inertia[:, :, None] * np.swapaxes(R, 1, 2))
+
+
+INERTIALS = """<mujoco>
+<compiler angle="radian" boundmass="0.01" boundinertia="0.001" settotalmass="7" balanceinertia="true"/>
+<worldbody><body name="a"><joint name="ha" axis="0 0 1"/>
+<inertial pos="0.1 0 0" euler="0.3 0.2 0.1" mass="2" diaginertia="0.01 0.02 0.025"/>
+<body name="b" pos="0.3 0 0"><joint name="hb" axis="0 1 0"/>
+<inertial pos="0 0.1 0" mass="1" fullinertia="0.02 0.03 0.04 0.001 -0.002 0.003"/>
+<body name="c" pos="0 0.2 0">
+<inertial pos="0 0 0.05" quat="0.9 0.1 0.2 0.3" mass="0.5" diaginertia="0.001 0.001 0.005"/>
+</body><body name="d"/></body></body></worldbody></mujoco>"""
+
+
+@pytest.mark.filterwarnings("ignore:compiler attribute 'settotalmass' is deprecated")   # MuJoCo's own compile warns
+def test_inertials_read_as_mujoco_compiles_them(tmp_path):
+    """The masses and inertias read from the parsed file (MuJoCo compiling stand-ins) are MuJoCo's own:
+    URDF inertials turned off their link axes, MJCF diagonal inertias in an euler or quat frame, a full
+    inertia, bodies without an inertial (mass 0 where MuJoCo gives them MINVAL), and the file's boundmass,
+    boundinertia, settotalmass and balanceinertia: masses and inertias ≤ 1e-14 relative to the largest
+    (MuJoCo's iterative eigen-decomposition rounds: 1.3e-15 measured), centres of mass ≤ 1e-15 m."""
+    (tmp_path / "inertials.xml").write_text(INERTIALS)
+    for path in (DATA / "tiny.urdf", DATA / "anchor.xml", DATA / "slide.urdf", tmp_path / "inertials.xml"):
+        mass, com, inertia = _mujoco_inertials(path)
+        dyn = robots.compile_dynamics(path)
+        R = np.array([quat_to_rot(q) for q in dyn.model.body_iquat])
+        mine = R @ dyn.inertia @ np.swapaxes(R, 1, 2)
+        assert np.max(np.abs(dyn.mass - mass)) <= 1e-14 * mass.max(), path.name
+        massive = dyn.mass > 0          # a body without an inertial has no centre of mass to compare
+        assert np.max(np.abs(dyn.model.body_ipos - com)[massive]) <= 1e-15, path.name
+        assert np.max(np.abs(mine - inertia)[massive]) <= 1e-14 * np.abs(inertia).max(), path.name
+        assert all(p is None for p in dyn.problem), path.name
+
+
+def test_mimic_joints_locked_together_read_as_fixed(tiny_dir):
+    """The lock the refusal suggests: j2 and j3 (j3 = −j2) locked, the fingers too, leaves j1 alone, the
+    rest merged into its link."""
+    chain = read_chain(tiny_dir / "mimic.urdf", "world", "tool", ["j2", "j3", "finger_joint", "finger_r_joint"])
+    assert chain.joint_names == ("j1",)
+    assert chain.links.link_mass.tolist() == pytest.approx([1.5 + 1.2 + 0.7 + 0.1], rel=1e-15)
+
+
+@needs_robots
+def test_tiago_dual_and_pr2_read_past_links_mujoco_refuses():
+    """MuJoCo refuses to compile either whole file (an antenna of TIAGo's base, a camera mount of PR2's
+    head); their arms read all the same, and a chain that does use PR2's camera mount is refused, naming it."""
+    for name, element in (("tiago_dual_left", "base_antenna_left_link"), ("pr2_left", "sensor_mount_link")):
+        with pytest.raises(ValueError, match=element):
+            _mujoco_inertials(robot_file(name))
+        assert read_chain(*bundled(name)).n == 7
+    expected = (r"^link 'sensor_mount_link' of pr2\.urdf, part of the link moved by joint 'head_tilt_joint', has an "
+                r"inertia no rigid body has: its principal moments 0\.001, 0\.001, 0\.01 kg·m² break the triangle")
+    with pytest.raises(robots.RobotFileError, match=expected):
+        read_chain(robot_file("pr2_left"), "torso_lift_link", "sensor_mount_link")
+
+
+@needs_robots
+def test_pr2_mimic_fingers_refused_on_the_chain():
+    """PR2's gripper: a chain through the finger joint, the five that mimic it locked, is refused naming
+    the first coupling (the right finger mimics it)."""
+    lock = [j for j in ROBOTS["pr2_left"].lock if j != "l_gripper_l_finger_joint"]
+    expected = (r"^joint 'l_gripper_l_finger_joint' on the chain of pr2\.urdf is mimicked by joint 'l_gripper_r_finger_"
+                r"joint' \(l_gripper_r_finger_joint = 1·l_gripper_l_finger_joint \+ 0\)")
+    with pytest.raises(robots.RobotFileError, match=expected):
+        read_chain(robot_file("pr2_left"), "torso_lift_link", "l_gripper_l_finger_link", lock)
+
+
+def test_a_continuous_joint_may_turn_past_a_turn(tiny_dir):
+    """tiny.urdf's j2 is continuous: 6.5 rad is an angle (PR2's forearm roll at 6.5 rad was refused as
+    degrees); a whole number of radians past a turn still reads as degrees there, and so does a value past
+    a turn outside a joint's range (j1: [-2, 2.5] rad)."""
+    ok = mutated(TINY, ["arms", 0, "initial", "angles"], [0.3, 6.5, 0.4])
+    assert load_scenario(_write(tiny_dir, ok)).q0[1] == 6.5
+    for angles, expected in (
+            ([0.3, 7, 0.4], "joint 2 (j2) at 7 rad is more than a turn, a whole number of radians: degrees? use "
+                            "angles_deg"),
+            ([30, 0.9, 0.4], "joint 1 (j1) at 30 rad is more than a turn, outside its range [-2, 2.5] rad: degrees? "
+                             "use angles_deg"),
+            ([-6.5, 0.9, 0.4], "joint 1 (j1) at -6.5 rad is more than a turn, outside its range [-2, 2.5] rad: "
+                               "degrees? use angles_deg")):
+        with pytest.raises(ScenarioError) as err:
+            model_from_dict(mutated(TINY, ["arms", 0, "initial", "angles"], angles), where="s.yaml", base_dir=tiny_dir)
+        assert str(err.value) == "s.yaml: arms[0].initial.angles: " + expected
+
+
+@needs_robots
+def test_pr2_forearm_roll_past_a_turn():
+    """The issue's case: PR2's forearm roll (continuous) at 6.5 rad, the same posture as 6.5 − 2π."""
+    path = SCENARIOS / "robots" / "pr2_box.yaml"
+    turned = load_scenario(path, overrides=[("arms[0].initial.angles[4]", 6.5)])
+    assert turned.q0[4] == 6.5
+    plain = load_scenario(path, overrides=[("arms[0].initial.angles[4]", 6.5 - 2 * np.pi)])
+    a, b = arm_poses(turned, turned.q0)[0], arm_poses(plain, plain.q0)[0]
+    assert np.max(np.abs(a.p_ee - b.p_ee)) <= 1e-12 and np.max(np.abs(a.R_ee - b.R_ee)) <= 1e-12
 
 
 def test_hand_written_joint_range():
