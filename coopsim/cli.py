@@ -89,6 +89,7 @@ def _cmd_mjcf(args) -> int:
 
     from coopsim.io.atomic import write_text_atomic
     from coopsim.twin.mjcf import mjcf_text
+    from coopsim.twin.weld import resolved
     from coopsim.apps.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
 
@@ -99,7 +100,8 @@ def _cmd_mjcf(args) -> int:
     with ProgressBar() as bar:
         for i, scenario in enumerate(scenarios):   # drawn after each file: a first-run compile notice comes first
             path = Path(args.out) / f"{Path(scenario).stem}.xml"
-            write_text_atomic(path, mjcf_text(load_scenario(scenario, overrides=overrides), _display_path(scenario)))
+            model = resolved(load_scenario(scenario, overrides=overrides))   # an automatic step: a native run
+            write_text_atomic(path, mjcf_text(model, _display_path(scenario)))
             paths.append(path)
             bar("mjcf", (i + 1) / len(scenarios))
     print("\n".join(map(str, paths)))     # after the bar: the paths never share its line
@@ -120,9 +122,9 @@ def _cmd_urdf(args) -> int:
 
 
 def _cmd_run(args) -> int:
+    from dataclasses import replace
     from pathlib import Path
 
-    from coopsim.twin.compare import format_comparison
     from coopsim.twin.harness import control_series, cross_validate
     from coopsim.io.log import file_sha256, run_log
     from coopsim.io.ros2 import VERDICT_RECORD, write_bag
@@ -139,13 +141,15 @@ def _cmd_run(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         cv = cross_validate(model, duration=args.duration, progress=bar)
         bar.close()
-        streams, meta = run_log(model, cv.native, cv.twin, extra_series=control_series(cv), metadata_extra={
+        streams, meta = run_log(replace(model, mujoco=cv.mujoco), cv.native, cv.twin, extra_series=control_series(cv),
+                                metadata_extra={
             "scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
             | ({"overrides": list(args.set)} if args.set else {}),
             "native_engine": cv.native.engine,
             "agreement": {k: f"{m['max']!r}" for k, m in cv.comparison.as_dict()["metrics"].items()},
             VERDICT_RECORD: {"passed": cv.comparison.passed, "failures": cv.comparison.failures(),
-                             "metrics": cv.comparison.as_dict()["metrics"]}})
+                             "metrics": cv.comparison.as_dict()["metrics"]}}
+            | ({} if cv.step is None else {"mujoco.step": cv.step.as_dict()}))
         summary: dict = {}
         bag = f"{model.name}_ros2"
 
@@ -165,9 +169,7 @@ def _cmd_run(args) -> int:
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
-        print(format_comparison(cv.comparison))
-        for failure in cv.comparison.failures():
-            print(f"  FAIL: {failure}")
+        _print_comparison(cv)
         print(f"wall time: native {cv.native.wall_time:.2f} s, MuJoCo {cv.twin.wall_time:.2f} s")
         bag_note = f", the ROS 2 bag {out / bag}" if args.ros2 else ""
         print(f"wrote {log_path}, {out / 'summary.json'}{bag_note} and {len(plots)} plots in {out}")
@@ -210,8 +212,19 @@ def _cmd_plot(args) -> int:
     return 0
 
 
-def _cmd_validate(args) -> int:
+def _print_comparison(cv) -> None:
+    """The comparison table of a CrossValidation, its twin's step when chosen or explained, its failures."""
     from coopsim.twin.compare import format_comparison
+    from coopsim.twin.weld import describe
+
+    print(format_comparison(cv.comparison))
+    if cv.step is not None:
+        print(f"  {describe(cv.step)}")
+    for failure in cv.comparison.failures():
+        print(f"  FAIL: {failure}")
+
+
+def _cmd_validate(args) -> int:
     from coopsim.twin.harness import cross_validate
     from coopsim.apps.progress import ProgressBar
     from coopsim.io.scenario import load_scenario
@@ -224,9 +237,7 @@ def _cmd_validate(args) -> int:
         bar.close()
         results.append(cv.comparison)
         if not args.json:
-            print(format_comparison(cv.comparison))
-            for failure in cv.comparison.failures():
-                print(f"  FAIL: {failure}")
+            _print_comparison(cv)
     ok = all(c.passed for c in results)
     if args.json:
         print(json.dumps({"passed": ok, "scenarios": [c.as_dict() for c in results]}, indent=2))

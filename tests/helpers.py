@@ -21,7 +21,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address, static_settings
 
 ROOT = Path(__file__).resolve().parents[1]   # the repository (this file is tests/helpers.py)
 SCENARIOS = ROOT / "scenarios"
@@ -124,7 +124,7 @@ class MujocoReference:
     when with_object=True; no welds), in coopsim's stacked joint order."""
 
     def __init__(self, model, with_object: bool):
-        spec = build_spec(model, with_object=with_object)
+        spec = build_spec(model, static_settings(model), with_object=with_object)
         for eq in list(spec.equalities):
             spec.delete(eq)
         self.m = spec.compile()

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.weld import resolved
 from coopsim.core.model import Model, torque_at
 
 INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
@@ -83,13 +84,13 @@ def default_weld_timeconst(integrator: str, timestep: float) -> float:
 def mujoco_twin(model: Model, integrator: str = "RK4", timestep: float | None = None,
                 weld_timeconst: float | None = None) -> MujocoTwin:
     """Compile the twin with `integrator` ('RK4' | 'Euler' | 'implicit' | 'implicitfast'), step
-    `timestep` s (None: the scenario's) and weld solref [weld_timeconst, 1] (critical damping; None:
+    `timestep` s (None: the scenario's, or the automatic step `coopsim run` takes) and weld solref [weld_timeconst, 1] (critical damping; None:
     `default_weld_timeconst`). build_spec disables MuJoCo's `refsafe` clamp (timeconst >= 2 steps),
     so the time constant is used as given; RK4 stays stable down to about timestep / 2.8, Euler and
-    implicitfast need about two steps. The weld yields by about timeconst² |J̇q̇|."""
+    implicitfast need about two steps. The weld yields about ∝ timeconst² (`coopsim.twin.weld`)."""
     if integrator not in INTEGRATORS:
         raise ValueError(f"integrator must be one of {', '.join(INTEGRATORS)}, not {integrator!r}")
-    dt = float(model.mujoco.timestep if timestep is None else timestep)
+    dt = float(resolved(model).mujoco.timestep if timestep is None else timestep)
     tc = default_weld_timeconst(integrator, dt) if weld_timeconst is None else float(weld_timeconst)
     settings = replace(model.mujoco, timestep=dt, integrator=integrator, weld_solref=(tc, 1.0))
     m = build_spec(model, settings, with_geoms=False).compile()

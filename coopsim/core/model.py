@@ -415,13 +415,16 @@ class IntegratorSettings:
 class MujocoSettings:
     """The MuJoCo twin's numerics.
 
-    MuJoCo enforces a weld as J q̈ = −b J q̇ − k r (b = 2/timeconst, k = 1/timeconst² at critical
-    damping, impedance d → 1), without the J̇q̇ term, so the weld yields by about
-    timeconst² · |J̇q̇|. The default timeconst is therefore one timestep (None), with MuJoCo's
-    `refsafe` clamp to 2·timestep disabled: RK4 stays stable down to about timestep/2.8.
+    MuJoCo holds a weld row with J q̈ = −J̇q̇ − b J q̇ − k d r − R f (b = 2/timeconst, k = 1/timeconst² at
+    critical damping, d the impedance, R = (1 − d)/d · an estimate of J M⁻¹ Jᵀ's diagonal), so a weld
+    carrying the force λ yields by R λ / (k d) ∝ timeconst² (`coopsim.twin.weld`). The default
+    timeconst is therefore one timestep (None), with MuJoCo's `refsafe` clamp to 2·timestep disabled:
+    RK4 stays stable down to about timestep/2.8. The default timestep (None) is chosen for each run from
+    the yield predicted along the native run (`coopsim.twin.weld.twin_step`).
 
     Attributes:
-        timestep: s.
+        timestep: s; None: automatic, the largest step whose predicted twin errors stay within a quarter
+            of every `validation` threshold.
         integrator: 'RK4' | 'Euler' | 'implicit' | 'implicitfast'.
         weld_solref: [timeconst s, dampratio] of the welds (None: [timestep, 1], `solref`).
         weld_solimp: [d0, d_width, width m, midpoint, power] of the welds.
@@ -431,7 +434,7 @@ class MujocoSettings:
             the harness detects a wrong twin.
     """
 
-    timestep: float = 1e-3
+    timestep: float | None = None
     integrator: str = "RK4"
     weld_solref: tuple[float, float] | None = None
     weld_solimp: tuple[float, ...] = (0.9999, 0.9999, 0.001, 0.5, 2.0)
@@ -444,8 +447,16 @@ class MujocoSettings:
 
         Returns:
             tuple[float, float]: (timeconst s, dampratio).
+
+        Raises:
+            ValueError: both are left to follow an automatic step that is not chosen yet.
         """
-        return self.weld_solref if self.weld_solref is not None else (self.timestep, 1.0)
+        if self.weld_solref is not None:
+            return self.weld_solref
+        if self.timestep is None:
+            raise ValueError("mujoco.timestep is automatic: the welds' time constant follows the step, "
+                             "chosen from the native run (coopsim.twin.weld.twin_step)")
+        return (self.timestep, 1.0)
 
 
 @dataclass(frozen=True)

@@ -175,6 +175,11 @@ def _meta_value(v: Any) -> str:
     return json.dumps(v)
 
 
+def _solref_effective(st) -> list | str:
+    """The welds' solref as the twin uses it; 'automatic' while it follows a step not chosen yet."""
+    return "automatic" if st.timestep is None and st.weld_solref is None else list(st.solref())
+
+
 def _record(d: dict) -> dict[str, str]:
     return {str(k): _meta_value(v) for k, v in d.items()}
 
@@ -232,7 +237,7 @@ def run_metadata(model: Model, res=None, extra: dict | None = None) -> dict[str,
                           "carrier": model.object.carrier, "duration": model.duration,
                           "gravity": model.gravity}),
         "native.integrator": _record(asdict(model.integrator)),
-        "mujoco": _record(asdict(model.mujoco) | {"weld_solref_effective": list(model.mujoco.solref())}),
+        "mujoco": _record(asdict(model.mujoco) | {"weld_solref_effective": _solref_effective(model.mujoco)}),
         "validation": _record(asdict(model.validation)),
     }
     if res is not None:

@@ -412,9 +412,13 @@ def _mujoco(sec: Section | None) -> MujocoSettings:
         return MujocoSettings()
     d = MujocoSettings()
     solref = sec.array("weld_solref", (2,), default=None, positive=True) if sec.has("weld_solref") else None
+    timestep = sec.number("timestep", None, positive=True)        # None: automatic (coopsim.twin.weld)
+    integrator = sec.string("integrator", ("RK4", "Euler", "implicit", "implicitfast"), d.integrator)
+    if integrator != "RK4" and timestep is None:
+        sec.fail("timestep", f"required with integrator {integrator} (the automatic step is RK4's)")
     s = MujocoSettings(
-        timestep=sec.number("timestep", d.timestep, positive=True),
-        integrator=sec.string("integrator", ("RK4", "Euler", "implicit", "implicitfast"), d.integrator),
+        timestep=timestep,
+        integrator=integrator,
         weld_solref=None if solref is None else (float(solref[0]), float(solref[1])),
         weld_solimp=tuple(float(x) for x in sec.array("weld_solimp", (5,), default=d.weld_solimp)),
         tolerance=sec.number("tolerance", d.tolerance, positive=True),
@@ -578,7 +582,8 @@ def _check_work(where: str, duration: float, field: str, s: IntegratorSettings, 
         fail(duration / s.step, "rk4 steps", MAX_STEPS, "integrator.step", s.step)
     elif s.max_step is not None:
         fail(duration / s.max_step, "steps at least", MAX_STEPS, "integrator.max_step", s.max_step)
-    fail(duration / mj.timestep, "MuJoCo steps", MAX_STEPS, "mujoco.timestep", mj.timestep)
+    if mj.timestep is not None:          # an automatic step asks for at most weld.MAX_AUTO_STEPS
+        fail(duration / mj.timestep, "MuJoCo steps", MAX_STEPS, "mujoco.timestep", mj.timestep)
     om = inverse.object_motion
     if om is not None:
         samples = (om.times[-1] - om.times[0]) / om.output_dt + 1

@@ -105,7 +105,8 @@ def run_summary(cv, log_path, plots) -> dict:
 
     Returns:
         dict: native (`simulation_summary`), agreement (`Comparison.as_dict`), wall_time_s (s, native,
-        mujoco and their ratio), mujoco (timestep s, integrator, weld solref), files, and control
+        mujoco and their ratio), mujoco (timestep s, integrator, weld solref as the twin ran, and where the
+        step was chosen or a failure explained `TwinStep.as_dict`), files, and control
         (`control_summary`) with a controller.
     """
     return {
@@ -113,10 +114,15 @@ def run_summary(cv, log_path, plots) -> dict:
         "agreement": cv.comparison.as_dict(),
         "wall_time_s": {"native": cv.native.wall_time, "mujoco": cv.twin.wall_time,
                         "native_over_mujoco": cv.native.wall_time / cv.twin.wall_time},
-        "mujoco": {"timestep_s": cv.native.model.mujoco.timestep, "integrator": cv.native.model.mujoco.integrator,
-                   "weld_solref": list(cv.native.model.mujoco.solref())},
+        "mujoco": _twin_settings(cv.mujoco or cv.native.model.mujoco)
+                  | ({} if cv.step is None else cv.step.as_dict()),
         "files": {"log": str(log_path), "plots": [str(p) for p in plots]},
     } | ({} if cv.control is None else {"control": control_summary(cv)})
+
+
+def _twin_settings(st) -> dict:
+    """The twin's step (s), integrator and welds' solref as it ran."""
+    return {"timestep_s": st.timestep, "integrator": st.integrator, "weld_solref": list(st.solref())}
 
 
 def control_summary(cv) -> dict:

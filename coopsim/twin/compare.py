@@ -28,6 +28,8 @@ class Metric:
         where: the column (a joint label such as "arm 1 joint 2", or a component) of the max.
         time: s, the sample time of the max.
         threshold: the largest max that passes, in `unit`; None: reported, not asserted.
+        cause: why a failed quantity differs (`coopsim.twin.weld.explain`: the twin's weld yield, or a
+            disagreement of the models); None: not explained.
     """
 
     name: str
@@ -37,6 +39,7 @@ class Metric:
     where: str
     time: float
     threshold: float | None
+    cause: str | None = None
 
     @property
     def passed(self) -> bool:
@@ -47,10 +50,11 @@ class Metric:
         """The one-line failure message: the max, the threshold, where and when.
 
         Returns:
-            str: e.g. "joint angle error 2.3e-06 rad exceeds 1e-06 rad at arm 1 joint 2, t=0.35 s".
+            str: e.g. "joint angle error 2.3e-06 rad exceeds 1e-06 rad at arm 1 joint 2, t=0.35 s", and with a
+            cause ": " and the cause.
         """
         return (f"{self.name} {self.max:.3g} {self.unit} exceeds {self.threshold:.3g} {self.unit} "
-                f"at {self.where}, t={self.time:.6g} s")
+                f"at {self.where}, t={self.time:.6g} s" + (f": {self.cause}" if self.cause else ""))
 
 
 @dataclass(frozen=True)

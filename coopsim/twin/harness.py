@@ -11,11 +11,12 @@ from typing import Callable
 import numpy as np
 
 from coopsim.control.controller import closed_loop, record
-from coopsim.core.model import Model, TorqueTable, ValidationThresholds, loop_controller
+from coopsim.core.model import Model, MujocoSettings, TorqueTable, ValidationThresholds, loop_controller
 from coopsim.forward.simulate import SimResult, simulate
 from coopsim.io.log import control_series as series
 from coopsim.twin.compare import Comparison, compare
 from coopsim.twin.mujoco_run import TwinResult, run_twin
+from coopsim.twin.weld import TwinStep, explain, twin_step
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +33,9 @@ class CrossValidation:
             (piecewise linear between the native samples) compared with the native run — information, no
             thresholds (its error is the tabulation's, and an unstable open loop, such as a pose held
             against gravity, drifts); None without a controller.
+        mujoco: the twin's settings as it ran (its timestep set); None: the native model's.
+        step: the twin's step and the weld yield predicted there (`coopsim.twin.weld.TwinStep`), when the
+            step was automatic or the comparison failed; None otherwise.
     """
 
     native: SimResult
@@ -39,6 +43,8 @@ class CrossValidation:
     comparison: Comparison
     control: tuple | None = None
     replay: Comparison | None = None
+    mujoco: MujocoSettings | None = None
+    step: TwinStep | None = None
 
 
 def cross_validate(model: Model, duration: float | None = None, twin_model: Model | None = None,
@@ -46,6 +52,9 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
     """Run the native model and its MuJoCo twin on the same torques and compare them.
 
     A `control:` section runs in the loop of each; the comparison is against the scenario's thresholds.
+    Where the twin's `mujoco.timestep` is left out, it is chosen from the weld yield predicted along the
+    native run (`coopsim.twin.weld.twin_step`); a failed quantity says whether it is that yield
+    (`coopsim.twin.weld.explain`).
 
     Args:
         model: the scenario's Model.
@@ -55,18 +64,26 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
         progress: called with (stage, fraction done), stage "native" or "mujoco".
 
     Returns:
-        CrossValidation: both runs on the native output grid, their Comparison, and with a controller
-        its records on both sides and the twin's open-loop replay of the native torques.
+        CrossValidation: both runs on the native output grid, their Comparison (failures explained), the
+        twin's settings and step, and with a controller its records on both sides and the twin's open-loop
+        replay of the native torques.
     """
     if duration is not None:
         model = replace(model, duration=duration)
 
     native = simulate(closed_loop(model), progress=None if progress is None else lambda f: progress("native", f))
-    twin = run_twin(twin_model or model, native.initial.q, native.initial.qd, native.t,
+    twin_model, step = twin_model or model, None
+    if twin_model.mujoco.timestep is None:
+        twin_model, step = twin_step(twin_model, native)
+    twin = run_twin(twin_model, native.initial.q, native.initial.qd, native.t,
                     progress=None if progress is None else lambda f: progress("mujoco", f))
-    records = _control_records(native, twin, twin_model or model)
-    replay = None if records is None else _open_loop_replay(native, twin_model or model)
-    return CrossValidation(native, twin, compare(native, twin), records, replay)
+    comparison = compare(native, twin)
+    if not comparison.passed:
+        step = step or twin_step(twin_model, native)[1]
+        comparison = explain(comparison, step, twin_model.mujoco.weld_solref is not None)
+    records = _control_records(native, twin, twin_model)
+    replay = None if records is None else _open_loop_replay(native, twin_model)
+    return CrossValidation(native, twin, comparison, records, replay, twin_model.mujoco, step)
 
 
 def _open_loop_replay(native: SimResult, twin_model: Model) -> Comparison:

@@ -18,6 +18,8 @@ model at `qpos0` (all angles zero: the loop open), so a run from the file starts
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import mujoco
 import mujoco.viewer
 import numpy as np
@@ -62,6 +64,22 @@ def _visual_box(body, size: np.ndarray, pos: np.ndarray, quat=(1.0, 0.0, 0.0, 0.
                   contype=0, conaffinity=0, mass=0.0, rgba=list(rgba))
 
 
+STATIC_STEP = 1e-3   # s: the step of a twin that is looked at, not run (`static_settings`)
+
+
+def static_settings(model: Model) -> MujocoSettings:
+    """The twin's settings where its step plays no part (a picture; MuJoCo's quantities at one state).
+
+    Args:
+        model: the frozen Model.
+
+    Returns:
+        MujocoSettings: model.mujoco, an automatic step set to STATIC_STEP.
+    """
+    st = model.mujoco
+    return st if st.timestep is not None else replace(st, timestep=STATIC_STEP)
+
+
 def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_object: bool = True,
                with_geoms: bool = True, initial: tuple[np.ndarray, np.ndarray] | None = None,
                scene: bool = False) -> mujoco.MjSpec:
@@ -82,8 +100,15 @@ def build_spec(model: Model, settings: MujocoSettings | None = None, *, with_obj
 
     Returns:
         mujoco.MjSpec: the spec, not compiled.
+
+    Raises:
+        ValueError: the settings' timestep is automatic (None): `coopsim.twin.weld.twin_step` sets it
+            (`static_settings` for a twin that is not run).
     """
     st = settings or model.mujoco
+    if st.timestep is None:
+        raise ValueError("mujoco.timestep is automatic: the twin's step is chosen from the native run "
+                         "(coopsim.twin.weld.twin_step) before the twin is built")
     spec = mujoco.MjSpec()
     spec.modelname = model.name
     spec.option.timestep = st.timestep

@@ -73,18 +73,32 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         mujoco.set_mjcb_control(None)
 
 
-def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
+def divides(t_out: np.ndarray, dt: float) -> bool:
+    """Whether a step divides every interval of an output grid into whole steps.
+
+    Args:
+        t_out: (N,) s, the output times.
+        dt: s, the step.
+
+    Returns:
+        bool: every interval is a whole number (at least one) of steps, to 1e-6 of a step.
+    """
     k = np.diff(t_out) / dt
-    if np.any(np.abs(k - np.round(k)) > 1e-6) or np.any(np.round(k) < 1):
+    return bool(np.all(np.abs(k - np.round(k)) <= 1e-6) and np.all(np.round(k) >= 1))
+
+
+def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
+    if not divides(t_out, dt):
         raise CoopsimError(f"mujoco.timestep: {dt:g} s does not divide the output interval "
                            f"(integrator.output_dt) into whole steps")
-    return np.round(k).astype(int)
+    return np.round(np.diff(t_out) / dt).astype(int)
 
 
 def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out.
 
-    The sample intervals are whole multiples of model.mujoco.timestep. A `control:` section runs its
+    The sample intervals are whole multiples of model.mujoco.timestep (set: `coopsim.twin.weld.twin_step`
+    chooses an automatic one from the native run). A `control:` section runs its
     controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4
     stage.
 

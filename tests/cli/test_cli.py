@@ -34,6 +34,7 @@ def test_validate_fails_on_a_wrong_twin_naming_the_quantity(workdir):
     out = run_cli("validate", "wrong.yaml", "--duration", "1", cwd=workdir)
     assert out.returncode == 1
     assert "FAIL: joint angle error" in out.stdout
+    assert ": not the twin's weld yield (predicted " in out.stdout and "the models disagree" in out.stdout
     assert "cross-validation: 0/1 scenarios agree" in out.stdout
 
 

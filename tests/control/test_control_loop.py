@@ -148,7 +148,7 @@ def test_grasp_feedback_closes_soft_grasps_in_the_twin_and_leaves_the_native_mod
     from coopsim.core.results import output_times
 
     zero = tuple(TorqueTable(np.zeros(1), np.zeros((1, tab.values.shape[1]))) for tab in carry.torques)
-    soft = replace(carry.mujoco, weld_solref=(0.05, 1.0), weld_solimp=(0.5, 0.5, 0.001, 0.5, 2.0))
+    soft = replace(carry.mujoco, timestep=1e-3, weld_solref=(0.05, 1.0), weld_solimp=(0.5, 0.5, 0.001, 0.5, 2.0))
     base = replace(carry, torques=zero, duration=0.2, control=replace(carry.control, mass_scale=1.0, squeeze=0.0),
                    integrator=replace(carry.integrator, output_dt=0.01), mujoco=soft)
     fed = replace(base, control=replace(base.control, grasp_kp=np.array([2e3, 20.0]), grasp_kd=np.array([100.0, 1.0])))

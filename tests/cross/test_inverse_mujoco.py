@@ -28,7 +28,7 @@ import pytest
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.resolutions import METHODS
 from coopsim.inverse.solve import default_bounds, resolution_for, resolve
-from coopsim.twin.mjcf import build_spec, dof_address, qpos_address
+from coopsim.twin.mjcf import build_spec, dof_address, qpos_address, static_settings
 from coopsim.inverse.trajectory import JointTrajectory
 from inverse_cases import BUNDLED, run
 
@@ -41,7 +41,7 @@ class OpenArms:
     carrier and no welds (with_object=True), in coopsim's stacked joint order."""
 
     def __init__(self, model, with_object: bool):
-        spec = build_spec(model, replace(model.mujoco, object_mass_scale=1.0), with_object=with_object)
+        spec = build_spec(model, replace(static_settings(model), object_mass_scale=1.0), with_object=with_object)
         for eq in list(spec.equalities):
             spec.delete(eq)
         self.m = spec.compile()

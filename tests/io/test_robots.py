@@ -34,7 +34,7 @@ from coopsim.io import robots
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.twin.harness import cross_validate
 from coopsim.io.foxglove import link_frame_names, native_link_poses, scene_update
-from coopsim.twin.mjcf import build_spec, qpos_address
+from coopsim.twin.mjcf import build_spec, qpos_address, static_settings
 from coopsim.core.model import PRISMATIC, REVOLUTE
 from coopsim.io.robots import ROBOTS, read_chain, robot_file, robots_folder
 from coopsim.io.scenario import load_scenario, model_from_dict
@@ -532,7 +532,7 @@ def assert_links_drawn_joint_to_joint(model, q):
     its /tf link frames (Foxglove) run from each joint to the next (the last to the end-effector) at the
     angles q, ≤ 1e-12 m; a link whose next joint sits on its own is a cube centred on its joint."""
     points = _joint_points(model, q)
-    mj = build_spec(model).compile()
+    mj = build_spec(model, static_settings(model)).compile()
     d = mujoco.MjData(mj)
     d.qpos[qpos_address(mj, model)] = q
     mujoco.mj_kinematics(mj, d)

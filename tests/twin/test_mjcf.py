@@ -20,6 +20,7 @@ import pytest
 
 from coopsim.twin.compare import orientation_error
 from coopsim.twin.mjcf import KEYFRAME, build_spec, dof_address, launch_viewer, mjcf_text, qpos_address
+from coopsim.twin.weld import resolved
 from coopsim.core.model import Model, TorqueFunction, torque_at
 from coopsim.twin.mujoco_run import run_twin
 from coopsim.io.scenario import load_scenario
@@ -112,7 +113,7 @@ class Twin(NamedTuple):
 
 
 def _twin(path) -> Twin:
-    model = load_scenario(path)
+    model = resolved(load_scenario(path))      # the step `coopsim mjcf` and `coopsim run` take
     text = mjcf_text(model, f"scenarios/{path.name}")
     committed = ROOT / "models" / f"{path.stem}.xml"
     assert committed.is_file(), f"{committed} missing: run `coopsim mjcf`"

@@ -14,7 +14,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from coopsim.core.errors import CoopsimError
 from coopsim.core.model import Model
-from coopsim.twin.mjcf import build_spec, qpos_address
+from coopsim.twin.mjcf import build_spec, qpos_address, static_settings
 from coopsim.apps.animate.gl import OffscreenRenderer
 from coopsim.apps.animate.motion import Motion
 
@@ -46,7 +46,7 @@ def scene_model(model: Model, q0: np.ndarray) -> mujoco.MjModel:
     Returns:
         mujoco.MjModel: the compiled scene.
     """
-    spec = build_spec(model, initial=(np.asarray(q0, float), np.zeros(model.n_total)), scene=True)
+    spec = build_spec(model, static_settings(model), initial=(np.asarray(q0, float), np.zeros(model.n_total)), scene=True)
     spec.body("object").add_site(name="object_frame", size=[1e-3, 1e-3, 1e-3])
     for m in range(model.r):
         spec.site(f"a{m}_ee").group = 4

@@ -13,6 +13,7 @@ import mujoco
 from coopsim.core.errors import CoopsimError, one_line
 from coopsim.io.scenario import load_scenario
 from coopsim.twin.mjcf import launch_viewer, mjcf_text
+from coopsim.twin.weld import resolved
 from coopsim.apps.animate.gl import has_display
 
 
@@ -64,7 +65,7 @@ def view(source: str | Path, label: str | None = None, overrides=()) -> None:
                 raise CoopsimError(f"{source}: MuJoCo cannot load it: {str(exc).splitlines()[0]}") from None
             path = source
         else:
-            model = load_scenario(source, overrides=overrides)
+            model = resolved(load_scenario(source, overrides=overrides))
             path = Path(tmp) / f"{model.name}.xml"
             path.write_text(mjcf_text(model, label or str(source)), encoding="utf-8")
         try:
