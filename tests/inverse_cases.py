@@ -37,3 +37,14 @@ def run(name: str, duration: float | None = None):
 def problem(name: str, duration: float | None = None, payload: bool = True):
     m, res, traj = run(name, duration)
     return inverse_problem(m, traj, PAYLOAD if payload else None)
+
+
+def with_motors(model, res, traj):
+    """Scenarios without motor data get motors for the test: stall torque 1.5 × the forward run's peak
+    |τ| per joint (at least 1 N·m), no-load speed 3 × the peak |θ̇| (at least 1 rad/s)."""
+    if np.all(np.isfinite(model.motors.stall_torque)):
+        return model
+    peak_tau = np.max(np.abs(res.tau), axis=0) if res is not None else np.ones(model.n_total)
+    stall = np.maximum(1.5 * peak_tau, 1.0)
+    speed = np.maximum(3 * np.max(np.abs(traj.qd), axis=0), 1.0)
+    return replace(model, motors=replace(model.motors, stall_torque=stall, no_load_speed=speed))

@@ -14,7 +14,7 @@ from coopsim.inverse import solve
 from coopsim.core.model import Motors, torque_limits
 from coopsim.inverse.qp import QPError
 from helpers import MujocoReference, mujoco_kkt_acceleration
-from inverse_cases import BUNDLED, PAYLOAD, problem, run
+from inverse_cases import BUNDLED, PAYLOAD, problem, run, with_motors
 
 PAPER = "paper_planar_2x3"
 METHODS = ("paper", "nonsqueezing", "min_energy")
@@ -101,24 +101,13 @@ def test_paper_scenario_capacities_as_measured():
         assert tau[j] == pytest.approx(line, abs=1e-12), f"{k}: joint {j} torque {tau[j]!r} vs motor line {line!r} N·m"
 
 
-def _with_motors(model, res, traj):
-    """Scenarios without motor data get motors for the test: stall torque 1.5 × the forward run's peak
-    |τ| per joint (at least 1 N·m), no-load speed 3 × the peak |θ̇| (at least 1 rad/s)."""
-    if np.all(np.isfinite(model.motors.stall_torque)):
-        return model
-    peak_tau = np.max(np.abs(res.tau), axis=0) if res is not None else np.ones(model.n_total)
-    stall = np.maximum(1.5 * peak_tau, 1.0)
-    speed = np.maximum(3 * np.max(np.abs(traj.qd), axis=0), 1.0)
-    return replace(model, motors=replace(model.motors, stall_torque=stall, no_load_speed=speed))
-
-
 @pytest.mark.parametrize("name", BUNDLED)
 def test_lp_bound_is_above_every_resolution(name):
     """Acceptance (a theorem, so a test): on every bundled scenario and both capacity modes, the LP
     capacity over all distributions is >= that of 'paper', 'nonsqueezing', 'min_energy' and of the
     optimised weights (slack 1e-9 relative)."""
     m, res, traj = run(name)
-    m = _with_motors(m, res, traj)
+    m = with_motors(m, res, traj)
     P = problem(name)
     for mode in cap.MODES:
         caps = [cap.method_capacity(P, resolution_for(m, k), m.motors, mode) for k in METHODS]

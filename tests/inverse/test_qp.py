@@ -10,15 +10,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
-from scipy.optimize import minimize, nnls
+from scipy.optimize import linprog, minimize, nnls
 
 from coopsim.inverse.distributions import grasp_line_frames
 from coopsim.inverse.problem import SampleFailureWarning, inverse_problem
 from coopsim.inverse.solve import default_bounds, resolution_for, resolve
 from coopsim.report.inverse_report import format_inverse_summary, inverse_study, inverse_summary
-from coopsim.inverse.qp import QPError, solve_qp, solve_qps
+from coopsim.inverse import capacity as cap
+from coopsim.inverse.qp import QPError, solve_lps, solve_qp, solve_qps
 from helpers import SCENARIOS, run_cli
-from inverse_cases import problem, run
+from inverse_cases import BUNDLED, problem, run, with_motors
 
 
 def _random_qp(rng, n=6, p=8, q=2, m=10):
@@ -262,3 +263,114 @@ def test_bounded_resolution_is_exact_on_the_paper_run():
     out = resolve(P, replace(R, method="bounded", force_bound=fb, moment_bound=mb))
     assert not out.failures
     assert np.max(np.abs(np.einsum("nij,nj->ni", P.A, out.f) - P.y)) <= 1e-15
+
+
+# ------------------------------------------------------------------------------------------------
+# LPs (solve_lps) against scipy's linprog: another HiGHS build, called one problem at a time
+# ------------------------------------------------------------------------------------------------
+
+LP_TOL = 1e-9     # objective, μ: relative to max(1, |value|)
+
+
+def _capacity_lps(name, mode, motors=True):
+    """lp_capacity's per-sample LPs (max μ) of a bundled scene; motors from `with_motors` (or the
+    scene's own: none on spatial_6r_pair, every row then left out)."""
+    m, res, traj = run(name)
+    m = with_motors(m, res, traj) if motors else m
+    A_ub, b_ub, A_eq, b_eq = cap._lp_rows(problem(name), m.motors, m.motors.passive, mode, None, None, "nonsqueezing")
+    c = np.zeros(A_ub.shape[2])
+    c[-1] = -1.0
+    return c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (len(c) - 1) + [(0, None)]
+
+
+def _linprog_one(lp, i):
+    """scipy's linprog on problem i alone (rows with an infinite bound left out): the result and the
+    inequality marginals over all rows (0 on those left out)."""
+    c, A_ub, b_ub, A_eq, b_eq, bounds = lp
+    keep = np.isfinite(b_ub[i])
+    sol = linprog(c, A_ub=A_ub[i][keep] if keep.any() else None, b_ub=b_ub[i][keep] if keep.any() else None,
+                  A_eq=A_eq[i], b_eq=b_eq[i], bounds=bounds, method="highs")
+    marg = np.zeros(len(keep))
+    if sol.status == 0:
+        marg[keep] = sol.ineqlin.marginals if keep.any() else 0.0
+    return sol, marg
+
+
+def _nondegenerate(lp, i, x):
+    """x is a vertex of problem i with exactly v active constraints (its duals are then unique)."""
+    c, A_ub, b_ub, A_eq, b_eq, bounds = lp
+    keep = np.isfinite(b_ub[i])
+    slack = (b_ub[i] - A_ub[i] @ x)[keep]
+    scale = max(1.0, np.max(np.abs(b_ub[i][keep]), initial=0.0), np.max(np.abs(x)))
+    at_bound = sum(lo is not None and abs(x[j] - lo) <= 1e-9 * scale for j, (lo, _) in enumerate(bounds))
+    return int(np.sum(np.abs(slack) <= 1e-9 * scale)) + len(b_eq[i]) + at_bound == len(c)
+
+
+def _agree(batch, lp, idx):
+    """Problems idx of an LPBatch agree with linprog: the same status; where optimal the objective and
+    μ to LP_TOL, marginals <= 0 (linprog's sign), and equal to linprog's at a nondegenerate vertex
+    both reach. Returns how many problems' marginals were compared."""
+    compared = 0
+    for i in idx:
+        sol, marg = _linprog_one(lp, i)
+        assert batch.status[i] == sol.status, (i, batch.status[i], sol.status, batch.messages[i], sol.message)
+        if sol.status != 0:
+            assert np.all(np.isnan(batch.x[i])) and np.all(batch.marginals[i] == 0.0)
+            continue
+        x, c = batch.x[i], lp[0]
+        assert abs(c @ x - sol.fun) <= LP_TOL * max(1.0, abs(sol.fun)), (i, c @ x, sol.fun)
+        assert abs(x[-1] - sol.x[-1]) <= LP_TOL * max(1.0, abs(sol.x[-1])), (i, x[-1], sol.x[-1])
+        assert np.all(batch.marginals[i] <= 1e-12 * max(1.0, np.max(np.abs(marg)))), i
+        if np.max(np.abs(x - sol.x)) <= 1e-9 * max(1.0, np.max(np.abs(x))) and _nondegenerate(lp, i, x):
+            compared += 1
+            assert np.max(np.abs(batch.marginals[i] - marg)) <= 1e-9 * max(1.0, np.max(np.abs(marg))), i
+    return compared
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_lps_match_linprog_on_the_bundled_scenes(name):
+    """The capacity LPs of every bundled scene (both modes; max μ and min μ): solve_lps on the whole
+    batch, and on single problems without the cap (the direct HiGHS path), against scipy's linprog
+    alone on every 10th problem and every one whose status is not optimal: statuses equal (optimal, and
+    unbounded where a sample allows any mass), objective and μ to LP_TOL (HiGHS certifies 1e-7 in its
+    scaled problem; both end on the same vertex here: measured <= 3e-13), marginals <= 0 as linprog's
+    and equal to them (1e-9) wherever both reach the same nondegenerate vertex."""
+    for mode in cap.MODES:
+        for sense in (1.0, -1.0):
+            lp = _capacity_lps(name, mode)
+            lp = (sense * lp[0],) + lp[1:]
+            N = len(lp[1])
+            batch = solve_lps(*lp)
+            idx = np.union1d(np.arange(0, N, 10), np.flatnonzero(batch.status != 0))
+            compared = _agree(batch, lp, idx)
+            assert compared > 0 or sense < 0          # min μ: μ = 0 where f is not unique (no vertex compared)
+            for i in idx[::4]:
+                one = (lp[0], *(a[i:i + 1] for a in lp[1:5]), lp[5])
+                _agree(solve_lps(*one, cap=np.inf), one, [0])
+
+
+def test_lps_infeasible_and_unbounded_problems_match_linprog():
+    """The paper carry's capacity LPs made infeasible at some samples (every torque row <= −1: τ >= 1
+    and τ <= −1 at once), at a seed (problem 0: the seeds' LP has no optimum) or not (130, 131), and
+    unbounded at others (no mass column in the equality rows: any μ carries), and a scene with no motor
+    limits (every problem unbounded): the statuses are linprog's (2, 3) at those problems, and the
+    other problems' solutions stay as without them."""
+    lp = _capacity_lps("paper_planar_2x3_carry", "scaled")
+    base = solve_lps(*lp)
+    for bad in ([0, 130, 131], [130, 131]):
+        b_ub = lp[2].copy()
+        b_ub[bad] = -1.0
+        A_eq = lp[3].copy()
+        A_eq[[64, 200], :, -1] = 0.0
+        broken = (lp[0], lp[1], b_ub, A_eq) + lp[4:]
+        batch = solve_lps(*broken)
+        assert batch.status[bad].tolist() == [2] * len(bad) and batch.status[[64, 200]].tolist() == [3, 3]
+        _agree(batch, broken, bad + [64, 200, 1, 65, 129, 132])
+        rest = np.setdiff1d(np.arange(len(b_ub)), bad + [64, 200])
+        assert np.array_equal(batch.status[rest], base.status[rest])
+        ok = rest[base.status[rest] == 0]
+        assert np.max(np.abs(batch.x[ok, -1] - base.x[ok, -1]) / np.maximum(1.0, base.x[ok, -1])) <= LP_TOL
+    free = _capacity_lps("spatial_6r_pair", "scaled", motors=False)
+    batch = solve_lps(*free)
+    assert np.all(batch.status == 3)
+    _agree(batch, free, np.arange(0, 301, 10))
