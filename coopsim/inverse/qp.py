@@ -28,7 +28,12 @@ positive *semi*definite Hessian, here H = RᵀR), then polished to the exact min
    HiGHS's status and what the polish found) — `solve_qps` never raises for one problem; `solve_qp`
    (one problem) raises QPError.
 
-`solve_lps` solves a batch of small LPs as one block-diagonal HiGHS LP.
+`solve_lps` solves a batch of small LPs with HiGHS's simplex method (`highspy`): every
+LP_SEED_STRIDE-th problem first, as one block-diagonal LP; every other problem then at the optimal
+basis of a seed beside it (along a trajectory the basis rarely changes between samples), its vertex
+computed and certified in NumPy (`_vertices`: feasible, its duals of the right sign — optimal; at an
+artificial cap with a feasible descent ray — unbounded); what is not certified goes to HiGHS, as one
+block-diagonal LP started from those bases.
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ POLISH_STEPS = 20          # working-set changes of the polish
 PRIMAL_TOL = 1e-12         # row violation, relative to the problem's largest |bound| or Σ|C_ij x_j|
 DUAL_TOL = 1e-10           # wrong-sign multiplier, relative to the largest |H x|, |g| (scaled problem)
 STATIONARITY_TOL = 1e-9    # |H x + g − Bᵀλ|, same scale
+LP_SEED_STRIDE = 64        # a batch of LPs is first solved at every 64th problem; their bases serve the others
 
 
 class QPError(CoopsimError):
@@ -120,9 +126,9 @@ class LPBatch(NamedTuple):
         status: (N,) int, linprog's status: 0 optimal, 2 infeasible, 3 unbounded, other: failed (−1: not
             solved).
         x: (N, v) the solutions (nan where not optimal).
-        marginals: (N, mu) the duals of the inequality rows (0 for rows left out, and where not
-            optimal).
-        messages: N strings, HiGHS's message for each problem.
+        marginals: (N, mu) the duals of the inequality rows, as linprog's `ineqlin.marginals`: the
+            objective's derivative with respect to b_ub (<= 0; 0 for rows left out, and where not optimal).
+        messages: N strings, HiGHS's model status for each problem.
     """
 
     status: np.ndarray
@@ -135,36 +141,79 @@ class LPBatch(NamedTuple):
 # LPs
 # ------------------------------------------------------------------------------------------------
 
-def _block_diag(A: np.ndarray, keep: np.ndarray):
-    """Sparse block-diagonal matrix (keep.sum(), N v) of the blocks A (N, rows, v), rows where keep
-    (N, rows); zero entries left out (as linprog stores a dense matrix)."""
-    from scipy.sparse import csc_array
-
-    N, rows, v = A.shape
-    row_of = (np.cumsum(keep.ravel()) - 1).reshape(N, rows)
-    i, r, j = np.nonzero(keep[..., None] & (A != 0))
-    return csc_array((A[i, r, j], (row_of[i, r], i * v + j)), shape=(int(keep.sum()), N * v))
+_LP_STATUS = {highspy.HighsModelStatus.kOptimal: 0, highspy.HighsModelStatus.kTimeLimit: 1,
+              highspy.HighsModelStatus.kIterationLimit: 1, highspy.HighsModelStatus.kInfeasible: 2,
+              highspy.HighsModelStatus.kModelError: 2, highspy.HighsModelStatus.kUnbounded: 3}
+_BASIS_STATUS = list(highspy.HighsBasisStatus.__members__.values())      # by code: kLower, kBasic, kUpper, ...
+_UNBOUNDED = "Unbounded"                                                  # HiGHS's model status string
 
 
-def _linprog_blocks(c, A_ub, b_ub, keep, A_eq, b_eq, bounds):
-    """One HiGHS LP of the problems stacked block-diagonally (min Σ cᵀx_i); the scipy result."""
-    from scipy.optimize import linprog
+class _LPs(NamedTuple):
+    """A batch of LPs with every constraint as a row: G (N, r + v, v) the rows [A_ub; A_eq] (r of them,
+    the first mu the inequality rows; keep (N, mu) those kept), then the identity (the columns' bounds);
+    g_lo <= G x <= g_hi (N, r + v) (rows left out free: ±inf; A_eq rows lo = hi; the columns' bounds
+    capped at ±cap for the variables the objective drives towards an infinite bound: cap_lo, cap_hi
+    (v,), uncapped lo, hi (v,)); norm (N, r + v) max|G_ij| per row, bound (N,) the largest finite row
+    bound; c (v,) the cost."""
 
-    N, me = A_eq.shape[:2]
-    has_ub = bool(keep.any())
-    return linprog(np.tile(c, N), A_ub=_block_diag(A_ub, keep) if has_ub else None,
-                   b_ub=b_ub[keep] if has_ub else None, A_eq=_block_diag(A_eq, np.ones((N, me), bool)) if me else None,
-                   b_eq=b_eq.ravel() if me else None, bounds=list(bounds) * N, method="highs")
+    G: np.ndarray
+    g_lo: np.ndarray
+    g_hi: np.ndarray
+    norm: np.ndarray
+    bound: np.ndarray
+    c: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    cap_lo: np.ndarray
+    cap_hi: np.ndarray
+    r: int
+    mu: int
+    keep: np.ndarray
+
+    @classmethod
+    def of(cls, c, A_ub, b_ub, A_eq, b_eq, bounds, cap):
+        N, me, v = np.shape(A_eq)
+        A_ub, b_ub = np.reshape(A_ub, (N, -1, v)), np.reshape(b_ub, (N, -1))
+        c = np.asarray(c, dtype=float)
+        keep = np.isfinite(b_ub)
+        lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], float)
+        hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], float)
+        cap_lo, cap_hi = np.where((c > 0) & (lo < -cap), -cap, lo), np.where((c < 0) & (hi > cap), cap, hi)
+        G = np.concatenate([A_ub, A_eq, np.broadcast_to(np.eye(v), (N, v, v))], axis=1).astype(float)
+        row_lo = np.concatenate([np.full(b_ub.shape, -np.inf), b_eq], axis=1)
+        row_hi = np.concatenate([np.where(keep, b_ub, np.inf), b_eq], axis=1)
+        finite = np.where(np.isfinite(row_lo), np.abs(row_lo), 0.0), np.where(np.isfinite(row_hi), np.abs(row_hi), 0.0)
+        return cls(G, np.concatenate([row_lo, np.broadcast_to(cap_lo, (N, v))], axis=1),
+                   np.concatenate([row_hi, np.broadcast_to(cap_hi, (N, v))], axis=1), np.max(np.abs(G), axis=2),
+                   np.max(np.maximum(*finite), axis=1, initial=0.0), c, lo, hi, cap_lo, cap_hi, row_lo.shape[1],
+                   A_ub.shape[1], keep)
+
+
+class _LPRun(NamedTuple):
+    """One HiGHS run of a block of problems: linprog's status code, HiGHS's model status, x (k, v) and the
+    row duals (k, r) (None unless optimal), the basis codes of the columns (k, v) and rows (k, r) (None
+    unless optimal and asked for)."""
+
+    status: int
+    message: str
+    x: np.ndarray | None
+    duals: np.ndarray | None
+    col_basis: np.ndarray | None
+    row_basis: np.ndarray | None
 
 
 def solve_lps(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarray, b_eq: np.ndarray,
               bounds, cap: float = 1e9) -> LPBatch:
     """N independent LPs  min cᵀx  s.t.  A_ub[i] x <= b_ub[i],  A_eq[i] x = b_eq[i],  bounds on x.
 
-    Solved as one block-diagonal HiGHS LP (each block is then optimal on its own: the objective is
-    separable) in which the variables the objective drives towards an infinite bound stop at ±cap; the
-    problems that reach it are solved alone, which gives their own status (unbounded; cap = inf: no cap);
-    when the combined LP has no optimum, its halves are solved in turn down to single problems.
+    The variables the objective drives towards an infinite bound stop at ±cap; a problem that reaches
+    it is unbounded where a ray certifies it (`_rays`), else solved alone without the cap, which gives
+    its own status (cap = inf: no cap). A batch of at least 2·LP_SEED_STRIDE problems is first solved
+    at every LP_SEED_STRIDE-th one (the seeds, one HiGHS LP); every problem's vertex is then computed
+    at the optimal basis of its nearest seed, else of the other seed beside it, and kept where it is
+    certified (`_vertices`). The others are solved as one block-diagonal HiGHS LP (each block is then
+    optimal on its own: the objective is separable), its simplex method started from their nearest
+    seeds' bases; when that LP has no optimum, its halves are solved in turn down to single problems.
 
     Args:
         c: (v,) the objective, shared.
@@ -178,43 +227,193 @@ def solve_lps(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarra
     Returns:
         LPBatch: status, x (N, v), inequality duals (N, mu) and messages of each problem.
     """
-    N, v = A_eq.shape[0], A_eq.shape[2]
-    keep = np.isfinite(b_ub)
-    out = LPBatch(np.full(N, -1), np.full((N, v), np.nan), np.zeros(b_ub.shape), [""] * N)
-    lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], float)
-    hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], float)
-    capped_hi, capped_lo = (c < 0) & (hi > cap), (c > 0) & (lo < -cap)
-    capped = [(None if np.isinf(l) else l, None if np.isinf(h) else h)
-              for l, h in zip(np.where(capped_lo, -cap, lo), np.where(capped_hi, cap, hi))]
-
-    def solve(idx, with_bounds):
-        sol = _linprog_blocks(c, A_ub[idx], b_ub[idx], keep[idx], A_eq[idx], b_eq[idx], with_bounds)
-        if sol.status != 0 and len(idx) > 1:
-            for half in (idx[:len(idx) // 2], idx[len(idx) // 2:]):
-                solve(half, with_bounds)
-        elif sol.status != 0 and with_bounds is capped:
-            solve(idx, bounds)
-        else:
-            _store(out, idx, sol, keep[idx])
-            if sol.status == 0 and with_bounds is capped:
-                x = out.x[idx]
-                for i in idx[np.any((capped_hi & (x >= cap / 2)) | (capped_lo & (x <= -cap / 2)), axis=1)]:
-                    solve(np.array([i]), bounds)
-
-    solve(np.arange(N), capped)
+    P = _LPs.of(c, A_ub, b_ub, A_eq, b_eq, bounds, cap)
+    N, v = len(P.G), len(P.c)
+    out = LPBatch(np.full(N, -1), np.full((N, v), np.nan), np.zeros((N, P.mu)), [""] * N)
+    capped = np.zeros(N, bool)                                      # optimal with the capped bounds
+    with _HIGHS_LOCK:
+        h = _highs_lp()
+        todo, basis = _from_seeds(h, P, out, capped) if N >= 2 * LP_SEED_STRIDE else (np.arange(N), None)
+        _solve_blocks(h, P, todo, True, basis, out, capped)
+        for i in np.flatnonzero(capped & _at_cap(P, out.x)):
+            _solve_blocks(h, P, np.array([i]), False, None, out, capped)
     return out
 
 
-def _store(out: LPBatch, idx: np.ndarray, sol, keep: np.ndarray) -> None:
-    """Write the combined solution `sol` of the problems idx (rows kept: keep (len(idx), mu)) into out."""
-    out.status[idx], out.x[idx], out.marginals[idx] = sol.status, np.nan, 0.0
+def _at_cap(P: _LPs, x: np.ndarray) -> np.ndarray:
+    """(k,) bool: a capped variable of x (k, v) is at least half-way to its cap (nan: no)."""
+    with np.errstate(invalid="ignore"):
+        return np.any(((P.cap_hi < P.hi) & (x >= P.cap_hi / 2)) | ((P.cap_lo > P.lo) & (x <= P.cap_lo / 2)), axis=1)
+
+
+def _from_seeds(h, P: _LPs, out: LPBatch, capped: np.ndarray):
+    """Solve the seeds (every LP_SEED_STRIDE-th problem, capped, one HiGHS LP), then every problem at
+    the optimal basis of its nearest seed and, where that fails, of the other seed beside it; store the
+    certified ones (capped), as unbounded those with a certified ray (`_rays`). Returns the problems
+    left and the bases (col (N, v), row (N, r)) of every problem's nearest seed — all problems and None
+    when the seeds' LP has no optimum."""
+    N = len(P.G)
+    seeds = np.arange(0, N, LP_SEED_STRIDE)
+    run = _run_lp(h, P, seeds, True, None, want_basis=True)
+    if run.status != 0:
+        return np.arange(N), None
+    pos = np.arange(N) / LP_SEED_STRIDE
+    near = np.minimum(np.rint(pos), len(seeds) - 1).astype(int)
+    other = np.minimum(np.where(near > pos, np.floor(pos), np.ceil(pos)), len(seeds) - 1).astype(int)
+    todo = np.arange(N)
+    for s, tried in ((near, np.zeros(N, bool)), (other, other == near)):
+        trial = todo[~tried[todo]]
+        x, y, ok, unbounded = _vertices(P, trial, run.col_basis[s[trial]], run.row_basis[s[trial]])
+        fin = ok & ~unbounded
+        _store(out, trial[fin], 0, run.message, x[fin], y[fin], P)
+        _store(out, trial[unbounded], 3, _UNBOUNDED, None, None, P)
+        capped[trial[fin]] = True
+        todo = np.setdiff1d(todo, trial[ok])
+    return todo, (run.col_basis[near], run.row_basis[near])
+
+
+def _solve_blocks(h, P: _LPs, idx: np.ndarray, capped: bool, basis, out: LPBatch, was_capped: np.ndarray) -> None:
+    """Solve the problems idx as one block-diagonal HiGHS LP (bounds capped or not), started from the
+    bases (col (N, v), row (N, r) codes, None: HiGHS's own start), and store them; a run without an
+    optimum is repeated without the bases, then its halves are solved in turn, a single capped
+    problem without the cap."""
+    if not len(idx):
+        return
+    run = _run_lp(h, P, idx, capped, None if basis is None else (basis[0][idx], basis[1][idx]))
+    if run.status != 0 and basis is not None:
+        _solve_blocks(h, P, idx, capped, None, out, was_capped)
+    elif run.status != 0 and len(idx) > 1:
+        for half in (idx[:len(idx) // 2], idx[len(idx) // 2:]):
+            _solve_blocks(h, P, half, capped, None, out, was_capped)
+    elif run.status != 0 and capped:
+        _solve_blocks(h, P, idx, False, None, out, was_capped)
+    else:
+        _store(out, idx, run.status, run.message, run.x, run.duals, P)
+        was_capped[idx] = capped and run.status == 0
+        at = _at_cap(P, out.x[idx]) if capped else np.zeros(len(idx), bool)
+        if np.any(at):                                          # a certified ray spares their runs alone
+            col, row = _basis_codes(h, len(idx))
+            unbounded = _vertices(P, idx[at], col[at], row[at])[3]
+            _store(out, idx[at][unbounded], 3, _UNBOUNDED, None, None, P)
+            was_capped[idx[at][unbounded]] = False
+
+
+def _run_lp(h, P: _LPs, idx: np.ndarray, capped: bool, basis, want_basis: bool = False) -> _LPRun:
+    """Solve the problems idx as one block-diagonal HiGHS LP (bounds capped or not), from the basis
+    (col (k, v), row (k, r) codes) where one is given (else HiGHS's presolve and crash)."""
+    k, r, v = len(idx), P.r, len(P.c)
+    Bt = np.swapaxes(P.G[idx, :r], 1, 2)                            # (k, v, r): column-major blocks
+    nz = Bt != 0
+    b, j, i = np.nonzero(nz)
+    start = np.concatenate([[0], np.cumsum(nz.sum(axis=2).ravel())[:-1]]).astype(np.int32)
+    lo, hi = (P.cap_lo, P.cap_hi) if capped else (P.lo, P.hi)
+    h.passModel(k * v, k * r, len(b), 1, 1, 0.0, np.tile(P.c, k), np.tile(lo, k), np.tile(hi, k),
+                P.g_lo[idx, :r].ravel(), P.g_hi[idx, :r].ravel(), start, (b * r + i).astype(np.int32), Bt[nz],
+                np.zeros(k * v, np.int32))
+    if basis is not None:
+        hb = highspy.HighsBasis()
+        hb.col_status = [_BASIS_STATUS[s] for s in basis[0].ravel().tolist()]
+        hb.row_status = [_BASIS_STATUS[s] for s in basis[1].ravel().tolist()]
+        hb.valid, hb.alien = True, False                          # as many basic as rows, by construction
+        h.setBasis(hb)
+    h.run()
+    model_status = h.getModelStatus()
+    status, message = _LP_STATUS.get(model_status, 4), h.modelStatusToString(model_status)
+    if status != 0:
+        return _LPRun(status, message, None, None, None, None)
+    sol = h.getSolution()
+    x, duals = np.asarray(sol.col_value).reshape(k, v), np.asarray(sol.row_dual).reshape(k, r)
+    return _LPRun(status, message, x, duals, *(_basis_codes(h, k) if want_basis else (None, None)))
+
+
+def _basis_codes(h, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The basis of the k problems HiGHS has just solved together: codes col (k, v), row (k, r)."""
+    hb = h.getBasis()
+    return tuple(np.array(s, dtype=np.int8).reshape(k, -1) for s in (hb.col_status, hb.row_status))
+
+
+def _vertices(P: _LPs, idx: np.ndarray, col_basis: np.ndarray, row_basis: np.ndarray):
+    """(x (k, v), row duals (k, r), ok (k,)) of the problems idx (capped bounds) at the bases (HiGHS's
+    codes, col (k, v), row (k, r)): the v constraints a basis holds (its nonbasic rows and columns, at
+    their lower or upper bound, a free column at 0) solved for x, and Mᵀλ = c (M their rows) for the
+    duals. ok: a certified optimum — x meets every row and bound and the held ones (to PRIMAL_TOL, of
+    the problem's largest row bound or Σ|B_ij x_j|), each dual has its bound's sign (>= 0 at a lower,
+    <= 0 at an upper bound, 0 at a free column, either on a fixed one; to DUAL_TOL of the largest
+    |c_j|, |λ_i|·max|M_i|) and Mᵀλ = c to STATIONARITY_TOL of the same."""
+    k, r, v = len(idx), P.r, len(P.c)
+    held = np.concatenate([row_basis, col_basis], axis=1)           # (k, r + v): 0 lower, 1 basic, 2 upper, 3 zero
+    G, g_lo, g_hi, norm = P.G[idx], P.g_lo[idx], P.g_hi[idx], P.norm[idx]
+    order = np.argsort(held == 1, axis=1, kind="stable")[:, :v]     # the held constraints first
+    M = np.take_along_axis(G, order[..., None], axis=1)
+    code = np.take_along_axis(held, order, axis=1)
+    t = np.where(code == 2, np.take_along_axis(g_hi, order, axis=1),
+                 np.where(code == 3, 0.0, np.take_along_axis(g_lo, order, axis=1)))
+    valid = ((held != 1).sum(axis=1) == v) & np.all(held <= 3, axis=1) & np.all(np.isfinite(t), axis=1)
+    M[~valid], t[~valid] = np.eye(v), 0.0
+    with np.errstate(all="ignore"):
+        try:
+            x, lam = _solve_both(M, t, P.c)
+        except np.linalg.LinAlgError:                               # a singular M: those are not certified
+            valid &= (np.linalg.det(M) != 0) & (np.linalg.det(np.swapaxes(M, 1, 2)) != 0)
+            M[~valid], t[~valid] = np.eye(v), 0.0
+            x, lam = _solve_both(M, t, P.c)
+        dual = np.zeros((k, r + v))
+        np.put_along_axis(dual, order, lam, axis=1)
+        Gx = (G @ x[..., None])[..., 0]
+        pscale = np.maximum(P.bound[idx], np.max(np.abs(G) @ np.abs(x)[..., None], axis=(1, 2)))
+        viol = np.max(np.maximum(g_lo - Gx, Gx - g_hi), axis=1)
+        res = np.max(np.abs((M @ x[..., None])[..., 0] - t), axis=1)
+        weight = np.abs(dual) * norm
+        wrong = np.where(held == 0, -dual, np.where(held == 2, dual, 0.0)) * norm    # > 0: the wrong sign
+        wrong = np.where(g_lo == g_hi, 0.0, np.where(held == 3, weight, wrong))
+        dscale = np.maximum(np.max(np.abs(P.c), initial=0.0), np.max(weight, axis=1))
+        stat = np.max(np.abs((lam[:, None, :] @ M)[:, 0] - P.c), axis=1)
+        ok = (valid & (viol <= PRIMAL_TOL * pscale) & (res <= PRIMAL_TOL * pscale)
+              & (np.max(wrong, axis=1) <= DUAL_TOL * dscale) & (stat <= STATIONARITY_TOL * dscale))
+        at_cap = ((P.cap_hi < P.hi) & (held[:, r:] == 2)) | ((P.cap_lo > P.lo) & (held[:, r:] == 0))
+        sub = np.flatnonzero(ok & np.any(at_cap, axis=1))
+        unbounded = np.zeros(k, bool)
+        unbounded[sub] = _rays(P, idx[sub], M[sub], order[sub], at_cap[sub])
+    return x, dual[:, :r], ok, unbounded
+
+
+def _solve_both(M: np.ndarray, t: np.ndarray, c: np.ndarray):
+    """x (k, v) and λ (k, v) of M x = t and Mᵀλ = c (M (k, v, v)); LinAlgError where an M is singular."""
+    k, v = t.shape
+    return (np.linalg.solve(M, t[..., None])[..., 0],
+            np.linalg.solve(np.swapaxes(M, 1, 2), np.broadcast_to(c, (k, v))[..., None])[..., 0])
+
+
+def _rays(P: _LPs, idx: np.ndarray, M: np.ndarray, order: np.ndarray, at_cap: np.ndarray) -> np.ndarray:
+    """(k,) bool: certified vertices of the problems idx (M (k, v, v) the rows of their held constraints
+    in `order` (k, v)) at which a capped column sits at its cap (at_cap (k, v), the first of them taken)
+    has a ray — off that bound, the other held constraints kept — that meets every row and bound
+    without the cap (to PRIMAL_TOL of Σ|G_ij d_j|) and lowers the cost (by more than DUAL_TOL of
+    Σ|c_j d_j|): without the cap the problem is unbounded."""
+    k, r, v = len(idx), P.r, len(P.c)
+    rows = np.arange(k)
+    j = np.argmax(at_cap, axis=1)
+    e = np.zeros((k, v))
+    e[rows, np.argmax(order == (r + j)[:, None], axis=1)] = np.where(P.cap_hi[j] < P.hi[j], 1.0, -1.0)
+    d = np.linalg.solve(M, e[..., None])[..., 0]
+    G = P.G[idx]
+    Gd = (G @ d[..., None])[..., 0]
+    tol = PRIMAL_TOL * np.max(np.abs(G) @ np.abs(d)[..., None], axis=(1, 2))[:, None]
+    lo = np.concatenate([P.g_lo[idx, :r], np.broadcast_to(P.lo, (k, v))], axis=1)
+    hi = np.concatenate([P.g_hi[idx, :r], np.broadcast_to(P.hi, (k, v))], axis=1)
+    meets = np.all(((Gd <= tol) | ~np.isfinite(hi)) & ((Gd >= -tol) | ~np.isfinite(lo)), axis=1)
+    return meets & (d @ P.c < -DUAL_TOL * (np.abs(d) @ np.abs(P.c)))
+
+
+def _store(out: LPBatch, idx: np.ndarray, status: int, message: str, x, duals, P: _LPs) -> None:
+    """Write the status, message, x (len(idx), v) and row duals (len(idx), r) of the problems idx into out
+    (x nan and duals 0 unless optimal; the duals of the inequality rows left out 0)."""
+    out.status[idx], out.x[idx], out.marginals[idx] = status, np.nan, 0.0
     for i in idx:
-        out.messages[i] = sol.message
-    if sol.status == 0:
-        out.x[idx] = sol.x.reshape(len(idx), -1)
-        marg = np.zeros(keep.shape)
-        marg[keep] = sol.ineqlin.marginals
-        out.marginals[idx] = marg
+        out.messages[i] = message
+    if status == 0:
+        out.x[idx] = x
+        out.marginals[idx] = np.where(P.keep[idx], duals[:, :P.mu], 0.0)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -440,34 +639,48 @@ class _Outcome(NamedTuple):
 
 
 _HIGHS_LOCK = threading.RLock()
-_HIGHS = None
+_HIGHS = {}
 
 
 def _highs():
-    """The process's HiGHS instance, silent. The first one HiGHS makes prints its banner on the C-level
-    standard output (it would corrupt `--json` output): that is sent to the null device."""
-    global _HIGHS
-    if _HIGHS is None:
-        try:
-            sys.stdout.flush()
-            saved = os.dup(1)
-        except (OSError, ValueError, AttributeError):
-            saved = None
-        try:
-            if saved is not None:
-                null = os.open(os.devnull, os.O_WRONLY)
-                os.dup2(null, 1)
-                os.close(null)
-            h = highspy.Highs()
-            h.setOptionValue("output_flag", False)
-        finally:
-            if saved is not None:
-                _flush_c_stdout()
-                os.dup2(saved, 1)
-                os.close(saved)
+    """The process's HiGHS instance for the QPs, silent, entries below 1e-12 dropped."""
+    if "qp" not in _HIGHS:
+        h = _silent_highs()
         h.setOptionValue("small_matrix_value", 1e-12)
-        _HIGHS = h
-    return _HIGHS
+        _HIGHS["qp"] = h
+    return _HIGHS["qp"]
+
+
+def _highs_lp():
+    """The process's HiGHS instance for the LPs, silent, with linprog's options (dual simplex)."""
+    if "lp" not in _HIGHS:
+        h = _silent_highs()
+        h.setOptionValue("simplex_strategy", 1)
+        _HIGHS["lp"] = h
+    return _HIGHS["lp"]
+
+
+def _silent_highs():
+    """A new HiGHS instance with its output off. The first one HiGHS makes prints its banner on the
+    C-level standard output (it would corrupt `--json` output): that is sent to the null device."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):
+        saved = None
+    try:
+        if saved is not None:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 1)
+            os.close(null)
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+    finally:
+        if saved is not None:
+            _flush_c_stdout()
+            os.dup2(saved, 1)
+            os.close(saved)
+    return h
 
 
 def _flush_c_stdout() -> None:
