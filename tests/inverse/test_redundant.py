@@ -96,8 +96,8 @@ def _replays(m, traj):
 def _capacities_as_measured(m, traj):
     """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant
     density): every closed-form resolution is feasible — 'paper' 3.540 kg and 'nonsqueezing' 10.61 kg (both
-    arm 2 joint 6 on τ_max at t = 2.52 s), 'min_energy' (the scenario's weights) 32.62 kg (arm 1 joint 4 on
-    τ_min, t = 0.44 s) — and the LP bound over every distribution, 53.86 kg, lies above them. Regression
+    arm 2 joint 6 on τ_max at t = 2.52 s), 'min_energy' (the scenario's weights) 32.62 kg (joint 4 of either arm,
+    mirror images, on τ_min, t = 0.44 s) — and the LP bound over every distribution, 53.86 kg, lies above them. Regression
     pins: numbers produced by coopsim itself (README table)."""
     from coopsim.inverse import capacity as cap
 
@@ -105,8 +105,9 @@ def _capacities_as_measured(m, traj):
     got = {k: cap.method_capacity(P, resolution_for(m, k), m.motors) for k in ("paper", "nonsqueezing", "min_energy")}
     assert got["paper"].mass == pytest.approx(3.54011, rel=1e-4) and (got["paper"].joint, got["paper"].time) == (12, 2.52)
     assert got["nonsqueezing"].mass == pytest.approx(10.6110, rel=1e-4) and got["nonsqueezing"].joint == 12
-    assert got["min_energy"].mass == pytest.approx(32.6194, rel=1e-4) and (got["min_energy"].joint,
-                                                                           got["min_energy"].time) == (3, 0.44)
+    # joint 4 of either arm: the arms mirror each other, and the tie between the two is broken by rounding
+    assert got["min_energy"].mass == pytest.approx(32.6194, rel=1e-4) and got["min_energy"].time == 0.44
+    assert got["min_energy"].joint in (3, 10)
     lp = cap.lp_capacity(P, m.motors, m.motors.passive.astype(bool))
     assert lp.mass == pytest.approx(53.8631, rel=1e-4) and lp.mass >= max(c.mass for c in got.values())
 
