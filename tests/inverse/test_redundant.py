@@ -94,11 +94,11 @@ def _replays(m, traj):
 
 
 def _capacities_as_measured(m, traj):
-    """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant
-    density): every closed-form resolution is feasible — 'paper' 3.540 kg and 'nonsqueezing' 10.61 kg (both
-    arm 2 joint 6 on τ_max at t = 2.52 s), 'min_energy' (the scenario's weights) 32.62 kg (joint 4 of either arm,
-    mirror images, on τ_min, t = 0.44 s) — and the LP bound over every distribution, 53.86 kg, lies above them. Regression
-    pins: numbers produced by coopsim itself (README table)."""
+    """`coopsim capacity` on the carry with the URDF's effort/velocity lines (object scaled at constant density): every
+    closed-form resolution is feasible — 'paper' 3.540 kg and 'nonsqueezing' 10.61 kg (both arm 2 joint 6 on τ_max
+    at t = 2.52 s), 'min_energy' (the scenario's weights) 32.62 kg (joint 4 of either arm, mirror images, on τ_min,
+    t = 0.44 s) — and the LP bound over every distribution, 53.86 kg, lies above them. Regression pins: numbers
+    produced by coopsim itself (README table)."""
     from coopsim.inverse import capacity as cap
 
     P = inverse_problem(m, traj)
