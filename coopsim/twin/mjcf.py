@@ -263,8 +263,7 @@ def qpos_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
     Returns:
         np.ndarray: (n,) int, n the joints of all arms, in coopsim's order.
     """
-    return np.array([mj_model.jnt_qposadr[mj_model.joint(f"a{m}_j{i}").id]
-                     for m, arm in enumerate(model.arms) for i in range(arm.n)])
+    return _joint_addresses(mj_model, model, mj_model.jnt_qposadr)
 
 
 def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
@@ -277,8 +276,12 @@ def dof_address(mj_model: mujoco.MjModel, model: Model) -> np.ndarray:
     Returns:
         np.ndarray: (n,) int, n the joints of all arms, in coopsim's order.
     """
-    return np.array([mj_model.jnt_dofadr[mj_model.joint(f"a{m}_j{i}").id]
-                     for m, arm in enumerate(model.arms) for i in range(arm.n)])
+    return _joint_addresses(mj_model, model, mj_model.jnt_dofadr)
+
+
+def _joint_addresses(mj_model: mujoco.MjModel, model: Model, table: np.ndarray) -> np.ndarray:
+    """table[joint id] of each stacked joint (arm by arm): the twin names joint i of arm m `a{m}_j{i}`."""
+    return np.array([table[mj_model.joint(f"a{m}_j{i}").id] for m, arm in enumerate(model.arms) for i in range(arm.n)])
 
 
 def mjcf_spec(model: Model) -> mujoco.MjSpec:
