@@ -15,7 +15,8 @@ import numpy as np
 from coopsim.compiled.gibbs_appell import arm_bias, arm_mass_matrix
 from coopsim.compiled.grasp import object_dynamics, object_pose
 from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
-from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from coopsim.compiled.linalg import (column_singular_ratio, eig_solve, pivoted_cholesky, pivoted_solve,
+                                     safe_pivot_ratio)
 from coopsim.compiled.packing import STAB_BAUMGARTE
 from coopsim.compiled.schur import constraint_trace, group_arm, schur_factor, schur_solve
 from coopsim.compiled.spatial import rot_log
@@ -256,6 +257,45 @@ def solve_constraints(P, W, K):
 
 
 @kernel
+def constraint_condition(P, W):
+    """cond(Λ𝐈⁻¹Λᵀ) = λ_max/λ_min after `chain_solve`, the eigenvalues' ratio as an eigen-solve gives it.
+
+    A = Λ𝐈⁻¹Λᵀ (K × K) is positive definite wherever `chain_solve` took a Cholesky path. There P A Pᵀ =
+    L Lᵀ (the pivoted factor: the dense path's own in W.A_f, or formed here after the `schur` path),
+    and the eigenvalues of A are the squared singular values of L: cond = (σ_max/σ_min)² of L by
+    one-sided Jacobi (`linalg.column_singular_ratio`), which the diagonal pivoting makes converge in
+    few sweeps (Demmel & Veselić 1992) — no eigen-decomposition of A. Where the eigen path ran (rank
+    lost or not proven) its condition number W.cond is the one reported. (After the `schur` path, whose
+    certificate bounds cond by 1e10, the factor always forms; were it not to, the eigen path's
+    `linalg.eig_solve` would give the number.) Agrees with
+    numpy.linalg.cond(A) to a relative 1e-13 + 8·K·eps·cond (tests/compiled/test_compiled.py).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef) after `chain_solve`: W.path, W.cond and W.A_f read (W.X
+            after the `schur` path); W.A (and W.A_f, W.perm, W.dF after the `schur` path) overwritten.
+
+    Returns:
+        float: λ_max/λ_min (inf when λ_min ≤ 0; 1 without constraint rows).
+    """
+    K = W.Lam.shape[0]
+    if K == 0:
+        return 1.0
+    if W.path[0] == EIGEN:
+        return W.cond[0]
+    A, L = W.A, W.A_f
+    if W.path[0] == SCHUR:
+        constraint_matrix(P, W)
+        if not pivoted_cholesky(A, L, W.perm, K) > 0.0:
+            return eig_solve(A, W.b, W.dF, K, P.rank_tol)[0]
+    for i in range(K):
+        for j in range(K):
+            A[i, j] = L[i, j] if i >= j else 0.0
+    ratio = column_singular_ratio(A, K, K)
+    return 1.0 / (ratio * ratio) if ratio > 0.0 else np.inf
+
+
+@kernel
 def chain_solve(P, W, tau, stab):
     """θ̈ (eqs. 25–27) into W.qdd and the loop-closure wrenches F (K,) into W.F for torques tau (N,).
 
@@ -279,8 +319,8 @@ def chain_solve(P, W, tau, stab):
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef): `chain_terms`' terms read (W.Mb, W.h, W.Lam,
             W.Lam_dot_qd). Written: W.qdd (N,) rad/s² or m/s²; W.F (K,) N and N·m in the rows S; W.Lb,
-            W.Lb_inv, W.X, W.x0, W.b, W.res, W.dF, W.rank, W.cond, and the buffers of the `schur` or dense
-            solve.
+            W.Lb_inv, W.X, W.x0, W.b, W.res, W.dF, W.rank, W.cond, W.path (the path taken: SCHUR, DENSE
+            or EIGEN), and the buffers of the `schur` or dense solve.
         tau: (N,) N·m (N for a prismatic joint), the joint torques.
         stab: (K,) the stabilising term (zeros: none).
 
@@ -336,6 +376,7 @@ def chain_solve(P, W, tau, stab):
     else:
         constraint_matrix(P, W)
         path = DENSE if solve_constraints(P, W, K) else EIGEN
+    W.path[0] = path
     for it in range(2):
         # θ̈ = L⁻ᵀ(z − Y F), block by block
         for m in range(r):

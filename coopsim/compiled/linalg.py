@@ -291,9 +291,9 @@ def _sort_pairs(ev, V, K, vectors):
 
 @kernel
 def singular_ratio(G, m, n):
-    """σ_min/σ_max of G[:m, :n] (m ≥ n) by one-sided Jacobi.
+    """σ_min/σ_max of G[:m, :n] (m ≥ n) by one-sided Jacobi (`column_singular_ratio` on a copy).
 
-    Hestenes' method (Demmel & Veselić 1992: high relative accuracy). Allocates an m × n copy.
+    Allocates an m × n copy.
 
     Args:
         G: (m, n) or larger; G[:m, :n] read, unchanged.
@@ -308,6 +308,25 @@ def singular_ratio(G, m, n):
             U[i, j] = G[i, j]
             if not np.isfinite(G[i, j]):
                 return 0.0
+    return column_singular_ratio(U, m, n)
+
+
+@kernel
+def column_singular_ratio(U, m, n):
+    """σ_min/σ_max of the finite U[:m, :n] (m ≥ n) by one-sided Jacobi, rotating U's columns in place.
+
+    Hestenes' method (Demmel & Veselić 1992: high relative accuracy): plane rotations of column pairs
+    until every pair is orthogonal to 1e-15 of its norms; the singular values are then the columns'
+    norms.
+
+    Args:
+        U: (m, n) or larger, finite; U[:m, :n] overwritten (its columns rotated: the singular values
+            are kept).
+        m, n: the rows and columns of the block, m ≥ n.
+
+    Returns:
+        float: σ_min/σ_max in [0, 1]; 0 for a zero U.
+    """
     for _ in range(JACOBI_SWEEPS):
         rotated = False
         for i in range(n - 1):

@@ -131,6 +131,8 @@ class Workspace(NamedTuple):
         qdd, tau: (N,) outputs: θ̈ (rad/s² or m/s²) and the joint torques τ applied (N·m or N).
         cond: (1,) condition number λ_max/λ_min of Λ𝐈⁻¹Λᵀ (−1: not computed on the fast path).
         rank: (1,) int, the numerical rank of Λ𝐈⁻¹Λᵀ.
+        path: (1,) int, the path of the last constraint solve (`closed_chain.chain_solve`: EIGEN, DENSE or
+            SCHUR).
         vec6, v3, m3: (6,), (3,), (4, 3, 3) scratch.
         d_inv, V, S, S_inv, yN: the O(r) constraint solve (`schur`; n_c ≤ nmax the carrier's joints):
             (K,) reciprocals of the diagonals of the k × k factors L_g (kept in A_f's diagonal
@@ -182,6 +184,7 @@ class Workspace(NamedTuple):
     tau: np.ndarray
     cond: np.ndarray
     rank: np.ndarray
+    path: np.ndarray
     dF: np.ndarray
     vec6: np.ndarray
     v3: np.ndarray
@@ -280,7 +283,7 @@ def workspace(P: PackedModel) -> Workspace:
         P: the packed model (PackedModel); its sizes N, r, nmax and K = k(r−1) set the buffers' shapes.
 
     Returns:
-        Workspace: zero-filled buffers (float64; perm and rank int64).
+        Workspace: zero-filled buffers (float64; perm, rank and path int64).
     """
     r, N = len(P.dof) - 1, int(P.dof[-1])
     nmax = int(np.max(np.diff(P.dof)))
@@ -293,6 +296,7 @@ def workspace(P: PackedModel) -> Workspace:
         z((N, nmax)), z((N, nmax)), z(N), z(N), z(N), z((r, 6, nmax)), z((r, 6)),
         z(3), z((3, 3)), z((3, 3)), z((r, 3)), z((6, nmax)), z(6), z(6), z(6),
         z((K, N)), z(K), z((K, N)), z(N), z((K, K)), z((K, K)), z(K), z(K), z(K),
-        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64), z(K), z(6), z(3),
+        np.zeros(K, dtype=np.int64), z(K), z(K), z(N), z(N), z(1), np.zeros(1, dtype=np.int64),
+        np.zeros(1, dtype=np.int64), z(K), z(6), z(3),
         z((4, 3, 3)),
         z(K), z((K, nmax)), z((nmax, nmax)), z(nmax), z(nmax))

@@ -15,9 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled.closed_chain import arm_terms, chain_forward, constraint_matrix, loop_residual
+from coopsim.compiled.closed_chain import arm_terms, chain_forward, constraint_condition, loop_residual
 from coopsim.compiled.grasp import object_dynamics, object_pose
-from coopsim.compiled.linalg import copy1, copy2, copy3, jacobi_eigh
+from coopsim.compiled.linalg import copy1, copy2, copy3
 from coopsim.compiled.manifold import max_abs
 from coopsim.compiled.spatial import rot_to_quat
 from coopsim.compiled.toolchain.jit import entry, kernel
@@ -38,7 +38,8 @@ class Samples(NamedTuple):
         internal_wrench: (S, r, 6) the internal wrenches F_I^m [f; n] at C, N and N·m (eq. 7).
         residual_pos: (S,) max |Φ|, m or rad.
         residual_vel: (S,) max |Λθ̇|, m/s or rad/s.
-        cond: (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ (inf when λ_min ≤ 0, 1 without constraint rows).
+        cond: (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ (inf when λ_min ≤ 0, 1 without constraint rows;
+            `closed_chain.constraint_condition`).
         status: (S,) int, chain_forward's code.
     """
 
@@ -189,24 +190,21 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
 
 @kernel
-def reported(P, W, i, qd, out, Yw, ev, V):
+def reported(P, W, i, qd, out, Yw):
     """Row i of `out` after an evaluation at rates qd: every reported quantity but θ̈, τ and the status.
 
     Object pose, twist and acceleration, grasp and internal wrenches, loop residuals (position,
-    velocity) and cond(Λ𝐈⁻¹Λᵀ); Yw, ev, V are scratch (the eigenvectors are computed though unused:
-    `jacobi_eigh` is then compiled once, for this call and `eig_solve`'s).
+    velocity) and cond(Λ𝐈⁻¹Λᵀ) (`closed_chain.constraint_condition`).
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef) after `closed_chain.chain_forward` at (θ, qd): read; W.phi, W.A,
-            W.vec6, W.v3 and W.m3 overwritten.
+            W.A_f, W.perm, W.vec6, W.v3 and W.m3 overwritten.
         i: the sample's row.
         qd: (N,) rad/s or m/s, the stacked joint rates of the evaluation.
         out: the Samples: row i of object_pos, object_quat, object_twist, object_acc, grasp_wrench,
             internal_wrench, residual_pos, residual_vel and cond written.
         Yw: (6,) scratch (the object wrench).
-        ev: (K,) scratch (eigenvalues).
-        V: (K, K) scratch (eigenvectors).
     """
     N = P.dof[-1]
     K = W.Lam.shape[0]
@@ -225,12 +223,7 @@ def reported(P, W, i, qd, out, Yw, ev, V):
             v += W.Lam[a, j] * qd[j]
         rv = max(rv, abs(v))
     out.residual_vel[i] = rv
-    if K:
-        constraint_matrix(P, W)
-        jacobi_eigh(W.A, K, ev, V, True)
-        out.cond[i] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
-    else:
-        out.cond[i] = 1.0
+    out.cond[i] = constraint_condition(P, W)
 
 
 @entry
@@ -250,12 +243,12 @@ def evaluate(P, W, Y, out, full):
     """
     N = P.dof[-1]
     stab = np.zeros(W.Lam.shape[0])
-    Yw, ev, V = np.empty(6), np.empty(W.Lam.shape[0]), np.empty((W.Lam.shape[0], W.Lam.shape[0]))
+    Yw = np.empty(6)
     for i in range(Y.shape[0]):
         out.status[i] = chain_forward(P, W, Y[i, :N], Y[i, N:], out.tau[i], stab)
         copy1(W.qdd, out.qdd[i])
         if full:
-            reported(P, W, i, Y[i, N:], out, Yw, ev, V)
+            reported(P, W, i, Y[i, N:], out, Yw)
 
 
 class InverseTerms(NamedTuple):

@@ -197,6 +197,7 @@ WORKSPACE_FIELDS = (
     ("tau", _f1),
     ("cond", _f1),
     ("rank", _i1),
+    ("path", _i1),
     ("dF", _f1),
     ("vec6", _f1),
     ("v3", _f1),

@@ -22,12 +22,17 @@ from coopsim.compiled.packing import PackedModel, Workspace
 from coopsim.dynamics import integrate as ref_integrate
 from coopsim.core.model import TorqueTable, torque_at
 from coopsim.forward.simulate import simulate
-from coopsim.core.errors import SimulationError
-from helpers import SCENARIOS, assert_compiled_terms_match_the_reference, consistent_states, rel_err
+from coopsim.core.errors import CoopsimError, SimulationError
+from helpers import (SCENARIOS, assert_compiled_terms_match_the_reference, consistent_states, constraint_condition,
+                     rel_err)
 from coopsim.io.scenario import load_scenario
 
 TOL = 1e-12
 ALL = sorted(p.stem for p in SCENARIOS.glob("*.yaml"))
+# every bundled scene: the top level, the hard cases, the controlled ones and the real robots (skipped
+# without the robots extra)
+BUNDLED = sorted(str(p.relative_to(SCENARIOS).with_suffix("")) for d in ("", "hard", "control", "robots")
+                 for p in (SCENARIOS / d).glob("*.yaml"))
 
 
 @pytest.fixture(scope="module", params=ALL)
@@ -53,6 +58,37 @@ def test_both_integrators_read_the_one_copy_of_the_tableaux():
 
 def test_stage_terms_and_accelerations_match_the_reference(scene):
     assert_compiled_terms_match_the_reference(scene, 10)
+
+
+def _loadable(name: str):
+    try:
+        return load_scenario(SCENARIOS / f"{name}.yaml")
+    except CoopsimError as exc:
+        if name.startswith("robots/"):
+            pytest.skip(f"{name}: {exc}")
+        raise
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("rank_tol", [None, 0.5], ids=["solve path", "eigen path"])
+def test_reported_condition_number_is_numpys(name, rank_tol):
+    """The sampled cond (`closed_chain.constraint_condition`: singular values of the pivoted Cholesky
+    factor, or the eigen path's own) against numpy.linalg.cond of the reference Λ𝐈⁻¹Λᵀ at random
+    consistent states: relative 1e-13 + 8·K·eps·cond. Both sides form the matrix in floating point,
+    which moves λ_min by about eps·λ_max: the ratio is determined only to about eps·cond. rank_tol 0.5
+    sends every solve down the eigen path (no Cholesky certificate reaches it)."""
+    model = _loadable(name)
+    if rank_tol is not None:
+        model = replace(model, integrator=replace(model.integrator, rank_tol=rank_tol, on_rank_deficiency="warn"))
+    states = consistent_states(model, 6, seed=21)
+    Y = np.array([np.concatenate(s) for s in states])
+    TAU = np.random.default_rng(22).normal(size=(len(Y), model.n_total))
+    out = api.evaluate_states(model, Y, TAU, full=True, n_threads=1)
+    K = model.rows.shape[0] * (model.r - 1)
+    for (q, qd), cond in zip(states, out.cond):
+        ref = constraint_condition(chain_terms(model, q, qd))
+        tol = 1e-13 + 8 * K * np.finfo(float).eps * ref
+        assert abs(cond / ref - 1.0) <= tol, f"{name}: cond {cond:.17g} against numpy's {ref:.17g}"
 
 
 def test_batch_on_threads_equals_single_evaluations(paper):
