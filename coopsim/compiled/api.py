@@ -25,13 +25,14 @@ from coopsim.core.model import Model
 from coopsim.core.results import Projection
 
 _CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
+_NO_FLAGS = np.zeros(0, dtype=np.int64)   # `sample.evaluate`'s raw: no state to project
 
 REASONS = {
     closed_chain.NOT_PD: "closed-chain mass matrix is not positive definite",
     closed_chain.RANK_DEFICIENT: "constraint matrix Λ𝐈⁻¹Λᵀ is rank-deficient",
     closed_chain.NON_FINITE: "non-finite joint accelerations",
     control.CONTROL_SINGULAR: "controller: singular equations (an arm's S J or the wrench distribution)",
-    integrate.NON_FINITE_STATE: "non-finite state",
+    manifold.NON_FINITE_STATE: "non-finite state",
     integrate.STEP_COLLAPSED: "step size collapsed",
     integrate.MAX_STEPS: "maximum number of steps exceeded",
     manifold.PROJECTION_FAILED: f"projection: loop closure did not converge in {PROJECTION_MAX_ITER} "
@@ -233,7 +234,7 @@ def forward(model: Model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Eva
     P, W, Ps, Ws = compiled(model)
     out = sample.new_samples(1, len(q), len(P.dof) - 1)
     out.tau[0] = tau
-    sample.evaluate(Ps, Ws, np.concatenate([_f(q), _f(qd)])[None], out, False)
+    sample.evaluate(Ps, Ws, np.concatenate([_f(q), _f(qd)])[None], out, False, _NO_FLAGS)
     return Evaluation(W.qdd.copy(), W.F.copy(), int(out.status[0]), int(W.rank[0]))
 
 
@@ -275,7 +276,7 @@ def threads(S: int | None = None) -> int:
 
 
 def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = False,
-                    n_threads: int | None = None) -> sample.Samples:
+                    n_threads: int | None = None, raw: np.ndarray | None = None) -> sample.Samples:
     """The closed chain at S states with torques TAU, split over threads (one workspace each).
 
     Args:
@@ -284,19 +285,33 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
         TAU: (S, N) N·m (N on a prismatic joint), the joint torques.
         full: with it every reported quantity, without it θ̈ and status only.
         n_threads: threads to use (default `threads(S)`).
+        raw: (S,) bool, the states to project onto the loop-closure manifold first, as the time loop
+            projects an output (`sample.evaluate`): Y must then be C-contiguous float64, and those rows
+            are overwritten with their projections. None: none is projected.
 
     Returns:
-        sample.Samples: (S, …) arrays, world axes, SI: θ̈, status, and with `full` every other field.
+        sample.Samples: (S, …) arrays, world axes, SI: θ̈, status (0, or a code of REASONS), and with
+        `full` every other field.
+
+    Raises:
+        ValueError: raw given with a Y that is not C-contiguous float64 (it could not be projected in
+            place).
     """
     P, _, Ps, _ = compiled(model)
-    Y = _f(Y)
+    if raw is None:
+        Y, flags = _f(Y), _NO_FLAGS
+    elif not (Y.dtype == np.float64 and Y.flags.c_contiguous):
+        raise ValueError("evaluate_states: projecting in place needs a C-contiguous float64 Y")
+    else:
+        flags = np.ascontiguousarray(raw, dtype=np.int64)
     out = sample.new_samples(len(Y), int(P.dof[-1]), len(P.dof) - 1)
     out.tau[:] = TAU
 
     def run(idx):
         if len(idx):
             s = slice(idx[0], idx[-1] + 1)
-            sample.evaluate(Ps, fresh_workspace(P), Y[s], sample.Samples(*(a[s] for a in out)), full)
+            sample.evaluate(Ps, fresh_workspace(P), Y[s], sample.Samples(*(a[s] for a in out)), full,
+                            flags[s] if len(flags) else flags)
 
     _map(run, np.array_split(np.arange(len(Y)), n_threads or threads(len(Y))))
     return out
@@ -328,7 +343,7 @@ def forward_models(models: list[Model], Y: np.ndarray, TAU: np.ndarray,
         P = pack(models[i])
         out = sample.new_samples(len(Y), N, len(P.dof) - 1)
         out.tau[:] = TAU
-        sample.evaluate(to_struct(P), fresh_workspace(P), Y, out, False)
+        sample.evaluate(to_struct(P), fresh_workspace(P), Y, out, False, _NO_FLAGS)
         QDD[i], status[i] = out.qdd, out.status
 
     _map(run, range(len(models)), n_threads)
@@ -357,6 +372,8 @@ class Run(NamedTuple):
         fail_y: (2N,) the state where it stopped on a failure.
         rank_warning: None, or (t s, y (2N,), rank, cond) at the first loss of rank of Λ𝐈⁻¹Λᵀ (cond its
             condition number).
+        raw: (len(t_out),) bool, the rows of Y left unprojected from dense output (`integrate_chain`'s
+            defer); None without defer.
     """
 
     Y: np.ndarray
@@ -365,12 +382,13 @@ class Run(NamedTuple):
     fail_t: float
     fail_y: np.ndarray
     rank_warning: tuple | None
+    raw: np.ndarray | None = None
 
 
 def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str, rtol: float = 1e-10,
                     atol: float = 1e-12, h_max: float = math.inf, h_min: float = 1e-12,
                     max_steps: int = 10_000_000, fixed_step: float | None = None, progress=None,
-                    chunk_seconds: float = 0.25, controller=None, land: bool = False) -> Run:
+                    chunk_seconds: float = 0.25, controller=None, land: bool = False, defer: bool = False) -> Run:
     """Integrate the closed chain of `model` from y0 at t_out[0], sampled at t_out.
 
     Adaptive (dop853, dopri5) unless fixed_step is given (rk4 needs it). `progress(fraction)` is called
@@ -392,17 +410,20 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
             (`coopsim.control.controller.Controller.compiled_loop`), whose command is added to the model's
             tables.
         land: adaptive steps end on every output time (`integrate.run`).
+        defer: with projection stabilization, leave the outputs reached by dense output unprojected
+            (Run.raw flags them) for `sample_states` to project: the steps and every other output are
+            unchanged.
 
     Returns:
-        Run: the states at t_out, the step counts, the status and where it failed, and the first rank
-        warning.
+        Run: the states at t_out, the step counts, the status and where it failed, the first rank
+        warning, and with defer the flags of the rows left unprojected.
     """
     P, W, Ps, Ws = compiled(model)
     ctl = controller
     tab = _tableau(method)
     t_out = _f(t_out)
     Y = np.zeros((len(t_out), len(y0)))
-    L = integrate.new_loop(_f(y0), float(t_out[0]), n_rows(P))
+    L = integrate.new_loop(_f(y0), float(t_out[0]), n_rows(P), len(t_out), defer)
     Ls = to_struct(L)
     n_out = len(t_out)
     k_stop = n_out if progress is None else min(n_out, 2)
@@ -421,10 +442,12 @@ def integrate_chain(model: Model, y0: np.ndarray, t_out: np.ndarray, method: str
     warn = None
     if L.warn[0]:
         warn = (float(L.warn_t[0]), L.warn_y.copy(), int(L.warn[1]), float(L.warn_cond[0]))
-    return Run(Y, tuple(int(c) for c in L.count), int(L.status[0]), float(L.fail_t[0]), L.fail_y.copy(), warn)
+    return Run(Y, tuple(int(c) for c in L.count), int(L.status[0]), float(L.fail_t[0]), L.fail_y.copy(), warn,
+               L.raw.astype(bool) if defer else None)
 
 
-def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | None = None) -> sample.Samples:
+def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | None = None,
+                  raw: np.ndarray | None = None) -> sample.Samples:
     """Every reported quantity at the states Y, times t, torques TAU.
 
     Args:
@@ -432,12 +455,16 @@ def sample_states(model: Model, t: np.ndarray, Y: np.ndarray, TAU: np.ndarray | 
         t: (S,) s, the sample times.
         Y: (S, 2N) the states [θ; θ̇] (rad or m, rad/s or m/s).
         TAU: (S, N) N·m (N on a prismatic joint); default (None): the model's torque tables at t.
+        raw: (S,) bool, the rows to project first, in place (`evaluate_states`); None: none.
 
     Returns:
         sample.Samples: (S, …) arrays, world axes, SI.
+
+    Raises:
+        ValueError: raw given with a Y that is not C-contiguous float64.
     """
     P = compiled(model).P
-    return evaluate_states(model, Y, tabulated_torques(P, t) if TAU is None else TAU, full=True)
+    return evaluate_states(model, Y, tabulated_torques(P, t) if TAU is None else TAU, full=True, raw=raw)
 
 
 def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,

@@ -453,10 +453,10 @@ def baumgarte_rhs(P, W, qd, out):
 def chain_forward(P, W, q, qd, tau, stab):
     """One closed-chain forward-dynamics evaluation at (q, qd) with torques tau: W.qdd, W.F and every term.
 
-    Every intermediate term goes into W. `chain_terms`, `baumgarte_rhs` and `chain_solve`, with the
-    stages of the first called from here directly: every level of calls takes references to its array
-    arguments that numba cannot prune (atomic updates), and the Baumgarte kernel is only entered when
-    selected. The array arguments are borrowed at once (`structs.borrow`): no reference to them is held
+    Every intermediate term goes into W: the kinematic terms at q (each arm's kinematics and Jacobian,
+    the object pose, Λ), then `chain_dynamics`, with the stages of the first called from here directly:
+    every level of calls takes references to its array arguments that numba cannot prune (atomic
+    updates). The array arguments are borrowed at once (`structs.borrow`): no reference to them is held
     across the calls.
 
     Args:
@@ -475,11 +475,36 @@ def chain_forward(P, W, q, qd, tau, stab):
     for m in range(len(P.dof) - 1):
         arm_kinematics(P, W, m, q)
         arm_jacobian(P, W, m)
+    object_pose(P, W)
+    constraint_jacobian(P, W)
+    return chain_dynamics(P, W, qd, tau, stab)
+
+
+@kernel
+def chain_dynamics(P, W, qd, tau, stab):
+    """The closed-chain forward dynamics at rates qd, torques tau, on the kinematic terms already in W.
+
+    `chain_forward` after its kinematic terms at q (each arm's kinematics and Jacobian, the object
+    pose, Λ: as `manifold.closure_kinematics` leaves them): the arm terms at qd, the object's, Λ̇θ̇,
+    the Baumgarte term when selected (that kernel is only entered then), and `chain_solve`. Each arm's
+    terms read that arm's kinematics only, so they come out as an evaluation from scratch gives them.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): the kinematic terms at q read; every other term of the
+            evaluation written (W.qdd (N,) θ̈, rad/s² or m/s², W.F (K,) N and N·m in the rows S).
+        qd: (N,) rad/s or m/s, the stacked joint rates.
+        tau: (N,) N·m (N for a prismatic joint), the joint torques.
+        stab: (K,) scratch, overwritten with the Baumgarte term (zeros without it).
+
+    Returns:
+        int: OK, NOT_PD, RANK_DEFICIENT or NON_FINITE (module docstring).
+    """
+    qd, tau, stab = borrow(qd), borrow(tau), borrow(stab)
+    for m in range(len(P.dof) - 1):
         arm_bias(P, W, m, qd)
         arm_mass_matrix(P, W, m)
-    object_pose(P, W)
     object_dynamics(P, W, qd)
-    constraint_jacobian(P, W)
     constraint_bias(P, W)
     if P.stabilization == STAB_BAUMGARTE:
         baumgarte_rhs(P, W, qd, stab)

@@ -10,7 +10,9 @@ output grid does not limit the step, and the adaptive step is unbounded unless `
 (`land`: the steps end on every output time instead, as the reference's do — with a controller in the
 loop, so that both loops take the same steps).
 With projection stabilization, every accepted step and every output sample is projected onto the
-loop-closure manifold (`manifold.project_state`) and the derivative is re-evaluated there.
+loop-closure manifold (`manifold.project_state`) and the derivative is re-evaluated there; an output
+from dense output can instead be left to the sampler to project (Loop.defer: `sample.evaluate` then
+evaluates it on the projection's own kinematics), which changes nothing in the steps.
 
 A fixed-step mode (any of the three tableaux) splits each output interval into
 ceil(Δt/step − 1e-9) equal steps, as the reference's RK4; its stage times t + c_i h are computed as
@@ -32,14 +34,14 @@ import numpy as np
 
 from coopsim.compiled.closed_chain import OK, RANK_DEFICIENT, chain_forward
 from coopsim.compiled.control import feedback
-from coopsim.compiled.linalg import bisect, copy1
-from coopsim.compiled.manifold import project_state
+from coopsim.compiled.linalg import bisect, copy1, finite
+from coopsim.compiled.manifold import NON_FINITE_STATE, project_state
 from coopsim.compiled.packing import STAB_PROJECTION
 from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.core import tableaux
 
 DOP853, DOPRI5, RK4 = 0, 1, 2
-NON_FINITE_STATE, STEP_COLLAPSED, MAX_STEPS = 4, 5, 6
+STEP_COLLAPSED, MAX_STEPS = 5, 6      # failure codes after NON_FINITE_STATE (manifold's, 4)
 SAFETY, MIN_FACTOR, MAX_FACTOR, STRETCH, SUBSTEP_SLACK = 0.9, 0.2, 10.0, 1.01, 1e-9
 
 
@@ -130,6 +132,10 @@ class Loop(NamedTuple):
         Fd: (7, n) dense-output coefficients.
         stab: (K,) Baumgarte term.
         step: (N,) projection step.
+        defer: (1,) int: 1: with projection stabilization, an output filled from dense output is left
+            as interpolated (flagged in raw) for the sampler to project (`sample.evaluate`), which then
+            reuses the projection's kinematics; 0: it is projected here.
+        raw: (len(t_out),) int: 1 for an output left unprojected (with defer), else 0.
     """
 
     t: np.ndarray
@@ -152,15 +158,19 @@ class Loop(NamedTuple):
     Fd: np.ndarray
     stab: np.ndarray
     step: np.ndarray
+    defer: np.ndarray
+    raw: np.ndarray
 
 
-def new_loop(y0: np.ndarray, t0: float, n_rows: int) -> Loop:
-    """Fresh loop state at (t0, y0) for a model with n_rows constraint rows.
+def new_loop(y0: np.ndarray, t0: float, n_rows: int, n_out: int, defer: bool = False) -> Loop:
+    """Fresh loop state at (t0, y0) for a model with n_rows constraint rows and n_out output times.
 
     Args:
         y0: (2N,) the initial state [θ; θ̇] (rad or m, rad/s or m/s), copied.
         t0: s, its time.
         n_rows: K = k(r−1), the model's constraint rows.
+        n_out: the number of output times.
+        defer: leave the outputs filled from dense output unprojected, for the sampler (Loop.defer).
 
     Returns:
         Loop: counters and buffers zeroed; h = 0 (`run` chooses the first step), k_next = 0.
@@ -169,7 +179,7 @@ def new_loop(y0: np.ndarray, t0: float, n_rows: int) -> Loop:
     z, iz = np.zeros, lambda k: np.zeros(k, dtype=np.int64)  # noqa: E731
     return Loop(np.array([t0]), z(1), np.array(y0, dtype=float), z(n), iz(1), iz(1),
                 iz(4), iz(1), z(1), z(n), iz(2), z(1), z(1), z(n), z((16, n)), z(n), z(n), z((7, n)),
-                z(n_rows), z(n // 2))
+                z(n_rows), z(n // 2), np.array([int(defer)], dtype=np.int64), iz(n_out))
 
 
 def stage_times(t0: float, t1: float, step: float, C: np.ndarray, stages: int) -> np.ndarray:
@@ -440,22 +450,6 @@ def dense_eval(tab, L, y, h, u, out):
 # ------------------------------------------------------------------------------------------------
 
 @kernel
-def finite(y):
-    """Whether every entry of y is finite (no NaN, no ±inf).
-
-    Args:
-        y: (n,) the array tested.
-
-    Returns:
-        bool: True when all are finite.
-    """
-    for i in range(len(y)):
-        if not np.isfinite(y[i]):
-            return False
-    return True
-
-
-@kernel
 def project(P, W, L, t, y):
     """Project y in place (projection stabilization only; otherwise y is left as it is).
 
@@ -475,8 +469,6 @@ def project(P, W, L, t, y):
     st = project_state(P, W, y, P.projection_tol, P.projection_max_iter, L.step)
     if st != OK:
         return fail(L, st, t, y)
-    if not finite(y):
-        return fail(L, NON_FINITE_STATE, t, y)
     return OK
 
 
@@ -640,7 +632,8 @@ def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_
         ctl: None, or (Pc, Wc, C): the controller in the loop (`rhs`).
         t_out: (S,) s, the output times, strictly increasing; t_out[0] is the initial time.
         Y: (S, 2N) written: the states [θ; θ̇] at t_out, each row once the loop reaches its time (rows
-            L.k_next … k_stop − 1 at least, L.k_next as on entry).
+            L.k_next … k_stop − 1 at least, L.k_next as on entry); with L.defer, a row from dense output
+            as interpolated (L.raw).
         rtol, atol: relative and absolute tolerances of the adaptive steps.
         h_max: s, the largest adaptive step (inf: unbounded).
         h_min: s, the smallest adaptive step (STEP_COLLAPSED below it).
@@ -737,7 +730,9 @@ def run(P, W, L, tab, ctl, t_out, Y, rtol, atol, h_max, h_min, max_steps, fixed_
             dense_coefficients(tab, L, L.y, L.y_new, h)
             while k < len(t_out) and t_out[k] < t_new:
                 dense_eval(tab, L, L.y, h, (t_out[k] - t) / h, Y[k])
-                if project(P, W, L, t_out[k], Y[k]) != OK:
+                if L.defer[0] and P.stabilization == STAB_PROJECTION:
+                    L.raw[k] = 1
+                elif project(P, W, L, t_out[k], Y[k]) != OK:
                     return
                 k += 1
         copy1(L.y_new, L.y)

@@ -316,8 +316,8 @@ def column_singular_ratio(U, m, n):
     """σ_min/σ_max of the finite U[:m, :n] (m ≥ n) by one-sided Jacobi, rotating U's columns in place.
 
     Hestenes' method (Demmel & Veselić 1992: high relative accuracy): plane rotations of column pairs
-    until every pair is orthogonal to 1e-15 of its norms; the singular values are then the columns'
-    norms.
+    until every pair is orthogonal to 1e-15 of its norms (|u_iᵀu_j| ≤ 1e-15 ‖u_i‖‖u_j‖, compared
+    squared); the singular values are then the columns' norms.
 
     Args:
         U: (m, n) or larger, finite; U[:m, :n] overwritten (its columns rotated: the singular values
@@ -336,7 +336,7 @@ def column_singular_ratio(U, m, n):
                     al += U[k, i] * U[k, i]
                     be += U[k, j] * U[k, j]
                     ga += U[k, i] * U[k, j]
-                if abs(ga) <= 1e-15 * np.sqrt(al * be):
+                if ga * ga <= 1e-30 * (al * be):
                     continue
                 rotated = True
                 zeta = (be - al) / (2.0 * ga)
@@ -446,6 +446,22 @@ def bisect(ts, lo, hi, t):
         else:
             hi = mid
     return lo
+
+
+@kernel
+def finite(y):
+    """Whether every entry of y is finite (no NaN, no ±inf).
+
+    Args:
+        y: (n,) the array tested.
+
+    Returns:
+        bool: True when all are finite.
+    """
+    for i in range(len(y)):
+        if not np.isfinite(y[i]):
+            return False
+    return True
 
 
 @kernel

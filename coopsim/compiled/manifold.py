@@ -3,23 +3,23 @@
 Positions are projected by Gauss–Newton steps of minimum norm, Δθ = −Λ⁺Φ(θ) with
 Λ⁺ = Λᵀ(ΛΛᵀ)⁺ (ΛΛᵀ solved by its block structure in O(r) (`schur`), or by a pivoted Cholesky, or
 by its eigen-decomposition when rank is lost), until
-max |Φ| ≤ tol; rates by θ̇ ← θ̇ − Λ⁺Λθ̇, applied twice (the second pass removes what rounding in the
-normal equations left).
+max |Φ| ≤ tol; rates by θ̇ ← θ̇ − Λ⁺Λθ̇, applied twice on one factor of ΛΛᵀ (the second pass removes
+what rounding in the normal equations left).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from coopsim.compiled.closed_chain import constraint_jacobian, loop_residual
+from coopsim.compiled.closed_chain import DENSE, EIGEN, SCHUR, constraint_jacobian, loop_residual
 from coopsim.compiled.grasp import object_pose
 from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
-from coopsim.compiled.linalg import eig_solve, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
+from coopsim.compiled.linalg import eig_solve, finite, pivoted_cholesky, pivoted_solve, safe_pivot_ratio
 from coopsim.compiled.schur import constraint_trace, schur_factor, schur_solve
 from coopsim.compiled.structs import borrow
 from coopsim.compiled.toolchain.jit import entry, kernel
 
-PROJECTION_FAILED = 7
+NON_FINITE_STATE, PROJECTION_FAILED = 4, 7   # failure codes (`closed_chain`'s are 0–3, the time loop's 5–6)
 
 
 @kernel
@@ -41,45 +41,78 @@ def closure_kinematics(P, W, q):
 
 
 @kernel
-def min_norm_step(P, W, rhs, out):
-    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam.
+def normal_factor(P, W):
+    """Factor ΛΛᵀ (K × K, Λ in W.Lam) for `normal_solve`; returns the path taken.
 
-    ΛΛᵀ is solved in O(r) by its block structure (`schur`) for three arms or more where that is
-    certified, else formed and solved densely (pivoted Cholesky, or the minimum-norm eigen solution
-    when the pivots do not prove full rank).
+    In O(r) by its block structure (`schur`) for three arms or more where that is certified, else formed
+    and factored densely (pivoted Cholesky, or — when the pivots do not prove full rank — left formed for
+    the minimum-norm eigen solution).
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
-        W: the workspace (Workspace StructRef): W.Lam read; W.b and W.dF overwritten, with the buffers of
-            the `schur` solve (W.A_f, W.d_inv, W.V, W.S, W.S_inv, W.yN) or of the dense one (W.A, W.A_f,
-            W.perm, W.yK).
+        W: the workspace (Workspace StructRef): W.Lam read; the factor written into the buffers of the
+            `schur` solve (W.A_f, W.d_inv, W.V, W.S, W.S_inv) or of the dense one (W.A, W.A_f, W.perm).
+
+    Returns:
+        int: `closed_chain`'s SCHUR, DENSE or EIGEN.
+    """
+    Lam, A, rank_tol = W.Lam, W.A, P.rank_tol
+    K, N = Lam.shape
+    if len(P.dof) > 3 and schur_factor(P, W, Lam, constraint_trace(P, Lam)):
+        return SCHUR
+    for i in range(K):
+        for l in range(i, K):
+            v = 0.0
+            for j in range(N):
+                v += Lam[i, j] * Lam[l, j]
+            A[i, l] = v
+            A[l, i] = v
+    return DENSE if pivoted_cholesky(A, W.A_f, W.perm, K) > safe_pivot_ratio(K, rank_tol) else EIGEN
+
+
+@kernel
+def normal_solve(P, W, path, rhs, out):
+    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with the factor of `normal_factor` (its path).
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Lam and the factor read; W.b, W.dF overwritten, with W.yN
+            (`schur` path) or W.yK (dense).
+        path: the path `normal_factor` returned.
         rhs: (K,) the right-hand side (m or rad for a position step, m/s or rad/s for a rate step), read
             before W.b is written.
         out: (N,) written: Λ⁺ rhs, rad or m (rad/s or m/s for a rate step) per joint.
     """
-    Lam, A, A_f, perm, b, yK, dF, rank_tol = W.Lam, W.A, W.A_f, W.perm, W.b, W.yK, W.dF, P.rank_tol
+    Lam, b, dF = W.Lam, W.b, W.dF
     K, N = Lam.shape
     for i in range(K):
         b[i] = rhs[i]
-    if len(P.dof) > 3 and schur_factor(P, W, Lam, constraint_trace(P, Lam)):
+    if path == SCHUR:
         schur_solve(P, W, b, dF)
+    elif path == DENSE:
+        pivoted_solve(W.A_f, W.perm, K, b, W.yK, dF)
     else:
-        for i in range(K):
-            for l in range(i, K):
-                v = 0.0
-                for j in range(N):
-                    v += Lam[i, j] * Lam[l, j]
-                A[i, l] = v
-                A[l, i] = v
-        if pivoted_cholesky(A, A_f, perm, K) > safe_pivot_ratio(K, rank_tol):
-            pivoted_solve(A_f, perm, K, b, yK, dF)
-        else:
-            eig_solve(A, b, dF, K, rank_tol)
+        eig_solve(W.A, b, dF, K, P.rank_tol)
     for j in range(N):
         v = 0.0
         for i in range(K):
             v += Lam[i, j] * dF[i]
         out[j] = v
+
+
+@kernel
+def min_norm_step(P, W, rhs, out):
+    """out (N,) ← Λ⁺ rhs = Λᵀ (ΛΛᵀ)⁺ rhs for rhs (K,), with Λ in W.Lam: `normal_factor`, `normal_solve`.
+
+    Args:
+        P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
+        W: the workspace (Workspace StructRef): W.Lam read; the buffers of `normal_factor` and
+            `normal_solve` overwritten.
+        rhs: (K,) the right-hand side (m or rad for a position step, m/s or rad/s for a rate step), read
+            before W.b is written.
+        out: (N,) written: Λ⁺ rhs, rad or m (rad/s or m/s for a rate step) per joint.
+    """
+    normal_solve(P, W, normal_factor(P, W), rhs, out)
 
 
 @kernel
@@ -136,22 +169,25 @@ def project_positions(P, W, q, tol, max_iter, step):
 def project_rates(P, W, qd, step):
     """qd ← qd − Λ⁺Λ qd in place (twice: the second pass removes what rounding left), Λ from W.
 
+    ΛΛᵀ is factored once for both passes (`normal_factor`).
+
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef): W.Lam (of the projected positions) read; W.res and the
-            buffers of `min_norm_step` overwritten.
+            buffers of `normal_factor` and `normal_solve` overwritten.
         qd: (N,) rad/s or m/s, the stacked joint rates, overwritten with Λ qd = 0 satisfied.
         step: (N,) scratch.
     """
     Lam, res = W.Lam, W.res
     K, N = Lam.shape
+    path = normal_factor(P, W)
     for _ in range(2):
         for i in range(K):
             v = 0.0
             for j in range(N):
                 v += Lam[i, j] * qd[j]
             res[i] = v
-        min_norm_step(P, W, res, step)
+        normal_solve(P, W, path, res, step)
         for j in range(N):
             qd[j] -= step[j]
 
@@ -160,12 +196,14 @@ def project_rates(P, W, qd, step):
 def project_state(P, W, y, tol, max_iter, step):
     """Project y = [θ; θ̇] (2N,) onto Φ(θ) = 0 and Λ(θ)θ̇ = 0, in place.
 
-    To max |Φ| ≤ tol, at most max_iter Gauss–Newton steps; W.phi holds the last residual.
+    To max |Φ| ≤ tol, at most max_iter Gauss–Newton steps; W.phi holds the last residual. On success W
+    holds `closure_kinematics` at the projected positions (what `closed_chain.chain_dynamics` starts
+    from).
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef): the kinematics, W.Lam and W.phi of the last iterate
-            written, with the buffers of `min_norm_step`.
+            written, with the buffers of `normal_factor` and `normal_solve`.
         y: (2N,) the state [θ; θ̇] (rad or m, rad/s or m/s), overwritten with its projection (the rates
             untouched when the positions fail).
         tol: m and rad, the tolerance on max |Φ|.
@@ -173,14 +211,14 @@ def project_state(P, W, y, tol, max_iter, step):
         step: (N,) scratch.
 
     Returns:
-        int: 0 or PROJECTION_FAILED.
+        int: 0, PROJECTION_FAILED, or NON_FINITE_STATE (the projected y is not finite).
     """
     y, step = borrow(y), borrow(step)
     N = P.dof[-1]
     if project_positions(P, W, y[:N], tol, max_iter, step) < 0:
         return PROJECTION_FAILED
     project_rates(P, W, y[N:], step)
-    return 0
+    return 0 if finite(y) else NON_FINITE_STATE
 
 
 @entry

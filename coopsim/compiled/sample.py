@@ -15,11 +15,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled.closed_chain import arm_terms, chain_forward, constraint_condition, loop_residual
+from coopsim.compiled.closed_chain import (OK, arm_terms, chain_dynamics, chain_forward, constraint_condition,
+                                          loop_residual)
 from coopsim.compiled.grasp import object_dynamics, object_pose
 from coopsim.compiled.linalg import copy1, copy2, copy3
-from coopsim.compiled.manifold import max_abs
+from coopsim.compiled.manifold import max_abs, project_state
 from coopsim.compiled.spatial import rot_to_quat
+from coopsim.compiled.structs import borrow
 from coopsim.compiled.toolchain.jit import entry, kernel
 
 
@@ -40,7 +42,7 @@ class Samples(NamedTuple):
         residual_vel: (S,) max |Λθ̇|, m/s or rad/s.
         cond: (S,) λ_max/λ_min of Λ𝐈⁻¹Λᵀ (inf when λ_min ≤ 0, 1 without constraint rows;
             `closed_chain.constraint_condition`).
-        status: (S,) int, chain_forward's code.
+        status: (S,) int, chain_forward's code (a projection's, `evaluate`).
     """
 
     qdd: np.ndarray
@@ -190,7 +192,7 @@ def grasp_wrenches(P, W, Y, F_e, F_I):
 
 
 @kernel
-def reported(P, W, i, qd, out, Yw):
+def reported(P, W, i, qd, out, Yw, phi_known):
     """Row i of `out` after an evaluation at rates qd: every reported quantity but θ̈, τ and the status.
 
     Object pose, twist and acceleration, grasp and internal wrenches, loop residuals (position,
@@ -198,13 +200,14 @@ def reported(P, W, i, qd, out, Yw):
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
-        W: the workspace (Workspace StructRef) after `closed_chain.chain_forward` at (θ, qd): read; W.phi, W.A,
-            W.A_f, W.perm, W.vec6, W.v3 and W.m3 overwritten.
+        W: the workspace (Workspace StructRef) after `closed_chain.chain_forward` at (θ, qd): read; W.phi
+            (unless phi_known), W.A, W.A_f, W.perm, W.vec6, W.v3 and W.m3 overwritten.
         i: the sample's row.
         qd: (N,) rad/s or m/s, the stacked joint rates of the evaluation.
         out: the Samples: row i of object_pos, object_quat, object_twist, object_acc, grasp_wrench,
             internal_wrench, residual_pos, residual_vel and cond written.
         Yw: (6,) scratch (the object wrench).
+        phi_known: whether W.phi already holds Φ(θ) (after a projection), else it is computed here.
     """
     N = P.dof[-1]
     K = W.Lam.shape[0]
@@ -214,7 +217,8 @@ def reported(P, W, i, qd, out, Yw):
     object_acceleration(P, W, W.qdd, out.object_acc[i])
     object_wrench(P, W, out.object_acc[i], Yw)
     grasp_wrenches(P, W, Yw, out.grasp_wrench[i], out.internal_wrench[i])
-    loop_residual(P, W)
+    if not phi_known:
+        loop_residual(P, W)
     out.residual_pos[i] = max_abs(W.phi)
     rv = 0.0
     for a in range(K):
@@ -227,28 +231,61 @@ def reported(P, W, i, qd, out, Yw):
 
 
 @entry
-def evaluate(P, W, Y, out, full):
+def evaluate(P, W, Y, out, full, raw):
     """The closed chain at S states Y (S, 2N) = [θ; θ̇] with torques out.tau (S, N).
 
     θ̈ goes into out.qdd and the status codes into out.status; with `full`, every other field of `out`
-    (Samples) too.
+    (Samples) too. A state flagged in raw is first projected onto the loop-closure manifold, in place,
+    as the time loop projects an output (`manifold.project_state` to P.projection_tol: the same
+    state), and evaluated on the projection's own kinematics (`closed_chain.chain_dynamics`: the
+    kinematic terms are not computed twice); when its projection fails the row keeps zeros and its
+    status is the projection's code.
 
     Args:
         P: the compiled model (the PackedModel StructRef of `structs.to_struct`; read only).
         W: the workspace (Workspace StructRef; scratch, overwritten).
-        Y: (S, 2N) the states [θ; θ̇], rad or m and rad/s or m/s.
+        Y: (S, 2N) the states [θ; θ̇], rad or m and rad/s or m/s; the rows flagged in raw overwritten with
+            their projections.
         out: the Samples (S rows): out.tau read (N·m, N for a prismatic joint); out.qdd and out.status
             written, and with `full` every other field.
         full: whether to fill the reported fields (`reported`).
+        raw: (S,) int, 1 for a state to project first; or empty: none is.
     """
     N = P.dof[-1]
     stab = np.zeros(W.Lam.shape[0])
-    Yw = np.empty(6)
+    Yw, step = np.empty(6), np.empty(N)
+    Y, raw, o = borrow(Y), borrow(raw), borrowed_samples(out)
     for i in range(Y.shape[0]):
-        out.status[i] = chain_forward(P, W, Y[i, :N], Y[i, N:], out.tau[i], stab)
-        copy1(W.qdd, out.qdd[i])
+        projected = len(raw) > 0 and raw[i] != 0
+        if projected:
+            st = project_state(P, W, Y[i], P.projection_tol, P.projection_max_iter, step)
+            if st != OK:
+                o.status[i] = st
+                continue
+            st = chain_dynamics(P, W, Y[i, N:], o.tau[i], stab)
+        else:
+            st = chain_forward(P, W, Y[i, :N], Y[i, N:], o.tau[i], stab)
+        o.status[i] = st
+        copy1(W.qdd, o.qdd[i])
         if full:
-            reported(P, W, i, Y[i, N:], out, Yw)
+            reported(P, W, i, Y[i, N:], o, Yw, projected)
+
+
+@kernel
+def borrowed_samples(out):
+    """`out` (Samples) with every array borrowed (`structs.borrow`): rows indexed from it cost no
+    reference count (the threads of a batch would otherwise contend on the shared arrays' counts).
+
+    Args:
+        out: the Samples; its arrays outlive the caller's use of the copy.
+
+    Returns:
+        Samples: the same arrays, borrowed.
+    """
+    return Samples(borrow(out.qdd), borrow(out.tau), borrow(out.object_pos), borrow(out.object_quat),
+                   borrow(out.object_twist), borrow(out.object_acc), borrow(out.grasp_wrench),
+                   borrow(out.internal_wrench), borrow(out.residual_pos), borrow(out.residual_vel),
+                   borrow(out.cond), borrow(out.status))
 
 
 class InverseTerms(NamedTuple):

@@ -231,6 +231,8 @@ LOOP_FIELDS = (
     ("Fd", _f2),
     ("stab", _f1),
     ("step", _f1),
+    ("defer", _i1),
+    ("raw", _i1),
 )
 LOOP_T = StructType(list(LOOP_FIELDS))
 

@@ -43,6 +43,9 @@ class Run(NamedTuple):
         tau: (N, n) N·m, the torques at the samples when the loop computed them (a controller in the
             compiled loop); None: the sampler evaluates the model's torques there.
         control_counts: the compiled controller's evaluation counters, or None.
+        raw: (N,) bool, the rows of Y the loop left as its dense output interpolated them, off the
+            loop-closure manifold, for `Engine.sample` to project in place (the compiled engine's samples
+            then reuse the projection's kinematics); None: every row is a state of the loop.
     """
 
     Y: np.ndarray
@@ -50,6 +53,7 @@ class Run(NamedTuple):
     events: tuple
     tau: np.ndarray | None = None
     control_counts: tuple | None = None
+    raw: np.ndarray | None = None
 
 
 # What an engine's `sample` gives: every reported quantity at the N samples, keyed by its SimResult field
@@ -101,19 +105,22 @@ class Engine(Protocol):
             SimulationError: the run failed; the message gives the time, the configuration and the reason.
         """
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
-        """Every reported quantity (SAMPLED) at the states Y.
+    def sample(self, model: Model, t_out: np.ndarray, run: Run) -> dict:
+        """Every reported quantity (SAMPLED) at the run's states.
 
         Args:
             model: the Model.
             t_out: (N,) s, the sample times.
-            Y: (N, 2n) the states [θ; θ̇] (rad or m, rad/s or m/s) at t_out.
-            tau: (N, n) N·m (N on a prismatic joint), the torques at the samples; None: the model's torques
-                there.
+            run: the engine's Run: its states Y (N, 2n) [θ; θ̇] (rad or m, rad/s or m/s) at t_out, the rows
+                run.raw flags projected here first, in place; run.tau (N, n) N·m (N on a prismatic joint),
+                the torques at the samples, or None: the model's torques there.
 
         Returns:
             dict: every name of SAMPLED → its (N, …) array, shapes and units as the SimResult field of that
             name (`coopsim.forward.simulate.SimResult`), world axes.
+
+        Raises:
+            SimulationError: a flagged row's projection failed (the time, the configuration, the reason).
         """
 
 
@@ -270,13 +277,15 @@ class ReferenceEngine(Engine):
         Y, stats = _reference_loop(model, init, t_out, rhs, _projection_step(n, onto_manifold))
         return Run(Y, stats, tuple(events))
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
-        """Every reported quantity (SAMPLED) at the states Y, one reference evaluation per sample.
+    def sample(self, model: Model, t_out: np.ndarray, run: Run) -> dict:
+        """Every reported quantity (SAMPLED) at the run's states, one reference evaluation per sample.
 
-        tau None: the model's torques at (t, q, qd).
+        The reference loop lands on every output (run.raw is None); run.tau None: the model's torques at
+        (t, q, qd).
 
         Args, Returns, Raises: as `Engine.sample`.
         """
+        Y, tau = run.Y, run.tau
         n, N, r = model.n_total, len(t_out), model.r
         out = {k: np.zeros((N,) + shape) for k, shape in [
             ("qdd", (n,)), ("tau", (n,)), ("object_pos", (3,)), ("object_quat", (4,)), ("object_twist", (6,)),
@@ -297,10 +306,20 @@ class ReferenceEngine(Engine):
         return out
 
 
-def _compiled_samples(model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
+def _compiled_samples(model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None,
+                      raw: np.ndarray | None = None) -> dict:
+    """`coopsim.compiled.api.sample_states` as the SAMPLED dict; the rows raw flags projected in Y first,
+    and a failed projection raised as the time loop words it (SimulationError)."""
     from coopsim.compiled import api
 
-    smp = api.sample_states(model, t_out, Y, tau)
+    smp = api.sample_states(model, t_out, Y, tau, raw=raw)
+    if raw is not None:
+        st = smp.status
+        bad = np.flatnonzero(raw & ((st == api.manifold.NON_FINITE_STATE) | (st == api.manifold.PROJECTION_FAILED)))
+        if len(bad):
+            i, n = int(bad[0]), model.n_total
+            raise SimulationError(f"simulation failed at {describe_state(t_out[i], Y[i, :n])}: "
+                                  f"{api.REASONS[int(smp.status[i])]}")
     return {k: getattr(smp, k) for k in SAMPLED}
 
 
@@ -344,7 +363,9 @@ class CompiledEngine(Engine):
 
         fixed_step: the method (DOP853 or DOPRI5 too) at fixed steps of at most this size; None: rk4 at
         integrator.step, the others adaptive. With a controller in the loop the Run carries its torques
-        (N, n) N·m at t_out and its evaluation counters.
+        (N, n) N·m at t_out and its evaluation counters. Without one, the outputs reached by dense output
+        are left to `sample` to project (Run.raw; with projection stabilization), which evaluates each on
+        its projection's kinematics.
 
         Args, Returns, Raises: as `Engine.run`.
         """
@@ -357,7 +378,7 @@ class CompiledEngine(Engine):
         loop = None if ctrl is None else ctrl.loop_record()
         run = api.integrate_chain(kernel, np.concatenate([init.q, init.qd]), t_out, s.method, rtol=s.rtol,
                                   atol=s.atol, h_max=np.inf if s.max_step is None else s.max_step, fixed_step=fixed,
-                                  progress=progress, controller=loop, land=loop is not None)
+                                  progress=progress, controller=loop, land=loop is not None, defer=loop is None)
         events = ()
         if run.rank_warning is not None:
             t, y, rank, cond = run.rank_warning
@@ -365,21 +386,23 @@ class CompiledEngine(Engine):
         if run.status:
             raise SimulationError(f"simulation failed at {describe_state(run.fail_t, run.fail_y[:n])}: "
                                   f"{self._reason(kernel, run)}")
+        deferred = 0 if run.raw is None else int(np.count_nonzero(run.raw))   # projected by `sample`
         stats = IntegratorStats(n_rhs=run.counts[0], n_accepted=run.counts[1], n_rejected=run.counts[2],
-                                n_projections=run.counts[3])
+                                n_projections=run.counts[3] + deferred)
         if ctrl is None:
-            return Run(run.Y, stats, events)
+            return Run(run.Y, stats, events, raw=run.raw)
         counts = ctrl.loop_counts()        # the loop's own evaluations, before the samples' torques add theirs
         return Run(run.Y, stats, events, ctrl.loop_torques(t_out, run.Y[:, :n], run.Y[:, n:]), counts)
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
-        """Every reported quantity (SAMPLED) at the states Y, compiled, on the model the loop ran on.
+    def sample(self, model: Model, t_out: np.ndarray, run: Run) -> dict:
+        """Every reported quantity (SAMPLED) at the run's states, compiled, on the model the loop ran on.
 
-        tau None: the torque tables of the model the loop ran on, at t_out.
+        The rows the loop left unprojected (run.raw) are projected here, each evaluated on its
+        projection's kinematics; run.tau None: the torque tables of the model the loop ran on, at t_out.
 
         Args, Returns, Raises: as `Engine.sample`.
         """
-        return _compiled_samples(self._kernel_model(model), t_out, Y, tau)
+        return _compiled_samples(self._kernel_model(model), t_out, run.Y, run.tau, run.raw)
 
     @staticmethod
     def _reason(model: Model, run) -> str:
@@ -450,13 +473,15 @@ class StagesEngine(Engine):
         Y, stats = _reference_loop(model, init, t_out, rhs, _projection_step(n, onto_manifold))
         return Run(Y, stats, tuple(events))
 
-    def sample(self, model: Model, t_out: np.ndarray, Y: np.ndarray, tau: np.ndarray | None) -> dict:
-        """Every reported quantity (SAMPLED) at the states Y, compiled.
+    def sample(self, model: Model, t_out: np.ndarray, run: Run) -> dict:
+        """Every reported quantity (SAMPLED) at the run's states, compiled.
 
-        tau None: the model's torques at (t, q, qd), evaluated in Python.
+        The reference loop lands on every output (run.raw is None); run.tau None: the model's torques at
+        (t, q, qd), evaluated in Python.
 
         Args, Returns, Raises: as `Engine.sample`.
         """
+        Y, tau = run.Y, run.tau
         return _compiled_samples(model, t_out, Y, _torques_at(model, t_out, Y) if tau is None else tau)
 
 

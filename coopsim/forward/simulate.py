@@ -200,7 +200,7 @@ def simulate(model: Model, duration: float | None = None, settings: IntegratorSe
     init = initial_state(model, eng.name)
     t_out = output_times(model.duration, model.integrator.output_dt)
     run = eng.run(model, init, t_out, progress, fixed_step)
-    res = _result(model, eng, t_out, run, eng.sample(model, t_out, run.Y, run.tau), init, start)
+    res = _result(model, eng, t_out, run, eng.sample(model, t_out, run), init, start)
     _check_conditioning(res)
     return res
 

@@ -21,6 +21,9 @@ from coopsim.compiled.structs import PACKED_FIELDS, LOOP_FIELDS, TABLEAU_FIELDS,
 from coopsim.compiled.packing import PackedModel, Workspace
 from coopsim.dynamics import integrate as ref_integrate
 from coopsim.core.model import TorqueTable, torque_at
+from coopsim.core.results import output_times
+from coopsim.forward.engines import ENGINES, Run
+from coopsim.dynamics.integrate import IntegratorStats
 from coopsim.forward.simulate import simulate
 from coopsim.core.errors import CoopsimError, SimulationError
 from helpers import (SCENARIOS, assert_compiled_terms_match_the_reference, consistent_states, constraint_condition,
@@ -147,6 +150,42 @@ def test_engines_agree_on_every_scenario(scene, method):
         err = rel_err(getattr(a, name), getattr(b, name))
         assert err <= 1e-7, f"{method} {scene.name}: {name} differs by {err:.3g}"
     assert np.max(a.residual_pos) <= model.integrator.projection_tol
+
+
+@pytest.mark.parametrize("name", ["paper_planar_2x3", "planar_3arm_vertical"])
+def test_outputs_left_to_the_sampler_equal_the_loops_projection(name):
+    """The outputs the time loop leaves unprojected (defer) come out of the sampler as the loop projects
+    them, and every sampled quantity as when they are evaluated from scratch, to the bit: the sampler
+    projects with the loop's kernel and evaluates on that projection's own kinematics (two and three
+    arms: the dense and the O(r) solves)."""
+    scene = load_scenario(SCENARIOS / f"{name}.yaml")
+    s = replace(scene.integrator, rtol=1e-9, atol=1e-10)
+    model = replace(scene, duration=0.5, integrator=s)
+    y0 = np.concatenate(consistent_states(model, 1, seed=31)[0])
+    t = output_times(model.duration, s.output_dt)
+    ref = api.integrate_chain(model, y0, t, "dop853", rtol=s.rtol, atol=s.atol)
+    run = api.integrate_chain(model, y0, t, "dop853", rtol=s.rtol, atol=s.atol, defer=True)
+    assert ref.raw is None and run.raw[1:-1].all() and not run.raw[[0, -1]].any()
+    assert run.counts[:3] == ref.counts[:3] and run.counts[3] == ref.counts[3] - np.count_nonzero(run.raw)
+    assert np.array_equal(run.Y[~run.raw], ref.Y[~run.raw])
+    assert np.max(np.abs(run.Y[run.raw] - ref.Y[run.raw])) > 0, "the dense outputs were projected after all"
+    Y = run.Y.copy()
+    got, want = api.sample_states(model, t, Y, raw=run.raw), api.sample_states(model, t, ref.Y)
+    assert np.array_equal(Y, ref.Y)
+    for field in got._fields:
+        assert np.array_equal(getattr(got, field), getattr(want, field)), field
+
+
+def test_a_failed_projection_at_a_sample_names_time_and_configuration(paper):
+    """A row the sampler cannot project (here non-finite) stops the run as the time loop's own
+    projection failure does: SimulationError with the time, the configuration and the reason."""
+    t = np.array([0.0, 0.01])
+    y = np.concatenate([paper.q0, paper.qd0])
+    Y = np.array([y, np.full_like(y, np.nan)])
+    run = Run(Y, IntegratorStats(0, 0, 0, 0), (), raw=np.array([False, True]))
+    with pytest.raises(SimulationError, match=r"simulation failed at t=0.01 s, q=\[.*\] rad: projection: loop "
+                                              r"closure did not converge"):
+        ENGINES["compiled"].sample(paper, t, run)
 
 
 def test_rk4_is_the_reference_rk4(paper):

@@ -55,12 +55,13 @@ def reference(model: Model) -> Reference:
 
 
 def _native_loop(model: Model, s: IntegratorSettings, ref) -> Callable[[], object]:
-    """The compiled time loop alone (as `simulate` runs it) from the reference's consistent state."""
+    """The compiled time loop alone (as `simulate` runs it: the outputs reached by dense output left to the
+    sampler to project) from the reference's consistent state."""
     m = replace(model, integrator=s)
     y0 = np.concatenate([ref.initial.q, ref.initial.qd])
     fixed = s.step if s.method == "rk4" else None
     return lambda: api.integrate_chain(m, y0, ref.t, s.method, rtol=s.rtol, atol=s.atol, h_max=math.inf,
-                                       fixed_step=fixed)
+                                       fixed_step=fixed, defer=True)
 
 
 def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> RunRow:
