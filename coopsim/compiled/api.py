@@ -7,12 +7,14 @@ callers (`coopsim.forward.simulate`) add the time and configuration.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
+import threading
 import time
 import weakref
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from typing import NamedTuple
 
 import numpy as np
@@ -24,7 +26,7 @@ from coopsim.core.errors import ConstraintError
 from coopsim.core.model import Model
 from coopsim.core.results import Projection
 
-_CACHE: "weakref.WeakKeyDictionary[Model, Compiled]" = weakref.WeakKeyDictionary()
+_CACHE: "weakref.WeakKeyDictionary[Model, tuple]" = weakref.WeakKeyDictionary()   # model → `_entry`
 _NO_FLAGS = np.zeros(0, dtype=np.int64)   # `sample.evaluate`'s raw: no state to project
 
 REASONS = {
@@ -143,6 +145,12 @@ def compiled(model: Model) -> Compiled:
         Compiled: its PackedModel and Workspace, with their StructRefs (the workspace is shared by every
         caller of this model: copy what you keep).
     """
+    return _entry(model)[0]
+
+
+def _entry(model: Model) -> tuple:
+    """The cache entry of `model`: (Compiled, what keeps the content key's objects alive, the spare
+    workspaces of `_leased_workspace`)."""
     hit = _CACHE.get(model)
     if hit is None:
         key = _content_key(model)
@@ -151,14 +159,32 @@ def compiled(model: Model) -> Compiled:
         if entry is None:
             P = pack(model)
             W = workspace(P)
-            entry = (Compiled(P, W, to_struct(P), to_struct(W)), (model.arms, model.object, model.torques))
+            entry = (Compiled(P, W, to_struct(P), to_struct(W)), (model.arms, model.object, model.torques), [])
         _BY_CONTENT[key] = entry               # most recently used last
         while len(_BY_CONTENT) > _BY_CONTENT_SIZE:
             _BY_CONTENT.pop(next(iter(_BY_CONTENT)))
-        hit = _CACHE[model] = entry[0]
+        hit = _CACHE[model] = entry
     return hit
 
 
+@contextlib.contextmanager
+def _leased_workspace(model: Model):
+    """A workspace of `model`'s for one batch share, its own while the block runs: a spare one kept from
+    an earlier batch (every kernel writes what it reads, and the zeros a workspace starts with outside
+    the arms' blocks stay zeros), else a fresh one; returned to the spares afterwards."""
+    spares = _entry(model)[2]
+    with _SPARES_LOCK:
+        ws = spares.pop() if spares else None
+    if ws is None:
+        ws = fresh_workspace(compiled(model).P)
+    try:
+        yield ws
+    finally:
+        with _SPARES_LOCK:
+            spares.append(ws)
+
+
+_SPARES_LOCK = threading.Lock()
 _BY_CONTENT: dict = {}
 _BY_CONTENT_SIZE = 32
 
@@ -310,8 +336,9 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
     def run(idx):
         if len(idx):
             s = slice(idx[0], idx[-1] + 1)
-            sample.evaluate(Ps, fresh_workspace(P), Y[s], sample.Samples(*(a[s] for a in out)), full,
-                            flags[s] if len(flags) else flags)
+            with _leased_workspace(model) as ws:
+                sample.evaluate(Ps, ws, Y[s], sample.Samples(*(a[s] for a in out)), full,
+                                flags[s] if len(flags) else flags)
 
     _map(run, np.array_split(np.arange(len(Y)), n_threads or threads(len(Y))))
     return out
@@ -351,14 +378,51 @@ def forward_models(models: list[Model], Y: np.ndarray, TAU: np.ndarray,
 
 
 def _map(fn, items, n_threads=None):
+    """fn over items on n threads (default `threads()`): the items dealt into n shares, the calling thread
+    running one and the process's worker pool the others (started once: a pool per call costs about
+    as much as a few hundred sampled states)."""
     items = list(items)
     n = min(len(items), n_threads or threads())
     if n <= 1:
         for it in items:
             fn(it)
         return
-    with ThreadPoolExecutor(n) as pool:
-        list(pool.map(fn, items))
+
+    def work(share):
+        for it in share:
+            fn(it)
+
+    shares = [items[k::n] for k in range(n)]
+    others = [_pool().submit(work, share) for share in shares[1:]]
+    try:
+        work(shares[0])
+    finally:
+        wait(others)
+    for f in others:
+        f.result()
+
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The process's worker threads for `_map`, started on first use (as many as are busy at once)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(64, thread_name_prefix="coopsim-batch")
+        return _POOL
+
+
+def _forget_pool() -> None:
+    """In a forked child: the parent's worker threads are not there, so the pool starts afresh (and the
+    locks, which a parent's thread may have held at the fork, are new)."""
+    global _POOL, _POOL_LOCK, _SPARES_LOCK
+    _POOL, _POOL_LOCK, _SPARES_LOCK = None, threading.Lock(), threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool)
 
 
 class Run(NamedTuple):
@@ -490,8 +554,8 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     def run(idx):
         if len(idx):
             s = slice(idx[0], idx[-1] + 1)
-            sample.inverse_terms(Ps, fresh_workspace(P), Q[s], QD[s], QDD[s],
-                                 sample.InverseTerms(*(a[s] for a in out)))
+            with _leased_workspace(model) as ws:
+                sample.inverse_terms(Ps, ws, Q[s], QD[s], QDD[s], sample.InverseTerms(*(a[s] for a in out)))
 
     _map(run, chunks)
     return out

@@ -8,6 +8,9 @@ sequences, both at rtol 1e-11) ≤ 1e-9 rad; dense output against the landing-on
 the same tolerance ≤ 1e-9 rad.
 """
 
+import os
+import signal
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -95,12 +98,35 @@ def test_reported_condition_number_is_numpys(name, rank_tol):
 
 
 def test_batch_on_threads_equals_single_evaluations(paper):
+    """Batches on the worker pool, their workspaces kept for the next batch: each state as alone."""
     states = consistent_states(paper, 6, seed=3)
     Y = np.array([np.concatenate(s) for s in states])
     TAU = np.random.default_rng(4).normal(size=(len(Y), paper.n_total))
-    out = api.evaluate_states(paper, Y, TAU, n_threads=2)
-    for y, tau, qdd in zip(Y, TAU, out.qdd):
+    first, again = api.evaluate_states(paper, Y, TAU, n_threads=2), api.evaluate_states(paper, Y, TAU, n_threads=2)
+    for y, tau, qdd in zip(Y, TAU, first.qdd):
         assert np.array_equal(qdd, api.forward(paper, y[:6], y[6:], tau).qdd)
+    assert np.array_equal(again.qdd, first.qdd)
+
+
+def test_a_forked_child_runs_batches_on_a_pool_of_its_own(paper):
+    """The worker pool's threads are not inherited by a fork: a child's batch on threads completes."""
+    Y = np.array([np.concatenate(s) for s in consistent_states(paper, 4, seed=3)])
+    TAU = np.zeros((len(Y), paper.n_total))
+    want = api.evaluate_states(paper, Y, TAU, n_threads=2).qdd      # the parent's pool is running
+    pid = os.fork()
+    if pid == 0:                                                     # the child: exit 0 only if it agrees
+        ok = np.array_equal(api.evaluate_states(paper, Y, TAU, n_threads=2).qdd, want)
+        os._exit(0 if ok else 1)
+    for _ in range(600):
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        pytest.fail("the forked child's batch did not complete (the parent's pool inherited)")
+    assert os.waitstatus_to_exitcode(status) == 0
 
 
 def test_parameter_sets_in_one_call(paper):
