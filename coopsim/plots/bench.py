@@ -48,7 +48,7 @@ def work_precision_plot(scenario: dict) -> Figure:
     """The work-precision figure of one `bench_scenario` dict (module docstring); legend beside it.
 
     Args:
-        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, reference
+        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, output_dt_s, reference
             (self_convergence_rad, rad) and runs (family, method, label, max_error rad, wall_s s,
             loop_s s or None, pareto).
 
@@ -78,7 +78,8 @@ def work_precision_plot(scenario: dict) -> Figure:
         ax.axvline(sc, color="C0", lw=0.8, ls="-.", label=labels[-2])
     ax.set_xlabel("max joint error against the reference (rad)")
     ax.set_ylabel("wall time (s)")
-    ax.set_title(f"Work–precision: {scenario['name']}, {scenario['duration_s']:g} s")
+    ax.set_title(f"Work–precision: {scenario['name']}, {scenario['duration_s']:g} s, "
+                 f"{scenario['output_dt_s']:g} s grid")
     ax.grid(True, which="both", alpha=0.25)
     ax.plot([], [], "o:", color="0.4", mfc="none", ms=4, lw=0.6, label=labels[-1])
     legend_beside(ax)
@@ -89,7 +90,7 @@ def work_precision_figure(scenario: dict, path: Path) -> Path:
     """Work-precision plot of one `bench_scenario` dict, written to `path` (PNG, atomically).
 
     Args:
-        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, reference
+        scenario: one `bench_scenario` dict (`coopsim.apps.bench`): its name, duration_s, output_dt_s, reference
             (self_convergence_rad, rad) and runs (family, method, label, max_error rad, wall_s s,
             loop_s s or None, pareto).
         path: the PNG file to write.

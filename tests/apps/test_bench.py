@@ -167,31 +167,46 @@ def test_scaling_fits_group_by_arms_and_joints():
 # ------------------------------------------------------------------------------------------------ report
 
 
-def test_report_shape_tables_and_json(report):
-    (sc,) = report["scenarios"]
-    assert sc["name"] == "paper_planar_2x3" and sc["duration_s"] == pytest.approx(0.2)
-    fams = [r["family"] for r in sc["runs"]]
-    n_pin = len(TINY.pin_rtols) if measure.have_pinocchio() else 0
-    assert fams.count("native") == 2 * len(TINY.rtols) + len(TINY.rk4_steps)
-    assert fams.count("mujoco") == sum(len(steps) for _, steps in TINY.mujoco) and fams.count("pinocchio") == n_pin
-    assert any(r["pareto"] for r in sc["runs"])
-    assert [h["target_rad"] for h in sc["headline"]] == list(measure.TARGETS)
-    assert sc["reference"]["far_below_targets"] and sc["eval_us"]["native_amortised_us"] > 0
+def test_report_shape_tables_and_json(report, paper):
+    """The paper scenario on the 0.05 s grid and again on its own 0.01 s grid (Ladders.own_grid): the same
+    runs, each compared on its grid; the µs per evaluation once."""
+    sc, own = report["scenarios"]
+    assert sc["name"] == own["name"] == "paper_planar_2x3"
+    assert sc["duration_s"] == own["duration_s"] == pytest.approx(0.2)
+    assert sc["output_dt_s"] == measure.OUTPUT_DT and own["output_dt_s"] == paper.integrator.output_dt == 0.01
+    for s in (sc, own):
+        fams = [r["family"] for r in s["runs"]]
+        n_pin = len(TINY.pin_rtols) if measure.have_pinocchio() else 0
+        assert fams.count("native") == 2 * len(TINY.rtols) + len(TINY.rk4_steps)
+        assert fams.count("mujoco") == sum(len(steps) for _, steps in TINY.mujoco) and fams.count("pinocchio") == n_pin
+        assert any(r["pareto"] for r in s["runs"])
+        assert [h["target_rad"] for h in s["headline"]] == list(measure.TARGETS)
+        assert s["reference"]["far_below_targets"]
+    assert sc["eval_us"]["native_amortised_us"] > 0 and own["eval_us"] is None
     assert len(report["scaling"]["points"]) == 4 and report["startup"] is None and report["commands"] is None
     data = json.loads(json_text(report))  # strict JSON: NaN written as the string "NaN"
     assert data["scenarios"][0]["runs"][0].keys() >= {"family", "wall_s", "loop_s", "max_error", "pareto"}
     rows = list(csv.reader(io.StringIO(csv_text(report))))
-    assert tuple(rows[0]) == CSV_FIELDS and len(rows) == 1 + len(sc["runs"])
+    assert tuple(rows[0]) == CSV_FIELDS and len(rows) == 1 + len(sc["runs"]) + len(own["runs"])
+    assert {r[1] for r in rows[1:]} == {"0.05", "0.01"}
     text = markdown_report(report)
-    for heading in ("## Headline", "## µs per dynamics evaluation", "## Scaling", "## paper_planar_2x3, 0.2 s"):
+    for heading in ("## Headline", "## µs per dynamics evaluation", "## Scaling",
+                    "## paper_planar_2x3, 0.2 s, 0.05 s grid", "## paper_planar_2x3, 0.2 s, 0.01 s grid",
+                    "| paper_planar_2x3, 0.01 s grid | 1e-03 |"):
         assert heading in text
+
+
+def test_own_grid_is_the_scenarios_where_it_differs(paper, spatial):
+    assert study.own_grid(paper, TINY) == 0.01 and study.own_grid(spatial, TINY) is None
+    assert study.own_grid(paper, replace(TINY, own_grid=())) is None
+    assert study.own_grid(replace(paper, integrator=replace(paper.integrator, output_dt=0.05)), TINY) is None
 
 
 def test_write_outputs_writes_every_file(report, tmp_path):
     paths = write_outputs(report, tmp_path / "b")
     names = sorted(p.name for p in paths)
     assert names == ["bench.json", "bench.md", "runs.csv", "scaling.csv", "scaling.png",
-                     "work_precision_paper_planar_2x3.png"]
+                     "work_precision_paper_planar_2x3.png", "work_precision_paper_planar_2x3_10ms.png"]
     assert all(p.stat().st_size > 0 for p in paths)
     assert (tmp_path / "b" / "scaling.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not [p for p in (tmp_path / "b").iterdir() if p.name.startswith(".")]  # no temporary files left

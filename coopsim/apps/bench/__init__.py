@@ -10,7 +10,8 @@ measured against one tight native reference on the same output grid, in the same
 
 Per run: wall time s (minimum over repeats; native: `simulate()` end to end, and `loop_s` the compiled
 time loop alone from the same consistent state, which is what MuJoCo's timed `Rollout.rollout` call
-does; Pinocchio: `solve_ivp`), max joint error rad over the output grid, final constraint violation
+does; Pinocchio: `solve_ivp`), max joint error rad over the output grid (OUTPUT_DT, and for the scenes
+of Ladders.own_grid their own output grid as well: every sample is reported), final constraint violation
 (native loop-closure residual, MuJoCo weld efc_pos, Pinocchio closure log6; m or rad). Per model: µs
 per dynamics evaluation, from Python and amortised in a compiled loop. Scaling: µs per evaluation of
 synthetic scenes, r arms × n joints, with power-law fits. Start-up: first-run compile time and cached
@@ -46,7 +47,7 @@ from coopsim.apps.bench.measure import (ATOL_RATIO, FULL, OUTPUT_DT, QUICK, REFE
                                         WELD_FACTORS, Ladders, RunRow, load_peers)
 from coopsim.apps.bench.scaling import scaling_study
 from coopsim.apps.bench.startup import command_times, startup_times
-from coopsim.apps.bench.study import bench_scenario
+from coopsim.apps.bench.study import bench_scenario, own_grid
 from coopsim.forward.simulate import simulate
 from coopsim.io.scenario import load_scenario
 
@@ -57,7 +58,9 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
               log: Callable[[str], None] = lambda s: None) -> dict:
     """Benchmark each scenario file, the scaling grid and (ladders.startup) the start-up and command times.
 
-    The start-up times and the commands' wall times are measured on the first scenario.
+    Each scenario on the OUTPUT_DT grid, and those of ladders.own_grid again on their own output grid
+    (no second µs-per-evaluation measurement). The start-up times and the commands' wall times are
+    measured on the first scenario.
 
     Args:
         scenarios: the scenario files.
@@ -68,8 +71,8 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     Returns:
         dict: 'settings' (what was run: the Ladders as a dict, output_dt_s, reference tolerances,
         atol_over_rtol, weld_factors, targets_rad), 'environment' (`environment`, plus 'load_average_end'),
-        'scenarios' (`bench_scenario` dicts), 'scaling' (`scaling_study`), 'startup' (`startup_times`, or
-        None) and 'commands' (`command_times`, or None).
+        'scenarios' (`bench_scenario` dicts, a scenario's own-grid one after its OUTPUT_DT one), 'scaling'
+        (`scaling_study`), 'startup' (`startup_times`, or None) and 'commands' (`command_times`, or None).
     """
     peers = peers or load_peers()
     models = [load_scenario(p) for p in scenarios]
@@ -77,6 +80,9 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
     report = {"settings": _settings(ladders), "environment": environment(), "scenarios": []}
     for model in models:
         report["scenarios"].append(bench_scenario(model, ladders, peers, log))
+        dt = own_grid(model, ladders)
+        if dt is not None:
+            report["scenarios"].append(bench_scenario(model, ladders, peers, log, output_dt=dt, costs=False))
     report["scaling"] = scaling_study(ladders, peers, log)
     report["startup"] = report["commands"] = None
     if ladders.startup:

@@ -20,6 +20,7 @@ from coopsim.core.model import IntegratorSettings, Model
 
 
 OUTPUT_DT = 0.05                     # s: coarse output grid; dense output means it does not limit steps
+OWN_GRID = ("paper_planar_2x3",)     # scenes benchmarked on their own output grid too (the speed targets')
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-14
 CHECK_FACTOR = 10.0                  # the self-convergence run is this much looser
 ATOL_RATIO = 0.1                     # atol = rtol · ATOL_RATIO on every adaptive ladder
@@ -58,6 +59,9 @@ class Ladders:
         scaling_r, scaling_n: the scaling grid: arm counts r and joints per arm n of the synthetic scenes.
         startup: measure the compile and cached start-up times (`startup_times`, fresh processes) and the
             CLI commands' wall times (`command_times`) on the first scenario.
+        own_grid: names of the scenarios benchmarked a second time on their own output grid
+            (integrator.output_dt), where it is not OUTPUT_DT: every sample is reported, so the sampling's
+            share of the native time grows with the grid's density.
     """
 
     rtols: tuple[float, ...] = tuple(10.0 ** -k for k in range(3, 13))
@@ -74,6 +78,7 @@ class Ladders:
     scaling_r: tuple[int, ...] = (2, 3, 4, 6, 8)
     scaling_n: tuple[int, ...] = (3, 6, 7)
     startup: bool = True
+    own_grid: tuple[str, ...] = OWN_GRID
 
 
 FULL = Ladders()
@@ -253,46 +258,50 @@ def fastest_reaching(rows: list[RunRow], family: str, target: float, key: str = 
     return min(ok, key=lambda r: getattr(r, key)) if ok else None
 
 
-def bench_duration(model: Model, ladders: Ladders) -> float:
-    """Run length: the scenario's, capped by ladders.max_duration, down to a whole number of OUTPUT_DT intervals.
+def bench_duration(model: Model, ladders: Ladders, output_dt: float = OUTPUT_DT) -> float:
+    """Run length: the scenario's, capped by ladders.max_duration, down to a whole number of output intervals.
 
     Whole intervals because MuJoCo samples on whole steps.
 
     Args:
         model: the scenario's Model (its duration s).
         ladders: the Ladders (max_duration s, None: no cap).
+        output_dt: s, the output grid's interval.
 
     Returns:
-        float: s, a positive whole multiple of OUTPUT_DT (one interval at least).
+        float: s, a positive whole multiple of output_dt (one interval at least).
     """
     d = model.duration if ladders.max_duration is None else min(model.duration, ladders.max_duration)
-    return OUTPUT_DT * max(1, math.floor(d / OUTPUT_DT + 1e-9))
+    return output_dt * max(1, math.floor(d / output_dt + 1e-9))
 
 
-def adaptive_settings(model: Model, method: str, rtol: float, atol: float | None = None) -> IntegratorSettings:
-    """The model's integrator settings with an adaptive method, its tolerances, unbounded step, output every OUTPUT_DT.
+def adaptive_settings(model: Model, method: str, rtol: float, atol: float | None = None,
+                      output_dt: float = OUTPUT_DT) -> IntegratorSettings:
+    """The model's integrator settings with an adaptive method, its tolerances, unbounded step, output every output_dt.
 
     Args:
         model: the Model whose integrator settings are the base.
         method: 'dop853' | 'dopri5'.
         rtol: relative tolerance.
         atol: absolute tolerance, rad or m and rad/s or m/s (default rtol · ATOL_RATIO).
+        output_dt: s, the output grid's interval.
 
     Returns:
-        IntegratorSettings: the modified copy (max_step None, output_dt OUTPUT_DT s).
+        IntegratorSettings: the modified copy (max_step None, output_dt s).
     """
     return replace(model.integrator, method=method, rtol=rtol, atol=rtol * ATOL_RATIO if atol is None else atol,
-                   max_step=None, output_dt=OUTPUT_DT)
+                   max_step=None, output_dt=output_dt)
 
 
-def rk4_settings(model: Model, step: float) -> IntegratorSettings:
-    """The model's integrator settings with RK4 at `step` s, output every OUTPUT_DT.
+def rk4_settings(model: Model, step: float, output_dt: float = OUTPUT_DT) -> IntegratorSettings:
+    """The model's integrator settings with RK4 at `step` s, output every output_dt.
 
     Args:
         model: the Model whose integrator settings are the base.
         step: s, the fixed step.
+        output_dt: s, the output grid's interval.
 
     Returns:
-        IntegratorSettings: the modified copy (method 'rk4', output_dt OUTPUT_DT s).
+        IntegratorSettings: the modified copy (method 'rk4', output_dt s).
     """
-    return replace(model.integrator, method="rk4", step=step, output_dt=OUTPUT_DT)
+    return replace(model.integrator, method="rk4", step=step, output_dt=output_dt)

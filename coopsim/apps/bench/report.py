@@ -16,7 +16,7 @@ from coopsim.io.atomic import write_text_atomic
 from coopsim.io.mcap_codec import nonfinite_name
 from coopsim.plots.bench import scaling_figure, work_precision_figure
 
-CSV_FIELDS = ("scenario", "family", "method", "setting", "param", "wall_s", "loop_s", "max_error_rad",
+CSV_FIELDS = ("scenario", "output_dt_s", "family", "method", "setting", "param", "wall_s", "loop_s", "max_error_rad",
               "final_violation", "evals", "weld_factor", "pareto", "note")
 SCALING_FIELDS = ("r", "n", "n_total", "rows", "planar", "native_amortised_us", "native_cholesky_us",
                   "native_python_us", "mujoco_forward_us", "pinocchio_us", "bad_states")
@@ -46,13 +46,15 @@ def csv_text(report: dict) -> str:
         report: the benchmark report (`coopsim.apps.bench.run_bench`).
 
     Returns:
-        str: the CSV text, header first: param rtol or step s, wall_s and loop_s s, max_error_rad rad,
-        final_violation m or rad, weld_factor (MuJoCo rows only), pareto 0 / 1.
+        str: the CSV text, header first: output_dt_s the output grid's interval s, param rtol or step s,
+        wall_s and loop_s s, max_error_rad rad, final_violation m or rad, weld_factor (MuJoCo rows only),
+        pareto 0 / 1.
     """
     rows = [list(CSV_FIELDS)]
     for sc in report["scenarios"]:
         for r in sc["runs"]:
-            rows.append([sc["name"], r["family"], r["method"], r["setting"], _num(r["param"], ".6g"),
+            rows.append([sc["name"], _num(sc["output_dt_s"], ".6g"), r["family"], r["method"], r["setting"],
+                         _num(r["param"], ".6g"),
                          _num(r["wall_s"]), _num(r["loop_s"]), _num(r["max_error"]), _num(r["final_violation"]),
                          r["evals"], r["extra"].get("weld_factor", ""), int(r["pareto"]), r["note"]])
     return _csv(rows)
@@ -130,8 +132,21 @@ def _ratio(x, fmt=".1f") -> str:
     return "—" if x is None else format(x, fmt) + "×"
 
 
+def scenario_label(sc: dict) -> str:
+    """'NAME' for a scenario benchmarked on OUTPUT_DT, 'NAME, X s grid' on another grid.
+
+    Args:
+        sc: one scenario of the report (`coopsim.apps.bench.bench_scenario`).
+
+    Returns:
+        str: the label.
+    """
+    dt = sc["output_dt_s"]
+    return sc["name"] if abs(dt - OUTPUT_DT) <= 1e-12 else f"{sc['name']}, {dt:g} s grid"
+
+
 def headline_lines(report: dict) -> list[str]:
-    """The headline table: per scenario and error target, the fastest native and MuJoCo runs reaching it.
+    """The headline table: per scenario (and grid) and error target, the fastest native and MuJoCo runs reaching it.
 
     With MuJoCo ÷ native for native simulate() and for its time loop alone, and whether a required ratio
     is met.
@@ -146,7 +161,8 @@ def headline_lines(report: dict) -> list[str]:
     for sc in report["scenarios"]:
         for h in sc["headline"]:
             nat, loop, mj = h["native"], h["native_by_loop"], h["mujoco"]
-            rows.append([sc["name"], f"{h['target_rad']:.0e}", _run_text(nat, "wall_s"), _run_text(loop, "loop_s"),
+            rows.append([scenario_label(sc), f"{h['target_rad']:.0e}", _run_text(nat, "wall_s"),
+                         _run_text(loop, "loop_s"),
                          _run_text(mj, "wall_s"), _ratio(h["ratio_wall"]) + _met(h, "wall"),
                          _ratio(h["ratio_loop"]) + _met(h, "loop")])
             if h["note"]:
@@ -177,11 +193,13 @@ def eval_lines(report: dict) -> list[str]:
 
     Returns:
         list[str]: the Markdown table lines, with native amortised ÷ constraintDynamics checked against
-        EVAL_RATIO_TARGET on EVAL_RATIO_SCENES.
+        EVAL_RATIO_TARGET on EVAL_RATIO_SCENES (a scenario's second grid has none: no grid changes them).
     """
     rows = []
     for sc in report["scenarios"]:
         c = sc["eval_us"]
+        if c is None:
+            continue
         f = lambda k: "—" if c.get(k) is None else f"{c[k]:.3g}"
         ratio = c.get("native_amortised_over_pinocchio")
         verdict = "" if sc["name"] not in EVAL_RATIO_SCENES or ratio is None else (
@@ -342,7 +360,8 @@ def markdown_report(report: dict) -> str:
              f"Wall times: minimum over repeats in one "
              f"process. Native: `simulate()` end to end (initial projection and sampling included), and its compiled "
              f"time loop alone; MuJoCo: the `Rollout.rollout` call alone; Pinocchio: `solve_ivp` alone. Errors: max "
-             f"|Δθ| over every joint on a {OUTPUT_DT:g} s grid against the native reference "
+             f"|Δθ| over every joint on a {OUTPUT_DT:g} s grid (and for {_own(report)} on its own output grid "
+             f"too: every sample is reported) against the native reference on the same grid "
              f"(DOP853 rtol {REFERENCE_RTOL:.0e}, atol {REFERENCE_ATOL:.0e}). Adaptive ladders use "
              f"atol = {ATOL_RATIO:g}·rtol and no step bound.", "", "## Headline", ""]
     lines += headline_lines(report) + ["", "## µs per dynamics evaluation", ""] + eval_lines(report)
@@ -352,17 +371,38 @@ def markdown_report(report: dict) -> str:
     lines += command_lines(report.get("commands"))
     lines += ["", "## Scaling (synthetic scenes)", ""] + scaling_lines(report)
     for sc in report["scenarios"]:
-        lines += ["", f"## {sc['name']}, {sc['duration_s']:g} s", "", reference_line(sc), ""]
+        lines += ["", f"## {sc['name']}, {sc['duration_s']:g} s, {sc['output_dt_s']:g} s grid", "",
+                  reference_line(sc), ""]
         lines += [f"- {n}" for n in sc["notes"]] + ([""] if sc["notes"] else [])
         lines += runs_lines(sc)
     return "\n".join(lines) + "\n"
 
 
+def _own(report: dict) -> str:
+    """The scenarios also benchmarked on their own output grid, as text ('none')."""
+    names = [sc["name"] for sc in report["scenarios"] if abs(sc["output_dt_s"] - OUTPUT_DT) > 1e-12]
+    return ", ".join(names) or "none"
+
+
+def figure_name(sc: dict) -> str:
+    """work_precision_NAME.png (OUTPUT_DT grid), work_precision_NAME_Xms.png on another grid.
+
+    Args:
+        sc: one scenario of the report (`coopsim.apps.bench.bench_scenario`).
+
+    Returns:
+        str: the file name.
+    """
+    dt = sc["output_dt_s"]
+    grid = "" if abs(dt - OUTPUT_DT) <= 1e-12 else f"_{1e3 * dt:g}ms"
+    return f"work_precision_{sc['name']}{grid}.png"
+
+
 def write_outputs(report: dict, out: str | Path) -> list[Path]:
     """Write the report's files into `out`, each atomically.
 
-    bench.json, bench.md, runs.csv, scaling.csv, work_precision_NAME.png per scenario and scaling.png
-    (only with scaling points).
+    bench.json, bench.md, runs.csv, scaling.csv, a work-precision figure per scenario and grid
+    (`figure_name`) and scaling.png (only with scaling points).
 
     Args:
         report: the benchmark report (`coopsim.apps.bench.run_bench`).
@@ -376,7 +416,7 @@ def write_outputs(report: dict, out: str | Path) -> list[Path]:
              write_text_atomic(out / "bench.md", markdown_report(report)),
              write_text_atomic(out / "runs.csv", csv_text(report)),
              write_text_atomic(out / "scaling.csv", scaling_csv_text(report))]
-    paths += [work_precision_figure(sc, out / f"work_precision_{sc['name']}.png") for sc in report["scenarios"]]
+    paths += [work_precision_figure(sc, out / figure_name(sc)) for sc in report["scenarios"]]
     if report["scaling"]["points"]:
         paths.append(scaling_figure(report["scaling"], out / "scaling.png"))
     return paths

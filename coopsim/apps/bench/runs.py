@@ -11,9 +11,9 @@ from typing import Callable
 import mujoco
 import numpy as np
 
-from coopsim.apps.bench.measure import (ATOL_RATIO, CHECK_FACTOR, MJ_STAGES, REFERENCE_ATOL, REFERENCE_RTOL,
-                                        WELD_FACTORS, Ladders, RunRow, adaptive_settings, best_time, have_pinocchio,
-                                        max_joint_error, rk4_settings)
+from coopsim.apps.bench.measure import (ATOL_RATIO, CHECK_FACTOR, MJ_STAGES, OUTPUT_DT, REFERENCE_ATOL,
+                                        REFERENCE_RTOL, WELD_FACTORS, Ladders, RunRow, adaptive_settings, best_time,
+                                        have_pinocchio, max_joint_error, rk4_settings)
 from coopsim.compiled import api
 from coopsim.core.errors import CoopsimError
 from coopsim.core.model import IntegratorSettings, Model
@@ -37,20 +37,21 @@ class Reference:
     self_convergence: float
 
 
-def reference(model: Model) -> Reference:
+def reference(model: Model, output_dt: float = OUTPUT_DT) -> Reference:
     """Native DOP853 at REFERENCE_RTOL / REFERENCE_ATOL, and again CHECK_FACTOR looser.
 
-    Both over model.duration on the OUTPUT_DT grid.
+    Both over model.duration on the output_dt grid.
 
     Args:
         model: the Model, its duration already the benchmark's (`bench_duration`).
+        output_dt: s, the output grid's interval (default OUTPUT_DT).
 
     Returns:
         Reference: the two runs and their self-convergence difference rad.
     """
-    tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL))
+    tight = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL, REFERENCE_ATOL, output_dt))
     check = simulate(model, settings=adaptive_settings(model, "dop853", REFERENCE_RTOL * CHECK_FACTOR,
-                                                       REFERENCE_ATOL * CHECK_FACTOR))
+                                                       REFERENCE_ATOL * CHECK_FACTOR, output_dt))
     return Reference(tight, check, max_joint_error(check.q, tight.q))
 
 
@@ -94,18 +95,19 @@ def native_run(model: Model, s: IntegratorSettings, ref, ladders: Ladders) -> Ru
 
 
 def native_runs(model: Model, ref, ladders: Ladders) -> list[RunRow]:
-    """DOP853 and DOPRI5 over ladders.rtols, RK4 over ladders.rk4_steps.
+    """DOP853 and DOPRI5 over ladders.rtols, RK4 over ladders.rk4_steps, on the reference's output grid.
 
     Args:
         model: the Model.
-        ref: the reference run (`SimResult`).
+        ref: the reference run (`SimResult`; its integrator.output_dt is the grid's interval).
         ladders: the Ladders.
 
     Returns:
         list[RunRow]: the DOP853, then DOPRI5, then RK4 rows, each in ladder order (`native_run`).
     """
-    cases = [adaptive_settings(model, m, r) for m in ("dop853", "dopri5") for r in ladders.rtols]
-    cases += [rk4_settings(model, h) for h in ladders.rk4_steps]
+    dt = ref.model.integrator.output_dt
+    cases = [adaptive_settings(model, m, r, output_dt=dt) for m in ("dop853", "dopri5") for r in ladders.rtols]
+    cases += [rk4_settings(model, h, dt) for h in ladders.rk4_steps]
     return [native_run(model, s, ref, ladders) for s in cases]
 
 
@@ -132,7 +134,7 @@ def mujoco_run(model: Model, ref, integrator: str, dt: float, peers, ladders: La
         model: the Model.
         ref: the reference run (`SimResult`): consistent initial state, output times, joint coordinates.
         integrator: 'RK4' | 'Euler' | 'implicit' | 'implicitfast'.
-        dt: s, the twin's timestep, a whole fraction of OUTPUT_DT.
+        dt: s, the twin's timestep, a whole fraction of the output grid's interval.
         peers: the peers module (`load_peers`).
         ladders: the Ladders (repeats, repeat_budget_s, max_repeats).
 

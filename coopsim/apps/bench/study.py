@@ -59,8 +59,9 @@ def _brief(row: RunRow | None) -> dict | None:
             "max_error": row.max_error}
 
 
-def bench_scenario(model: Model, ladders: Ladders, peers, log: Callable[[str], None] = lambda s: None) -> dict:
-    """The whole benchmark of one scenario: reference, every run, µs per evaluation, headline.
+def bench_scenario(model: Model, ladders: Ladders, peers, log: Callable[[str], None] = lambda s: None,
+                   output_dt: float = OUTPUT_DT, costs: bool = True) -> dict:
+    """The whole benchmark of one scenario on one output grid: reference, every run, µs per evaluation, headline.
 
     The reference comes with its self-convergence, the runs with their Pareto flags.
 
@@ -69,34 +70,53 @@ def bench_scenario(model: Model, ladders: Ladders, peers, log: Callable[[str], N
         ladders: the Ladders.
         peers: the peers module (`load_peers`).
         log: progress callback, one line of text per stage.
+        output_dt: s, the output grid's interval: every run is sampled and compared on it.
+        costs: measure the µs per evaluation (which no grid changes).
 
     Returns:
         dict: 'name'; 'duration_s' s; 'output_dt_s' s; 'n_joints'; 'arms'; 'reference' (method, rtol,
         atol, check_rtol, check_atol, self_convergence_rad rad, far_below_targets,
         smallest_measured_error_rad rad or None, rhs_evaluations); 'runs' (`RunRow`s as dicts); 'eval_us'
-        (`eval_costs`); 'headline' (`headline`); 'notes' (list of str).
+        (`eval_costs`, None without costs); 'headline' (`headline`); 'notes' (list of str).
     """
-    model = replace(model, duration=bench_duration(model, ladders))
-    log(f"{model.name}: reference ({model.duration:g} s)")
-    ref = reference(model)
-    log(f"{model.name}: native ladders")
+    model = replace(model, duration=bench_duration(model, ladders, output_dt))
+    where = f"{model.name} ({output_dt:g} s grid)"
+    log(f"{where}: reference ({model.duration:g} s)")
+    ref = reference(model, output_dt)
+    log(f"{where}: native ladders")
     rows = native_runs(model, ref.result, ladders)
-    log(f"{model.name}: MuJoCo ladders")
+    log(f"{where}: MuJoCo ladders")
     rows += mujoco_runs(model, ref.result, peers, ladders)
     notes = []
     if have_pinocchio():
-        log(f"{model.name}: Pinocchio ladder")
+        log(f"{where}: Pinocchio ladder")
         rows += pinocchio_runs(model, ref.result, peers, ladders)
     else:
         notes.append("Pinocchio rows skipped: the optional 'pin' package is not installed (pip install -e '.[bench]')")
     for row, on in zip(rows, pareto_front([r.max_error for r in rows], [r.wall_s for r in rows])):
         row.pareto = bool(on)
-    log(f"{model.name}: cost per evaluation")
-    costs = eval_costs(model, ref.result, rows, peers, ladders)
-    return {"name": model.name, "duration_s": model.duration, "output_dt_s": OUTPUT_DT,
+    cost = None
+    if costs:
+        log(f"{where}: cost per evaluation")
+        cost = eval_costs(model, ref.result, rows, peers, ladders)
+    return {"name": model.name, "duration_s": model.duration, "output_dt_s": output_dt,
             "n_joints": model.n_total, "arms": model.r, "reference": _reference_summary(ref, rows),
-            "runs": [asdict(r) for r in rows], "eval_us": costs, "headline": headline(model.name, rows),
+            "runs": [asdict(r) for r in rows], "eval_us": cost, "headline": headline(model.name, rows),
             "notes": notes}
+
+
+def own_grid(model: Model, ladders: Ladders) -> float | None:
+    """The scenario's own output grid when it is benchmarked on it too (ladders.own_grid), else None.
+
+    Args:
+        model: the scenario's Model (its name and integrator.output_dt s).
+        ladders: the Ladders (own_grid: the scenario names).
+
+    Returns:
+        float | None: s, integrator.output_dt, when the name is listed and the grid is not OUTPUT_DT.
+    """
+    dt = model.integrator.output_dt
+    return dt if model.name in ladders.own_grid and abs(dt - OUTPUT_DT) > 1e-12 else None
 
 
 def _reference_summary(ref: Reference, rows: list[RunRow]) -> dict:
