@@ -150,7 +150,7 @@ def compiled(model: Model) -> Compiled:
 
 def _entry(model: Model) -> tuple:
     """The cache entry of `model`: (Compiled, what keeps the content key's objects alive, the spare
-    workspaces of `_leased_workspace`)."""
+    record pairs of `_leased_structs`)."""
     hit = _CACHE.get(model)
     if hit is None:
         key = _content_key(model)
@@ -168,20 +168,26 @@ def _entry(model: Model) -> tuple:
 
 
 @contextlib.contextmanager
-def _leased_workspace(model: Model):
-    """A workspace of `model`'s for one batch share, its own while the block runs: a spare one kept from
-    an earlier batch (every kernel writes what it reads, and the zeros a workspace starts with outside
-    the arms' blocks stay zeros), else a fresh one; returned to the spares afterwards."""
+def _leased_structs(model: Model):
+    """(Ps, Ws): StructRefs of `model`'s packed model and of a workspace, the share's own while the block
+    runs: a spare pair kept from an earlier batch (every kernel writes what it reads, and the zeros a
+    workspace starts with outside the arms' blocks stay zeros), else a new one; returned afterwards.
+
+    Ps is a StructRef of its own over the same arrays: each kernel call takes a reference to its
+    records, and threads sharing one record would contend for its reference count (two threads on
+    one Ps ran a batch 1.7× slower than one thread alone; on one each, at the speed of one).
+    """
     spares = _entry(model)[2]
     with _SPARES_LOCK:
-        ws = spares.pop() if spares else None
-    if ws is None:
-        ws = fresh_workspace(compiled(model).P)
+        pair = spares.pop() if spares else None
+    if pair is None:
+        P = compiled(model).P
+        pair = (to_struct(P), fresh_workspace(P))
     try:
-        yield ws
+        yield pair
     finally:
         with _SPARES_LOCK:
-            spares.append(ws)
+            spares.append(pair)
 
 
 _SPARES_LOCK = threading.Lock()
@@ -323,7 +329,7 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
         ValueError: raw given with a Y that is not C-contiguous float64 (it could not be projected in
             place).
     """
-    P, _, Ps, _ = compiled(model)
+    P = compiled(model).P
     if raw is None:
         Y, flags = _f(Y), _NO_FLAGS
     elif not (Y.dtype == np.float64 and Y.flags.c_contiguous):
@@ -336,8 +342,8 @@ def evaluate_states(model: Model, Y: np.ndarray, TAU: np.ndarray, full: bool = F
     def run(idx):
         if len(idx):
             s = slice(idx[0], idx[-1] + 1)
-            with _leased_workspace(model) as ws:
-                sample.evaluate(Ps, ws, Y[s], sample.Samples(*(a[s] for a in out)), full,
+            with _leased_structs(model) as (Pt, Wt):
+                sample.evaluate(Pt, Wt, Y[s], sample.Samples(*(a[s] for a in out)), full,
                                 flags[s] if len(flags) else flags)
 
     _map(run, np.array_split(np.arange(len(Y)), n_threads or threads(len(Y))))
@@ -545,7 +551,7 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     Returns:
         sample.InverseTerms: (S, …) arrays, world axes, SI.
     """
-    P, _, Ps, _ = compiled(model)
+    P = compiled(model).P
     Q, QD, QDD = _f(Q), _f(QD), _f(QDD)
     nmax = int(np.max(np.diff(P.dof)))
     out = sample.new_inverse_terms(len(Q), int(P.dof[-1]), len(P.dof) - 1, nmax)
@@ -554,8 +560,8 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     def run(idx):
         if len(idx):
             s = slice(idx[0], idx[-1] + 1)
-            with _leased_workspace(model) as ws:
-                sample.inverse_terms(Ps, ws, Q[s], QD[s], QDD[s], sample.InverseTerms(*(a[s] for a in out)))
+            with _leased_structs(model) as (Pt, Wt):
+                sample.inverse_terms(Pt, Wt, Q[s], QD[s], QDD[s], sample.InverseTerms(*(a[s] for a in out)))
 
     _map(run, chunks)
     return out
