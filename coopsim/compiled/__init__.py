@@ -31,6 +31,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
                     torque tables, stabilization
     sample.py       many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py           one arm's inverse kinematics and rates
+    capacity.py     the minimum-energy load capacity of one weight vector (the weight optimiser's objective)
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 
 The first compile, on two cores with no kernel compiled twice, is `coopsim.apps.warmup`'s.

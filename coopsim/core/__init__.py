@@ -7,4 +7,5 @@
     results.py  sampled motions and projections shared by the engines and both sides
     labels.py   the names of arms and joints in messages and figures
     tableaux.py the integrators' Butcher tableaux and dense-output coefficients (one copy for both engines)
+    digest.py   content digests: a value's identity by what it holds (results shared between sweep points)
 """

@@ -13,4 +13,5 @@
     ros2_msgs.py   the ROS 2 message definitions a bag uses, as MCAP ros2msg schemas, and their type hashes
     ros2.py        a run as a ROS 2 bag: a rosbag2 folder of standard CDR messages (joint states, TF, …)
     atomic.py      atomic outputs: each file, and each command's files as one set
+    processes.py   helper processes that end with the command however it ends (figure workers, compiles)
 """

@@ -5,4 +5,5 @@ and the agreement with the native model.
     mujoco_run.py  the twin run (RK4, the same torques or controller)
     compare.py     agreement metrics
     harness.py     the cross-validation harness (native and twin, compared, logged)
+    weld.py        the welds' yield predicted from the native run, the automatic step, why a twin differs
 """
