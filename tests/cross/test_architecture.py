@@ -267,3 +267,19 @@ def test_the_public_face_names_real_objects_and_imports_nothing_heavy():
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_each_folder_lists_its_files():
+    """Each folder's `__init__.py` docstring names every module (`name.py` or `` `name` ``) and every
+    subfolder (`name/`) in it, as README "What is there" says."""
+    missing = []
+    for init in sorted(PACKAGE.rglob("__init__.py")):
+        if init.parent == PACKAGE:
+            continue
+        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+        for p in sorted(init.parent.iterdir()):
+            if p.suffix == ".py" and p.name != "__init__.py" and p.name not in doc and f"`{p.stem}`" not in doc:
+                missing.append(f"{init.relative_to(ROOT)}: {p.name}")
+            if p.is_dir() and (p / "__init__.py").is_file() and f"{p.name}/" not in doc:
+                missing.append(f"{init.relative_to(ROOT)}: {p.name}/")
+    assert not missing, "not listed in their folder's __init__ docstring:\n" + "\n".join(missing)
