@@ -78,13 +78,20 @@ def test_bundled_scenario_against_pinocchio_urdf(robot_scenario):
 def assert_agrees_with_pinocchio(model, S: RobotScene, seed: int):
     """Poses and arm dynamics at the initial and 10 random states, closed-chain accelerations and
     wrenches at 10 consistent states (seeds `seed`, `seed` + 1), within test_independent's tolerances."""
+    report = _open_arms_report(model, S, seed)
+    check_chain(model, S, consistent_states(S, 10, seed=seed + 1), report)
+    report.check()
+    assert report.max("closed-chain accelerations (compiled)") <= 1e-9
+
+
+def _open_arms_report(model, S: RobotScene, seed: int) -> Report:
+    """Poses and arm dynamics at the initial and 10 random states (seed `seed`) against Pinocchio's read of
+    the same robot file (`independent.checks`), collected, not yet checked."""
     report = Report(model.name)
     open_states = [("initial", model.q0, model.qd0)] + random_states(S.n, 10, seed=seed)
     check_poses(model, S, open_states, report)
     check_arm_dynamics(model, S, open_states, report)
-    check_chain(model, S, consistent_states(S, 10, seed=seed + 1), report)
-    report.check()
-    assert report.max("closed-chain accelerations (compiled)") <= 1e-9
+    return report
 
 
 def test_bundled_scenario_twin_agrees(robot_scenario):
@@ -158,15 +165,10 @@ def test_meshes_are_not_needed():
     assert read_chain(DATA / "tiny.urdf", "base_link", "tool", ["finger_joint"]).n == 3
     assert read_chain(DATA / "anchor.xml", "base", "tip").n == 2
 
-def _agrees_with_pinocchio(path, seed: int):
-    """The scenario at `path` read by coopsim, its poses and arm dynamics checked against Pinocchio's read
-    of the same robot file at the initial and 10 random states (`independent.checks`); the model."""
-    model, S = load_scenario(path), RobotScene(path)
-    report = Report(model.name)
-    states = [("initial", model.q0, model.qd0)] + random_states(S.n, 10, seed=seed)
-    check_poses(model, S, states, report)
-    check_arm_dynamics(model, S, states, report)
-    report.check()
+def _open_arms_agree_with_pinocchio(path, seed: int):
+    """The scenario at `path`, its open arms checked against Pinocchio (`_open_arms_report`); the model."""
+    model = load_scenario(path)
+    _open_arms_report(model, RobotScene(path), seed).check()
     return model
 
 
@@ -176,7 +178,7 @@ def test_small_robot_against_pinocchio_urdf(tiny_dir):
     axis (0.6, 0, 0.8), fixed links on the chain (flange) and off it (cover), a locked finger, a tool
     frame past the flange, an end-effector offset: poses and arm dynamics as Pinocchio reads the URDF."""
     path = _write(tiny_dir, TINY)
-    model = _agrees_with_pinocchio(path, seed=13)
+    model = _open_arms_agree_with_pinocchio(path, seed=13)
     # what the file says comes along: joint ranges (continuous: none), effort and velocity limits
     assert model.joint_range[:3].tolist() == [[-2.0, 2.5], [-np.inf, np.inf], [-3.0, 3.0]]
     assert model.motors.stall_torque[:3].tolist() == [40.0, 25.0, 12.0]
@@ -393,7 +395,7 @@ def test_bad_inertias_off_the_chain_do_not_stop_it(tiny_dir):
     with pytest.raises(ValueError, match="inertia must have positive eigenvalues"):
         _mujoco_inertials(DATA / "bad_inertia.urdf")
     path = _write(tiny_dir, BAD)
-    model = _agrees_with_pinocchio(path, seed=19)
+    model = _open_arms_agree_with_pinocchio(path, seed=19)
     assert model.arms[0].link_mass.tolist() == [1.5, 1.2, 0.7]
 
 
