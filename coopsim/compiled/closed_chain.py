@@ -18,7 +18,7 @@ from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
 from coopsim.compiled.linalg import (column_singular_ratio, eig_solve, pivoted_cholesky, pivoted_solve,
                                      safe_pivot_ratio)
 from coopsim.compiled.packing import STAB_BAUMGARTE
-from coopsim.compiled.schur import constraint_trace, group_arm, schur_factor, schur_solve
+from coopsim.compiled.schur import arm_rows, constraint_trace, group_arm, schur_factor, schur_solve
 from coopsim.compiled.spatial import rot_log
 from coopsim.compiled.structs import borrow
 from coopsim.compiled.toolchain.jit import kernel
@@ -337,10 +337,7 @@ def chain_solve(P, W, tau, stab):
     # 𝐈_m = L Lᵀ, z, and Yᵀ (the rows of arm m's group, or all of them in the carrier's columns)
     for m in range(r):
         o, e = dof[m], dof[m + 1]
-        i0, i1 = 0, K
-        if m != c:
-            g = m - 1 if m > c else m
-            i0, i1 = g * k, g * k + k
+        i0, i1 = arm_rows(m, c, k, K)
         M, L, Ym, Lamm = Mb[o:e], Lb[o:e], Yt[i0:i1, o:e], Lam[i0:i1, o:e]
         for j in range(e - o):
             for t in range(j):
@@ -381,10 +378,7 @@ def chain_solve(P, W, tau, stab):
         # θ̈ = L⁻ᵀ(z − Y F), block by block
         for m in range(r):
             o, e = dof[m], dof[m + 1]
-            i0, i1 = 0, K
-            if m != c:
-                g = m - 1 if m > c else m
-                i0, i1 = g * k, g * k + k
+            i0, i1 = arm_rows(m, c, k, K)
             L, Ym = Lb[o:e], Yt[i0:i1, o:e]
             n = e - o
             for j in range(n - 1, -1, -1):

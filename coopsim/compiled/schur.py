@@ -49,6 +49,26 @@ def group_arm(g, c):
 
 
 @kernel
+def arm_rows(m, c, k, K):
+    """The rows of Λ in which arm m's columns are not zero: its own group (the inverse of `group_arm`), or
+    every row for the carrier c, whose columns every group shares.
+
+    Args:
+        m: arm index, 0-based.
+        c: the carrier arm's index.
+        k: constraint rows per grasp.
+        K: rows of Λ, (r − 1)·k.
+
+    Returns:
+        tuple: (i0, i1), the rows i0 … i1 − 1.
+    """
+    if m == c:
+        return 0, K
+    g = m - 1 if m > c else m
+    return g * k, g * k + k
+
+
+@kernel
 def constraint_trace(P, Y):
     """trace(Y Yᵀ) from the nonzero blocks of Y only.
 
