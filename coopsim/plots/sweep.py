@@ -9,7 +9,9 @@ Where the column has a sibling `…saturating_motor` (a capacity: `capacity.payl
 → `capacity.payload.min_energy.saturating_motor`), each point is marked by the motor that saturates
 first there (one marker per motor, named in the legend beside the panel); where its sibling
 `…feasible` is false (no mass the motors can carry) the value is left out and the point marked
-"infeasible". Failed points are left out (a heat map's cell stays blank).
+"infeasible". Failed points are left out (a heat map's cell stays blank). A grid denser than
+MARKED_PER_AXIS points along an axis is marked on an evenly strided sub-lattice of its points, and the
+borders between regions of different saturating motors are drawn as lines between the cells.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ if TYPE_CHECKING:
 PANEL = (5.2, 3.8)        # inches
 COLORBAR = (0.1, 0.2, 0.85)   # inches: gap from the panel, colorbar width, room for its ticks and label
 MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">")
+MARKED_PER_AXIS = 21      # a denser grid is marked on a sub-lattice of at most this many points per axis
 
 
 def sibling(column: str, columns, name: str) -> str | None:
@@ -98,6 +101,38 @@ def _mark(ax, x: np.ndarray, y: np.ndarray, labels: list, foot: bool = False) ->
     return handles
 
 
+def _mark_grid(ax, x: np.ndarray, y: np.ndarray, labels: list) -> list:
+    """The marks of a heat map on a grid: every point's (`_mark`) on a grid of at most MARKED_PER_AXIS
+    points per axis; on a denser one the points of an evenly strided sub-lattice (from the first row and
+    column) and black borders between cells whose labels differ. Returns the legend
+    handles."""
+    xs, ys = np.unique(x), np.unique(y)
+    i, j = np.searchsorted(xs, x), np.searchsorted(ys, y)
+    if max(len(xs), len(ys)) <= MARKED_PER_AXIS:
+        return _mark(ax, x, y, labels)
+    keep = _lattice(i, len(xs)) & _lattice(j, len(ys))
+    cells = np.full((len(ys), len(xs)), None, dtype=object)
+    cells[j, i] = labels
+    _borders(ax, cells, _edges(xs), _edges(ys))
+    return _mark(ax, x[keep], y[keep], [m for m, k in zip(labels, keep) if k])
+
+
+def _lattice(index: np.ndarray, count: int) -> np.ndarray:
+    """Whether each grid index is on the strided sub-lattice of `_mark_grid` (from the first index)."""
+    return index % -(-(count - 1) // (MARKED_PER_AXIS - 1)) == 0
+
+
+def _borders(ax, cells: np.ndarray, xe: np.ndarray, ye: np.ndarray) -> None:
+    """Black lines along the cell edges (xe, ye: the edges) between neighbouring cells of a (rows, columns)
+    grid whose labels differ."""
+    from matplotlib.collections import LineCollection
+
+    segments = [[(xe[c + 1], ye[r]), (xe[c + 1], ye[r + 1])] for r, c in zip(*np.nonzero(cells[:, 1:] != cells[:, :-1]))]
+    segments += [[(xe[c], ye[r + 1]), (xe[c + 1], ye[r + 1])] for r, c in zip(*np.nonzero(cells[1:] != cells[:-1]))]
+    if segments:
+        ax.add_collection(LineCollection(segments, colors="black", linewidths=1.2, zorder=2))
+
+
 def _legend_labels(labels) -> list[str]:
     return sorted({m for m in labels or () if m}, key=lambda m: (m == "infeasible", m))
 
@@ -149,7 +184,9 @@ def column_figure(title: str, axis_names: list[str], axis_values: np.ndarray, gr
         cax = ax.inset_axes([1.0 + COLORBAR[0] / w, 0.0, COLORBAR[1] / w, 1.0])
         fig.colorbar(mesh, cax=cax, label=column)
         ax.set(xlabel=axis_names[0], ylabel=axis_names[1])
-        if motors is not None:
+        if motors is not None and grid:
+            handles = _mark_grid(ax, x, y, motors)
+        elif motors is not None:
             handles = _mark(ax, x, y, motors)
     else:
         ax.hist(values[np.isfinite(values)], bins=min(30, max(5, len(values) // 4)), color="tab:blue")

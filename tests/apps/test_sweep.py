@@ -150,6 +150,7 @@ def test_quasi_random_designs_are_seeded_and_scaled(tmp_path):
     # the bundled sweeps (in this test: the Monte Carlo one imports scipy.stats, about a second, once)
     sweeps = {path.stem: load_sweep(path) for path in (SCENARIOS / "sweeps").glob("*.yaml")}
     assert {k: v.points.shape for k, v in sweeps.items()} == {"paper_capacity_map": (45, 2), "carry_duration": (11, 1),
+                                                              "paper_payload_map": (5151, 2),
                                                               "spatial_mc_agreement": (16, 6)}
     mc = sweeps["spatial_mc_agreement"]
     lo, hi = np.array([a.bounds for a in mc.axes]).T
