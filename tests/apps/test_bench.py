@@ -15,18 +15,21 @@ import numpy as np
 import pytest
 
 from coopsim.apps import bench
-from coopsim.apps.bench import measure, runs, scaling, startup, study
+from coopsim.apps.bench import inverse, measure, runs, scaling, startup, study
 from coopsim.apps.bench import Ladders, RunRow
 from coopsim.apps.bench import report as bench_report
 from coopsim.apps.bench.report import CSV_FIELDS, csv_text, json_text, markdown_report, write_outputs
 from coopsim.cli import build_parser, main
 from coopsim.core.errors import CoopsimError
+from coopsim.io.overrides import parse_assignment
+from coopsim.io.scenario import load_scenario
 from helpers import SCENARIOS
 
 # Tiny ladders: enough to exercise every family and table, a second or two per scenario.
 TINY = Ladders(rtols=(1e-4, 1e-8), rk4_steps=(0.05, 0.025), mujoco=(("RK4", (5e-3, 2.5e-3)), ("Euler", (5e-3,))),
                pin_rtols=(1e-6,), max_duration=0.2, repeats=1, repeat_budget_s=0.0, max_repeats=1,
-               eval_states=300, scaling_r=(2, 3), scaling_n=(3, 6), startup=False)
+               eval_states=300, scaling_r=(2, 3), scaling_n=(3, 6), startup=False, inverse_dts=(0.04, 0.02),
+               inverse_arms=(2, 3))
 
 
 @pytest.fixture(scope="module")
@@ -184,13 +187,20 @@ def test_report_shape_tables_and_json(report, paper):
         assert s["reference"]["far_below_targets"]
     assert sc["eval_us"]["native_amortised_us"] > 0 and own["eval_us"] is None
     assert len(report["scaling"]["points"]) == 4 and report["startup"] is None and report["commands"] is None
+    inv = report["inverse"]
+    assert [p["samples"] for p in inv["scaling"]["in_samples"]] == [326, 651]      # 13 s every 0.04 s, 0.02 s
+    assert [p["arms"] for p in inv["scaling"]["in_arms"]] == [2, 3] and inv["commands"] is None
+    assert inv["point"]["samples"] == 651 and inv["point"]["point_ms"] > 0
+    assert set(inv["scaling"]["fits"]) == {"point_in_samples", "trajectory_in_samples", "point_in_arms",
+                                           "trajectory_in_arms"}
     data = json.loads(json_text(report))  # strict JSON: NaN written as the string "NaN"
     assert data["scenarios"][0]["runs"][0].keys() >= {"family", "wall_s", "loop_s", "max_error", "pareto"}
     rows = list(csv.reader(io.StringIO(csv_text(report))))
     assert tuple(rows[0]) == CSV_FIELDS and len(rows) == 1 + len(sc["runs"]) + len(own["runs"])
     assert {r[1] for r in rows[1:]} == {"0.05", "0.01"}
     text = markdown_report(report)
-    for heading in ("## Headline", "## µs per dynamics evaluation", "## Scaling",
+    for heading in ("## Headline", "## µs per dynamics evaluation", "## Scaling", "## The inverse side",
+                    "| arms r × 6 joints | samples | IK ms | capacity point ms |",
                     "## paper_planar_2x3, 0.2 s, 0.05 s grid", "## paper_planar_2x3, 0.2 s, 0.01 s grid",
                     "| paper_planar_2x3, 0.01 s grid | 1e-03 |"):
         assert heading in text
@@ -264,6 +274,50 @@ def test_command_times_take_the_minimum_and_judge_the_targets(monkeypatch):
     monkeypatch.setattr(startup.time, "perf_counter", lambda: 0.0)
     with pytest.raises(CoopsimError, match="coopsim run failed"):
         startup.command_times("s.yaml", repeats=1, commands={"run": (["run"], 3.0)})
+
+
+@pytest.mark.parametrize("r", [2, 3])
+def test_the_synthetic_carry_starts_at_the_initial_pose_and_lifts_the_box(r):
+    """The carry's first waypoint is the object pose of the scene's initial angles (its IK gives them
+    back), the last one 5 cm above it: checked by forward kinematics of the IK's joint angles (1e-9 m and
+    rad: the IK converges to 1e-13; angles of a 6R arm are not a unique answer, the pose is)."""
+    from coopsim.inverse.trajectory import object_motion_trajectory, object_pose_of
+    model = inverse.synthetic_carry(r, 6)
+    traj = object_motion_trajectory(model, model.inverse.object_motion)
+    p0, R0 = object_pose_of(model, model.q0)
+    p_start, R_start = object_pose_of(model, traj.q[0])
+    p_end, R_end = object_pose_of(model, traj.q[-1])
+    assert np.abs(p_start - p0).max() < 1e-9 and np.abs(R_start - R0).max() < 1e-9
+    assert np.abs(p_end - p0 - [0.0, 0.0, 0.05]).max() < 1e-9 and np.abs(R_end - R0).max() < 1e-9
+    assert len(traj.t) == 101 and model.motors.stall_torque.tolist() == [100.0] * 6 * r
+
+
+def test_minimal_overrides_cut_a_study_to_its_fewest_samples(paper):
+    """The command's fixed start-up is measured on the same command with these overrides: the carry's
+    motion sampled at its two ends only, a forward scene for one 0.01 s step."""
+    carry = SCENARIOS / "paper_planar_2x3_carry.yaml"
+    words = inverse.minimal_overrides(load_scenario(carry))
+    cut = load_scenario(carry, overrides=[parse_assignment(w) for w in words[1::2]])
+    om = cut.inverse.object_motion
+    assert words[0] == "--set" and (om.times[-1] - om.times[0]) / om.output_dt + 1 == 2
+    words = inverse.minimal_overrides(paper)
+    cut = load_scenario(SCENARIOS / "paper_planar_2x3.yaml", overrides=[parse_assignment(w) for w in words[1::2]])
+    assert cut.duration == 0.01 and cut.integrator.output_dt == 0.01
+
+
+def test_command_overheads_are_the_difference_of_the_two_walls(monkeypatch):
+    """Each command on each scene twice: as given and with `minimal_overrides`; the difference is judged
+    against the 1 s margin. (Processes replaced here: the real ones run in `coopsim bench`.)"""
+    calls = []
+    monkeypatch.setattr(inverse, "command_wall", lambda words, repeats, cwd: calls.append(words) or
+                        (1.2 if "--set" in words else (2.5 if words[0] == "capacity" else 2.0)))
+    rows = inverse.command_overheads(scenes=("scenarios/paper_planar_2x3_carry.yaml",))
+    assert [(r["command"], r["above_s"], r["met"]) for r in rows] == [("capacity", pytest.approx(1.3), False),
+                                                                      ("inverse --replay", pytest.approx(0.8), True)]
+    assert calls[0][:2] == ["capacity", "scenarios/paper_planar_2x3_carry.yaml"] and "--set" in calls[1]
+    assert "| paper_planar_2x3_carry | `coopsim capacity` | 2.50 | 1.20 | 1.30 | NO |" in \
+        bench_report.inverse_lines({"point": rows and {"samples": 1, "point_ms": 1.0, "trajectory_ms": 1.0},
+                                    "scaling": {"in_samples": [], "in_arms": [], "fits": {}}, "commands": rows})
 
 
 def test_the_sources_it_stamps_and_digests_are_the_package_s():

@@ -22,6 +22,7 @@ start-up, each a fresh Python process.
     costs.py    µs per dynamics evaluation
     study.py    one scene's benchmark and its headline
     scaling.py  synthetic scenes of r arms × n joints
+    inverse.py  the inverse side: a capacity point, its cost in samples and arms, the inverse commands
     startup.py  first-run compile, cached start-up, the commands' wall times
     report.py   a report's tables and files (Markdown, CSV, JSON, figures)
     here        `run_bench`: the whole benchmark, with the environment and source state
@@ -45,6 +46,7 @@ from typing import Callable
 import coopsim
 from coopsim.apps.bench.measure import (ATOL_RATIO, FULL, OUTPUT_DT, QUICK, REFERENCE_ATOL, REFERENCE_RTOL, TARGETS,
                                         WELD_FACTORS, Ladders, RunRow, load_peers)
+from coopsim.apps.bench.inverse import inverse_bench
 from coopsim.apps.bench.scaling import scaling_study
 from coopsim.apps.bench.startup import command_times, startup_times
 from coopsim.apps.bench.study import bench_scenario, own_grid
@@ -72,7 +74,8 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
         dict: 'settings' (what was run: the Ladders as a dict, output_dt_s, reference tolerances,
         atol_over_rtol, weld_factors, targets_rad), 'environment' (`environment`, plus 'load_average_end'),
         'scenarios' (`bench_scenario` dicts, a scenario's own-grid one after its OUTPUT_DT one), 'scaling'
-        (`scaling_study`), 'startup' (`startup_times`, or None) and 'commands' (`command_times`, or None).
+        (`scaling_study`), 'inverse' (`inverse_bench`, or None without ladders.inverse_dts), 'startup'
+        (`startup_times`, or None) and 'commands' (`command_times`, or None).
     """
     peers = peers or load_peers()
     models = [load_scenario(p) for p in scenarios]
@@ -84,6 +87,7 @@ def run_bench(scenarios: list[str | Path], ladders: Ladders = FULL, peers=None,
         if dt is not None:
             report["scenarios"].append(bench_scenario(model, ladders, peers, log, output_dt=dt, costs=False))
     report["scaling"] = scaling_study(ladders, peers, log)
+    report["inverse"] = inverse_bench(ladders, log) if ladders.inverse_dts else None
     report["startup"] = report["commands"] = None
     if ladders.startup:
         log("start-up: fresh processes (compile, then cached)")

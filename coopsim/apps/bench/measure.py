@@ -62,6 +62,9 @@ class Ladders:
         own_grid: names of the scenarios benchmarked a second time on their own output grid
             (integrator.output_dt), where it is not OUTPUT_DT: every sample is reported, so the sampling's
             share of the native time grows with the grid's density.
+        inverse_dts: s, the paper carry's object-motion sample intervals of the inverse side's scaling in
+            samples (`coopsim.apps.bench.inverse`; empty: no inverse figures).
+        inverse_arms: arm counts r of the synthetic r × 6-joint carries of its scaling in arms.
     """
 
     rtols: tuple[float, ...] = tuple(10.0 ** -k for k in range(3, 13))
@@ -79,13 +82,15 @@ class Ladders:
     scaling_n: tuple[int, ...] = (3, 6, 7)
     startup: bool = True
     own_grid: tuple[str, ...] = OWN_GRID
+    inverse_dts: tuple[float, ...] = (0.04, 0.02, 0.01, 0.005)
+    inverse_arms: tuple[int, ...] = (2, 3, 4, 6)
 
 
 FULL = Ladders()
 QUICK = Ladders(rtols=(1e-3, 1e-6, 1e-9), rk4_steps=(0.05, 0.01),
                 mujoco=(("RK4", (5e-3, 1e-3)), ("Euler", (5e-3, 1e-3))), pin_rtols=(1e-4, 1e-8),
                 max_duration=0.5, repeats=1, repeat_budget_s=0.0, max_repeats=1, eval_states=2000,
-                scaling_r=(2, 3), scaling_n=(3, 6), startup=False)
+                scaling_r=(2, 3), scaling_n=(3, 6), startup=False, inverse_dts=(0.04, 0.02), inverse_arms=(2, 3))
 
 
 @dataclass

@@ -259,6 +259,53 @@ def _fit_lines(fits: dict) -> list[str]:
     return lines
 
 
+def fit_text(fit: dict | None) -> str:
+    """'p = 1.02 (rms 0.011 decades)' of a `power_fit` dict ('—' without one).
+
+    Args:
+        fit: the `power_fit` dict or None.
+
+    Returns:
+        str: the exponent and the fit's rms residual.
+    """
+    return "—" if fit is None else f"p = {fit['exponent']:.2f} (rms {fit['rms_log10']:.3f} decades)"
+
+
+def inverse_lines(inv: dict | None) -> list[str]:
+    """Markdown lines of `inverse_bench`'s figures.
+
+    Args:
+        inv: the `inverse_bench` dict, or None.
+
+    Returns:
+        list[str]: a sentence on the capacity point, the scaling tables with their fits, the commands
+        table; ["not measured"] without figures.
+    """
+    if not inv:
+        return ["not measured"]
+    p = inv["point"]
+    lines = [f"A capacity point of `scenarios/sweeps/paper_capacity_map.yaml` (the paper carry, {p['samples']} "
+             f"samples, every linear resolution and the LP bound in both capacity modes): {p['point_ms']:.1f} ms "
+             f"on the shared trajectory ({1e3 / p['point_ms']:.0f} points/s on one core); the trajectory's "
+             f"closed-chain IK itself {p['trajectory_ms']:.1f} ms.", ""]
+    sc, fits = inv["scaling"], inv["scaling"]["fits"]
+    lines += ["| output dt s | samples | IK ms | capacity point ms |", "|---|---|---|---|"]
+    lines += [f"| {q['output_dt_s']:g} | {q['samples']} | {q['trajectory_ms']:.2f} | {q['point_ms']:.2f} |"
+              for q in sc["in_samples"]]
+    lines += ["", f"In samples: the point {fit_text(fits.get('point_in_samples'))}, the IK "
+                  f"{fit_text(fits.get('trajectory_in_samples'))}.", ""]
+    lines += ["| arms r × 6 joints | samples | IK ms | capacity point ms |", "|---|---|---|---|"]
+    lines += [f"| {q['r']} | {q['samples']} | {q['trajectory_ms']:.2f} | {q['point_ms']:.2f} |" for q in sc["in_arms"]]
+    lines += ["", f"In arms: the point {fit_text(fits.get('point_in_arms'))}, the IK "
+                  f"{fit_text(fits.get('trajectory_in_arms'))}."]
+    if inv.get("commands"):
+        lines += ["", "| scene | command | wall s | at its fewest samples s | above s | met (≤ 1 s) |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {c['scene']} | `coopsim {c['command']}` | {c['wall_s']:.2f} | {c['startup_s']:.2f} | "
+                  f"{c['above_s']:.2f} | {'yes' if c['met'] else 'NO'} |" for c in inv["commands"]]
+    return lines
+
+
 def runs_lines(sc: dict) -> list[str]:
     """Every run of one scenario, Pareto-front runs marked ★.
 
@@ -350,7 +397,7 @@ def markdown_report(report: dict) -> str:
 
     Returns:
         str: the Markdown text: machine and method, headline, µs per evaluation, start-up, commands,
-        scaling, then every scenario's reference and runs; ending in a newline.
+        scaling, the inverse side, then every scenario's reference and runs; ending in a newline.
     """
     env, st = report["environment"], report.get("startup")
     lines = ["# Work-precision benchmark", "",
@@ -370,6 +417,7 @@ def markdown_report(report: dict) -> str:
     lines += ["", "## Commands (first scenario, fresh processes, cache filled)", ""]
     lines += command_lines(report.get("commands"))
     lines += ["", "## Scaling (synthetic scenes)", ""] + scaling_lines(report)
+    lines += ["", "## The inverse side", ""] + inverse_lines(report.get("inverse"))
     for sc in report["scenarios"]:
         lines += ["", f"## {sc['name']}, {sc['duration_s']:g} s, {sc['output_dt_s']:g} s grid", "",
                   reference_line(sc), ""]

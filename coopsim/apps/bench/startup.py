@@ -125,14 +125,31 @@ def command_times(scenario: str | Path, repeats: int = 2, commands=COMMANDS) -> 
     out = {}
     with tempfile.TemporaryDirectory(prefix="coopsim-bench-") as folder:
         for name, (words, target) in commands.items():
-            walls = []
-            for _ in range(max(1, repeats)):
-                cmd = [sys.executable, "-m", "coopsim.cli", words[0], str(scenario), *words[1:], "--json",
-                       "--out", folder]
-                start = time.perf_counter()
-                done = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-                walls.append(time.perf_counter() - start)
-                if done.returncode not in (0, 1):      # 1: ran, but a check failed (reported by the command)
-                    raise CoopsimError(f"coopsim {name} failed: {done.stderr.strip().splitlines()[-1:]}")
-            out[name] = {"wall_s": min(walls), "target_s": target, "met": min(walls) <= target}
+            wall = command_wall([words[0], str(scenario), *words[1:], "--json", "--out", folder], repeats)
+            out[name] = {"wall_s": wall, "target_s": target, "met": wall <= target}
     return out
+
+
+def command_wall(words: list[str], repeats: int = 2, cwd: str | Path | None = None) -> float:
+    """Wall time of a CLI command as a user runs it: fresh `python -m coopsim.cli WORDS` processes.
+
+    Args:
+        words: the command line after `coopsim`.
+        repeats: processes (one at least); the minimum is returned.
+        cwd: the processes' working folder (None: this process's).
+
+    Returns:
+        float: s, the minimum wall time over the processes.
+
+    Raises:
+        CoopsimError: a process exits with a status other than 0 or 1 (1: it ran, but a check failed).
+    """
+    walls = []
+    for _ in range(max(1, repeats)):
+        start = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "coopsim.cli", *words], cwd=cwd, capture_output=True,
+                              text=True, timeout=900)
+        walls.append(time.perf_counter() - start)
+        if done.returncode not in (0, 1):      # 1: ran, but a check failed (reported by the command)
+            raise CoopsimError(f"coopsim {words[0]} failed: {done.stderr.strip().splitlines()[-1:]}")
+    return min(walls)
