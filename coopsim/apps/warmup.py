@@ -43,7 +43,7 @@ from coopsim.compiled.closed_chain import chain_forward
 from coopsim.compiled.manifold import project_state
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T, _new_workspace
 from coopsim.control.controller import Controller
-from coopsim.core.model import ControlSettings
+from coopsim.core.model import ControlSettings, ObjectMotion
 from coopsim.io.processes import end_with_parent
 from coopsim.io.scenario import model_from_dict
 
@@ -142,12 +142,16 @@ def compile_inverse_terms(model) -> None:
 
 
 def compile_extras(model) -> None:
-    """Compile the entries some commands use: inverse kinematics and the capacity objective.
+    """Compile the entries some commands use: inverse kinematics (one arm's, and an object motion's in one
+    pass) and the capacity objective.
 
     Args:
         model: the warm-up scene's Model.
     """
     api.solve_arm(model, 0, np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6), model.q0, max_iter=1)
+    still = ObjectMotion(np.array([0.0, 1.0]), np.zeros((2, 3)), np.stack([np.eye(3)] * 2))
+    api.object_motion_ik(model, still, np.array([0.0, 1.0]), model.q0, [], np.zeros((model.r, 3)),
+                         np.full(model.r, np.inf), 1e-9, max_iter=1)
     z = np.zeros((1, 1, 1))
     min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
                              np.ones(1, bool), np.ones(1, bool), 1e-12)

@@ -31,6 +31,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
                     torque tables, stabilization
     sample.py       many states at once (θ̈, every reported quantity), inverse-dynamics terms
     ik.py           one arm's inverse kinematics and rates
+    object_motion.py closed-chain inverse kinematics of a prescribed object motion, every sample in one pass
+                    (square arms by Newton, redundant ones by their least-velocity ODE, DOP853)
     capacity.py     the minimum-energy load capacity of one weight vector (the weight optimiser's objective)
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 

@@ -19,11 +19,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled import capacity, closed_chain, control, ik, integrate, manifold, sample
+from coopsim.compiled import capacity, closed_chain, control, ik, integrate, manifold, object_motion, sample
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
-from coopsim.core.model import Model
+from coopsim.core.model import Model, ObjectMotion
 from coopsim.core.results import Projection
 
 _CACHE: "weakref.WeakKeyDictionary[Model, tuple]" = weakref.WeakKeyDictionary()   # model → `_entry`
@@ -60,11 +60,11 @@ class Compiled(NamedTuple):
 
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles
-    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics and the capacity objective (`capacity`, a
+    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories) and the capacity objective (`capacity`, a
     trajectory given as object motion: their first use compiles them, a few seconds); "control", the
     controllers (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
-            "extras": (ik.arm_solve, capacity.min_energy_mass_interval),
+            "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -648,3 +648,80 @@ def solve_arm(model: Model, m: int, p, R, twist, acc, guess: np.ndarray, tol: fl
     st = ik.arm_solve(Ps, Ws, m, _f(P.rows), _f(p), _f(R), _f(twist), _f(acc), q, tol, max_iter, sing_tol,
                       qd, qdd, info)
     return ArmSolution(int(st), q, qd, qdd, float(info[0]), float(info[1]), float(info[2]))
+
+
+class MotionSolution(NamedTuple):
+    """Closed-chain inverse kinematics of an object motion (`object_motion.trajectory`).
+
+    Attributes:
+        status: object_motion.OK or a failure code.
+        q, qd, qdd: (n_s, N) θ (rad or m), θ̇ (rad/s or m/s), θ̈ (rad/s² or m/s²), stacked arm after arm
+            (complete when OK).
+        arm: the failing arm, 0-based (a failure).
+        sample: the failing sample's index (−1: a waypoint between segments).
+        t: s, the failure's time.
+        p_C: (3,) m, the object's centre of mass there, world.
+        values: (2,) the numbers of the failure's reason (`object_motion.trajectory`'s info[4:6]).
+        t_prev: s, the previous sample's time (a singularity crossed).
+    """
+
+    status: int
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    arm: int
+    sample: int
+    t: float
+    p_C: np.ndarray
+    values: np.ndarray
+    t_prev: float
+
+
+def object_motion_ik(model: Model, motion: ObjectMotion, t_out: np.ndarray, guess: np.ndarray,
+                     redundant: list[int], first: np.ndarray, reach_lim: np.ndarray, plane_tol: float,
+                     tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7, rtol: float = 1e-12,
+                     atol: float = 1e-12) -> MotionSolution:
+    """Every arm's joint motion along a prescribed object motion, in one compiled pass over the samples.
+
+    Square arms by Newton and the differential kinematics, redundant ones by the least-joint-velocity
+    ODE with its null-space pull (DOP853 at rtol, atol) put on the grasps at every sample
+    (`coopsim.compiled.object_motion`).
+
+    Args:
+        model: the Model.
+        motion: the object's waypoints, time law, rest posture (None: the model's initial angles) and gain.
+        t_out: (n_s,) s, the sample times, within the waypoints' span.
+        guess: (N,) rad or m, stacked joint coordinates starting the inverse kinematics at the first sample.
+        redundant: the indices of the arms with more joints than rows.
+        first: (r, 3) m, each arm's first joint origin relative to its base point, world axes.
+        reach_lim: (r,) m, each arm's reach with its slack (a target farther is out of reach).
+        plane_tol: m or rad, how far a grasp may leave the constrained rows.
+        tol: Newton tolerance on max |S e| (m or rad).
+        max_iter: cap on the Newton iterations.
+        sing_tol: σ_min/σ_max of S J below which an arm counts as singular.
+        rtol, atol: DOP853's tolerances for the redundant arms' ODE.
+
+    Returns:
+        MotionSolution: the status, the joint motion and a failure's record.
+    """
+    P = compiled(model).P
+    announce_compile("extras")
+    law = object_motion.LAWS[motion.time_law]
+    rest = model.q0 if motion.rest_posture is None else motion.rest_posture
+    mo = object_motion.Motion(_f(motion.times).copy(), _f(motion.positions).copy(), _f(motion.rotations).copy(),
+                              _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain))
+    red = np.array(redundant, dtype=np.int64)
+    square = np.array([m for m in range(len(P.dof) - 1) if m not in redundant], dtype=np.int64)
+    idx = np.array([j for m in redundant for j in range(P.dof[m], P.dof[m + 1])], dtype=np.int64)
+    t_out = _f(t_out).copy()
+    n_s, n = len(t_out), int(P.dof[-1])
+    Q, QD, QDD = np.zeros((n_s, n)), np.zeros((n_s, n)), np.zeros((n_s, n))
+    info, where = np.zeros(7), np.zeros(2, dtype=np.int64)
+    L = to_struct(integrate.new_loop(np.zeros(len(idx)), float(t_out[0]), 0, 0))
+    B = object_motion.buffers(n, len(idx), len(P.dof) - 1)
+    with _leased_structs(model) as (Ps, Ws):
+        st = object_motion.trajectory(Ps, Ws, L, _tableau("dop853"), _f(P.rows).copy(), mo, red, idx, square,
+                                      _f(first).copy(), _f(reach_lim).copy(), t_out, _f(guess).copy(), tol, max_iter,
+                                      sing_tol, plane_tol, rtol, atol, Q, QD, QDD, info, where, B)
+    return MotionSolution(int(st), Q, QD, QDD, int(where[0]), int(where[1]), float(info[0]),
+                          mo.origin + info[1:4], info[4:6].copy(), float(info[6]))

@@ -87,6 +87,32 @@ def rows_of(S, v, out):
 
 @entry
 def arm_solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info):
+    """`solve` called from Python (arguments and result as there).
+
+    Args:
+        P: the compiled model (PackedModel StructRef, read only).
+        W: the workspace (Workspace StructRef), as `solve`.
+        m: arm index, 0-based.
+        S: (k, 6) row selector of the pose rows solved, k = n_m.
+        p: (3,) m, target position relative to the arm's base point, world axes.
+        R: (3, 3) target orientation of the end-effector frame, world axes.
+        twist: (6,) the end-effector twist [v; ω], m/s and rad/s, world axes.
+        acc: (6,) the end-effector acceleration [a; ω̇], m/s² and rad/s², world axes.
+        q: (N,) rad or m, the stacked joint coordinates, as `solve`.
+        tol: Newton tolerance on max |S e| (m or rad).
+        max_iter: cap on the Newton iterations.
+        sing_tol: σ_min/σ_max of S J below which the solve stops as SINGULAR.
+        qd, qdd: (N,) rad/s (m/s), rad/s² (m/s²), as `solve`.
+        info: (3,) written, as `solve`.
+
+    Returns:
+        int: SOLVED, SINGULAR or NOT_CONVERGED.
+    """
+    return solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info)
+
+
+@kernel
+def solve(P, W, m, S, p, R, twist, acc, q, tol, max_iter, sing_tol, qd, qdd, info):
     """Joint angles of arm m putting the end-effector frame at (p, R) in the rows S, then θ̇ and θ̈.
 
     Newton steps Δθ = −(S J)⁻¹ S e(θ) on the pose error e (`pose_error`) until max |S e| ≤ tol, then the

@@ -316,8 +316,23 @@ def reach_check(arm: ArmModel, point: np.ndarray) -> Reach:
     Returns:
         Reach: the distance, the reach and whether it is within it.
     """
+    first, reach = reach_bound(arm)
+    dist = float(np.linalg.norm(np.asarray(point, dtype=float) - first))
+    return Reach(dist, reach, dist <= reach * (1 + REACH_SLACK))
+
+
+def reach_bound(arm: ArmModel) -> tuple[np.ndarray, float]:
+    """The two numbers `reach_check` compares a point with: the first joint's origin and the arm's reach.
+
+    Args:
+        arm: the arm's model (ArmModel).
+
+    Returns:
+        tuple[np.ndarray, float]: the first joint's origin (3,) m relative to the arm's base point, world
+        axes (base_rot · joint_pos[0]); the reach, m (the sum of the distances between successive joint
+        origins and from the last to the end-effector; inf with a prismatic joint).
+    """
     reach = float(np.sum(np.linalg.norm(arm.joint_pos[1:], axis=1)) + np.linalg.norm(arm.ee_pos))
     if np.any(arm.prismatic):
         reach = np.inf
-    dist = float(np.linalg.norm(np.asarray(point, dtype=float) - arm.base_rot @ arm.joint_pos[0]))
-    return Reach(dist, reach, dist <= reach * (1 + REACH_SLACK))
+    return arm.base_rot @ arm.joint_pos[0], reach

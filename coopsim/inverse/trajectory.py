@@ -29,7 +29,8 @@ from coopsim.core.model import ArmModel, Model, ObjectMotion
 from coopsim.core.results import output_times
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 from coopsim.dynamics.closed_chain import arm_poses, carrier_object
-from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
+from coopsim.dynamics.kinematics import (REACH_SLACK, arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate,
+                                         reach_bound, reach_check)
 from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
 
 
@@ -273,6 +274,19 @@ def pose_error_at(pose, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return np.concatenate([pose.p_ee_rel - p, rot_log(pose.R_ee @ R.T)])
 
 
+def newton_failure(error: float, steps: int) -> str:
+    """The reason of a Newton solve that did not converge: 'Newton did not converge (max |error| … after … steps)'.
+
+    Args:
+        error: m or rad, the max |error| left.
+        steps: the steps taken.
+
+    Returns:
+        str: the one-line reason.
+    """
+    return f"Newton did not converge (max |error| {error:.3g} after {steps} steps)"
+
+
 def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np.ndarray,
            tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7) -> np.ndarray:
     """Joint angles (n,) putting the end-effector frame at (p, R) in the rows S, by Newton's method.
@@ -307,7 +321,7 @@ def arm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, guess: np
         if sv[-1] < sing_tol * sv[0]:
             raise SingularJacobian(f"singular Jacobian (σ_min/σ_max = {sv[-1] / sv[0]:.2g})")
         q -= np.linalg.solve(SJ, e)
-    raise ConstraintError(f"Newton did not converge (max |error| {np.max(np.abs(e)):.3g} after {max_iter} steps)")
+    raise ConstraintError(newton_failure(float(np.max(np.abs(e))), max_iter))
 
 
 def arm_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray):
@@ -332,30 +346,89 @@ def arm_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, ac
     return qd, qdd, float(np.linalg.det(SJ))
 
 
-def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: float = 1e-9) -> JointTrajectory:
+def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: float = 1e-9,
+                             engine: str = "compiled") -> JointTrajectory:
     """Closed-chain inverse kinematics of a prescribed object motion, sampled every motion.output_dt
     from the first to the last waypoint.
 
-    Each arm is solved by continuation: Newton from the previous sample's angles advanced by
-    θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch chosen at the start is kept.
+    Each square arm is solved by continuation: Newton from the previous sample's angles advanced by
+    θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch chosen at the start is kept;
+    the redundant arms as `redundant_motion`. engine 'compiled' runs every sample in one compiled pass
+    (`coopsim.compiled.object_motion`), 'reference' the readable NumPy/SciPy path (`redundant_motion` and
+    one compiled Newton solve per sample and arm); both give the same error texts.
 
     Args:
         model: the Model whose arms carry the object.
         motion: the object's waypoints and time law (scenario `inverse.object_motion`).
         plane_tol: m or rad, how far a target may leave the plane of motion of a planar scene.
+        engine: 'compiled' or 'reference'.
 
     Returns:
         JointTrajectory: t (N,) s and q, qd, qdd (N, n) rad (or m), stacked arm by arm.
 
     Raises:
         TrajectoryError: naming the time and arm when a target is out of reach, an arm's Jacobian is
-            singular, det(S J) changes sign between samples (a singularity is crossed), or a target
-            leaves the plane of motion.
+            singular, det(S J) changes sign between samples (a singularity is crossed), a target
+            leaves the plane of motion, or a joint leaves its range.
+        ValueError: an unknown engine.
     """
+    if engine not in ("compiled", "reference"):
+        raise ValueError(f"unknown engine {engine!r}; expected compiled or reference")
     S = model.rows
     redundant = _check_joint_counts(model, S)
     t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
+    if engine == "reference":
+        q, qd, qdd = _reference_motion(model, motion, t_out, guess, redundant, plane_tol)
+    else:
+        q, qd, qdd = _compiled_motion(model, motion, t_out, guess, redundant, plane_tol)
+    _check_joint_limits(model, t_out, q)
+    return JointTrajectory(t_out, q, qd, qdd, "object_motion")
+
+
+def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant, plane_tol):
+    """(θ, θ̇, θ̈) of every arm by `coopsim.compiled.api.object_motion_ik`, a failure raised as the reference's."""
+    from coopsim.compiled import api, object_motion as om
+
+    bounds = [reach_bound(arm) for arm in model.arms]
+    first = np.array([f for f, _ in bounds])
+    reach = np.array([r for _, r in bounds])
+    sol = api.object_motion_ik(model, motion, t_out, guess, redundant, first, reach * (1 + REACH_SLACK), plane_tol)
+    if sol.status == om.OK:
+        return sol.q, sol.qd, sol.qdd
+    m, (a, _) = sol.arm, sol.values
+    reason = {om.OUT_OF_REACH: "reach", om.NOT_CONVERGED: "newton", om.OFF_PLANE: "plane", om.CROSSES: "crosses",
+              om.SINGULAR: "singular_redundant" if m in redundant else "singular"}.get(sol.status)
+    if reason is None:
+        raise TrajectoryError(f"inverse.object_motion: the redundancy resolution's integration failed at "
+                              f"t={sol.t:.6g} s (step size collapsed)")
+    raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev)
+
+
+def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.0, reach: float = 0.0,
+             t_prev: float = 0.0, detail: str = "") -> TrajectoryError:
+    """The TrajectoryError of a failed sample of arm m at time t (p_C: the object's world position): the one
+    wording of both engines. reason: 'reach' (value: the grasp's distance), 'newton' (value: max |S e|
+    left, or detail: the solver's own words), 'singular' / 'singular_redundant' (value: σ_min/σ_max), 'plane' (value: the full pose error),
+    'crosses' (between t_prev and t)."""
+    name = model.arms[m].name
+    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
+    leaves = f"inverse.object_motion: the path leaves the workspace of arm {name!r} {where}: "
+    text = {"reach": lambda: leaves + f"its grasp is {value:.4g} m from the first joint, reach {reach:.4g} m",
+            "newton": lambda: leaves + f"no joint angles reach its grasp ({detail or newton_failure(value, 50)})",
+            "singular": lambda: f"inverse.object_motion: arm {name!r} meets a singularity {where}: singular "
+                                f"Jacobian (σ_min/σ_max = {value:.2g})",
+            "singular_redundant": lambda: f"inverse.object_motion: arm {name!r} meets a singularity at t={t:.6g} s: "
+                                          f"singular Jacobian (σ_min/σ_max = {value:.2g})",
+            "plane": lambda: f"inverse.object_motion: at t={t:.6g} s the grasp of arm {name!r} leaves the plane of "
+                             f"motion by {value:.3g} (m or rad)",
+            "crosses": lambda: f"inverse.object_motion: arm {name!r} crosses a singularity between t={t_prev:.6g} s "
+                               f"and t={t:.6g} s (det S J changes sign)"}[reason]()
+    return TrajectoryError(text)
+
+
+def _reference_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant, plane_tol):
+    """(θ, θ̇, θ̈) of every arm the readable way: `redundant_motion`, then the square arms sample by sample."""
     N, n = len(t_out), model.n_total
     q, qd, qdd = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, n))
     dets = np.zeros((N, model.r))
@@ -367,20 +440,17 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
         if i:
             h = t - t_out[i - 1]
             guess = q[i - 1] + h * qd[i - 1] + 0.5 * h * h * qdd[i - 1]
-        for m, (arm, sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.arms, model.dof_slices,
-                                                             grasp_targets(model, p_C, R_o, tw, ac, origin))):
+        for m, (sl, (p, R, tw_m, ac_m)) in enumerate(zip(model.dof_slices,
+                                                        grasp_targets(model, p_C, R_o, tw, ac, origin))):
             if m in redundant:
                 continue
             sol = _solve_arm(model, m, p, R, tw_m, ac_m, guess, t, origin + p_C)
             if sol.full_error > plane_tol:
-                raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
-                                      f"leaves the plane of motion by {sol.full_error:.3g} (m or rad)")
+                raise _failure(model, "plane", m, t, origin + p_C, sol.full_error)
             q[i, sl], qd[i, sl], qdd[i, sl], dets[i, m] = sol.q[sl], sol.qd[sl], sol.qdd[sl], sol.det
             if i and np.sign(dets[i, m]) != np.sign(dets[i - 1, m]):
-                raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} crosses a singularity between "
-                                      f"t={t_out[i - 1]:.6g} s and t={t:.6g} s (det S J changes sign)")
-    _check_joint_limits(model, t_out, q)
-    return JointTrajectory(t_out, q, qd, qdd, "object_motion")
+                raise _failure(model, "crosses", m, t, origin + p_C, t_prev=t_out[i - 1])
+    return q, qd, qdd
 
 
 # The fields of a Model that the object-motion trajectory does not depend on: what a sweep may change
@@ -513,7 +583,7 @@ def min_norm_ik(arm: ArmModel, S: np.ndarray, p: np.ndarray, R: np.ndarray, gues
             return q
         A = S @ ee_jacobian(pose)
         q -= A.T @ np.linalg.solve(A @ A.T, e)
-    raise ConstraintError(f"Newton did not converge (max |error| {np.max(np.abs(e)):.3g} after {max_iter} steps)")
+    raise ConstraintError(newton_failure(float(np.max(np.abs(e))), max_iter))
 
 
 REDUNDANT_RTOL = 1e-12   # DOP853 tolerances of the redundancy-resolution ODE (rad)
@@ -568,9 +638,7 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
                                          rest[sl], motion.rest_gain)
             sv = np.linalg.svd(A, compute_uv=False) if acc else np.ones(1)
             if not sv[-1] >= sing_tol * sv[0]:
-                ratio = sv[-1] / sv[0]
-                raise TrajectoryError(f"inverse.object_motion: arm {model.arms[m].name!r} meets a singularity at "
-                                      f"t={t:.6g} s: singular Jacobian (σ_min/σ_max = {ratio:.2g})")
+                raise _failure(model, "singular_redundant", m, t, np.zeros(3), sv[-1] / sv[0])
             out.append((rd, rdd))
         return out
 
@@ -610,19 +678,15 @@ def _redundant_ik(model: Model, m: int, p, R, guess, t, p_C, plane_tol):
     """Least-norm IK of redundant arm m (`min_norm_ik`) with the one-line errors of `_solve_arm`."""
     arm, S = model.arms[m], model.rows
     dist, reach, ok = reach_check(arm, p)
-    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
     if not ok:
-        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
-                              f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
+        raise _failure(model, "reach", m, t, p_C, dist, reach)
     try:
         q = min_norm_ik(arm, S, p, R, guess)
     except ConstraintError as e:
-        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
-                              f"no joint angles reach its grasp ({e})") from None
+        raise _failure(model, "newton", m, t, p_C, detail=str(e)) from None
     full = float(np.max(np.abs(pose_error(arm, q, p, R))))
     if full > plane_tol:
-        raise TrajectoryError(f"inverse.object_motion: at t={t:.6g} s the grasp of arm {arm.name!r} "
-                              f"leaves the plane of motion by {full:.3g} (m or rad)")
+        raise _failure(model, "plane", m, t, p_C, full)
     return q
 
 
@@ -632,20 +696,14 @@ def _solve_arm(model: Model, m: int, p, R, twist, acc, guess, t, p_C):
     naming the arm and the time (p_C: the object's world position, for the message)."""
     from coopsim.compiled import api, ik
 
-    arm = model.arms[m]
-    dist, reach, ok = reach_check(arm, p)
-    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
+    dist, reach, ok = reach_check(model.arms[m], p)
     if not ok:
-        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
-                              f"its grasp is {dist:.4g} m from the first joint, reach {reach:.4g} m")
+        raise _failure(model, "reach", m, t, p_C, dist, reach)
     sol = api.solve_arm(model, m, p, R, twist, acc, guess)
     if sol.status == ik.SINGULAR:
-        raise TrajectoryError(f"inverse.object_motion: arm {arm.name!r} meets a singularity {where}: singular "
-                              f"Jacobian (σ_min/σ_max = {sol.ratio:.2g})")
+        raise _failure(model, "singular", m, t, p_C, sol.ratio)
     if sol.status != ik.SOLVED:
-        raise TrajectoryError(f"inverse.object_motion: the path leaves the workspace of arm {arm.name!r} {where}: "
-                              f"no joint angles reach its grasp (Newton did not converge (max |error| "
-                              f"{sol.ratio:.3g} after 50 steps))")
+        raise _failure(model, "newton", m, t, p_C, sol.ratio)
     return sol
 
 
