@@ -11,7 +11,9 @@ import numpy as np
 from coopsim.inverse.problem import inverse_problem
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
-from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory
+from coopsim.core.model import ObjectMotion
+from coopsim.core.spatial import axis_angle_to_rot
+from coopsim.inverse.trajectory import from_simulation, object_motion_trajectory, object_pose_of
 from helpers import SCENARIOS
 
 BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.yaml"))
@@ -48,3 +50,15 @@ def with_motors(model, res, traj):
     stall = np.maximum(1.5 * peak_tau, 1.0)
     speed = np.maximum(3 * np.max(np.abs(traj.qd), axis=0), 1.0)
     return replace(model, motors=replace(model.motors, stall_torque=stall, no_load_speed=speed))
+
+
+def short_motion(m, scale: float = 0.25) -> ObjectMotion:
+    """0.6 s, three waypoints from the object's initial pose: a few mm along the constrained linear rows
+    and a few mrad about the constrained angular ones, 50 ms samples."""
+    p, R = object_pose_of(m, m.q0)
+    S = m.rows
+    lin = scale * (S[:, :3].T @ np.array([0.02, -0.015, 0.01, 0.012, -0.01, 0.008])[:S.shape[0]])
+    ang = S[:, 3:].T @ np.ones(S.shape[0])
+    ax = ang / np.linalg.norm(ang)
+    Rs = [R, R @ axis_angle_to_rot(ax, scale * 0.04), R @ axis_angle_to_rot(ax, -scale * 0.02)]
+    return ObjectMotion(np.array([0.0, 0.3, 0.6]), np.array([p, p + lin, p - 0.5 * lin]), np.array(Rs), "quintic", 0.05)

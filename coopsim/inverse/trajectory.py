@@ -400,8 +400,7 @@ def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant
     reason = {om.OUT_OF_REACH: "reach", om.NOT_CONVERGED: "newton", om.OFF_PLANE: "plane", om.CROSSES: "crosses",
               om.SINGULAR: "singular_redundant" if m in redundant else "singular"}.get(sol.status)
     if reason is None:
-        raise TrajectoryError(f"inverse.object_motion: the redundancy resolution's integration failed at "
-                              f"t={sol.t:.6g} s (step size collapsed)")
+        reason = "integration"
     raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev)
 
 
@@ -410,7 +409,7 @@ def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.
     """The TrajectoryError of a failed sample of arm m at time t (p_C: the object's world position): the one
     wording of both engines. reason: 'reach' (value: the grasp's distance), 'newton' (value: max |S e|
     left, or detail: the solver's own words), 'singular' / 'singular_redundant' (value: σ_min/σ_max), 'plane' (value: the full pose error),
-    'crosses' (between t_prev and t)."""
+    'crosses' (between t_prev and t), 'integration' (the redundant arms' ODE stopped)."""
     name = model.arms[m].name
     where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
     leaves = f"inverse.object_motion: the path leaves the workspace of arm {name!r} {where}: "
@@ -422,6 +421,8 @@ def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.
                                           f"singular Jacobian (σ_min/σ_max = {value:.2g})",
             "plane": lambda: f"inverse.object_motion: at t={t:.6g} s the grasp of arm {name!r} leaves the plane of "
                              f"motion by {value:.3g} (m or rad)",
+            "integration": lambda: f"inverse.object_motion: the redundancy resolution's integration failed at "
+                                   f"t={t:.6g} s (step size collapsed)",
             "crosses": lambda: f"inverse.object_motion: arm {name!r} crosses a singularity between t={t_prev:.6g} s "
                                f"and t={t:.6g} s (det S J changes sign)"}[reason]()
     return TrajectoryError(text)
@@ -617,7 +618,7 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
 
     Raises:
         TrajectoryError: an arm nears a singularity (σ_min/σ_max of S J below sing_tol), leaves its
-            reach or the plane of motion.
+            reach or the plane of motion, or the integration stops (its step size collapsed).
     """
     from scipy.integrate import solve_ivp
 
@@ -658,10 +659,12 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
         x0 = np.concatenate([y[sl] for sl in slices])
         sol = solve_ivp(rhs, (ta, tb), x0, method="DOP853", rtol=REDUNDANT_RTOL, atol=REDUNDANT_ATOL,
                         dense_output=True)
-        for i in np.flatnonzero(inside):
+        for i in np.flatnonzero(inside if sol.status == 0 else inside & (t_out <= sol.t[-1])):
             q[i], tg = on_grasp(t_out[i], _stacked(model.n_total, slices, sol.sol(t_out[i])))
             for sl, (rd, rdd) in zip(slices, rates(t_out[i], q[i], tg, acc=True)):
                 qd[i, sl], qdd[i, sl] = rd, rdd
+        if sol.status != 0:
+            raise _failure(model, "integration", 0, float(sol.t[-1]), np.zeros(3))
         y = on_grasp(tb, _stacked(model.n_total, slices, sol.sol(tb)))[0]
     return q, qd, qdd
 

@@ -5,9 +5,11 @@ kernel a second time on a first run."""
 
 import pytest
 
-from coopsim.compiled import api
+from coopsim.compiled import api, object_motion
 from coopsim.apps import warmup
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
+from coopsim.inverse.trajectory import object_motion_trajectory, shared_object_motion_trajectory
+from inverse_cases import model, short_motion
 
 
 @pytest.mark.parametrize("group", ["base", "extras", "control"])
@@ -19,3 +21,14 @@ def test_the_warm_up_leaves_no_group_pending(group):
 def test_a_kernel_compiled_by_signature_has_no_other_signature(kernel):
     cached = {key[0] for key in kernel._cache._cache_file._load_index()}
     assert cached == {(PACKED_T, WORKSPACE_T, *warmup._signatures()[kernel])}, kernel.__name__
+
+
+def test_object_motion_passes_use_the_warm_up_signature():
+    """The compiled object-motion pass called as the commands call it (a square scene through the shared
+    trajectories' copies, a scene with redundant arms) finds the one signature the warm-up cached."""
+    for name in ("paper_planar_2x3_carry", "hard/planar_4arm_mixed"):
+        m = model(name)
+        motion = m.inverse.object_motion or short_motion(m)
+        shared_object_motion_trajectory(m, motion)
+        object_motion_trajectory(m, motion)
+    assert len(object_motion.trajectory._cache._cache_file._load_index()) == 1
