@@ -169,9 +169,11 @@ def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float,
         if not chosen.feasible:
             raise rt.RetimeError(f"--payload: no motion carries {payload:g} kg along the path "
                                  f"(static capacity {rt.static_capacity(dyn):.6g} kg)")
-    if not (bare.converged and best.converged and (chosen is None or chosen.converged)):
-        raise rt.RetimeError(f"{method}: the linearisation of the motor lines did not converge "
-                             f"in {rt.MAX_LINEARISATIONS} linearisations")
+    for r in (bare, best, chosen):
+        if r is not None and not r.converged:
+            raise rt.RetimeError(f"{method}: the linearisation of the motor lines did not converge at {r.mass:.6g} kg "
+                                 f"(status: not converged after {r.iterations} linearisations, last relative change "
+                                 f"of ṡ² {r.stats.get('relative_change', float('nan')):.3g}); nothing written")
     curve = [(float(dyn.nominal_mass), bare.duration)]
     for mu in np.linspace(dyn.nominal_mass, mass, CURVE_POINTS)[1:-1]:
         r = rt.retime(dyn, float(mu), start=bare.law.b)
