@@ -46,10 +46,12 @@ from coopsim.core.model import Model, Motors, ObjectMotion, SampledTimeLaw
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.path import JointPath
 from coopsim.inverse.problem import InverseProblem, inverse_problem
+from coopsim.inverse.qp import solve_lps
 from coopsim.inverse.solve import resolution_for
 
 LP_BOUND = "lp"                 # the method name of the best distribution (grasp wrenches free per point)
 B_FLOOR = 1e-14                 # relative floor of b̄ in the tangent (b̄ = 0 at a piece's ends)
+SHRINKS = 30                    # the most times b̄ is quartered when the rows linearised at it have no solution
 MAX_LINEARISATIONS = 60         # the most linearisations of the motor lines per minimum-time solve
 BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's LP bounded
 
@@ -532,7 +534,8 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
            start: np.ndarray | None = None) -> Retiming:
     """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module).
 
-    The rows are linearised at b̄ (first without the velocity term, or at `start`), solved, and
+    The rows are linearised at b̄ (first without the velocity term, or at `start`; where the rows
+    linearised there have no solution, at b̄/4, up to SHRINKS times), solved, and
     linearised again at the solution until max |b − b̄| ≤ tol·max b; `check_time_law` then measures
     the exact lines.
 
@@ -565,8 +568,12 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     else:
         b, stats = start, {}
     scale = max(float(np.max(b)), 1e-300)
+    shrunk = 0
     for it in range(1, max_iter + 1):
         new, stats = solve(_tangent(b, scale))
+        if new is None and shrunk < SHRINKS and np.any(b > 0):
+            b, shrunk = b / 4.0, shrunk + 1        # a tangent far above the feasible ṡ² overestimates θ̇ at rest
+            continue
         if new is None:
             return Retiming(mass, None, False, True, it, solver, stats=stats)
         change = float(np.max(np.abs(new - b)))
@@ -722,6 +729,47 @@ def line_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray, f:
     drop = dyn.slope[j] * qd
     hi, lo = dyn.stall[j] - drop, -dyn.stall[j] - drop
     return np.maximum(tau - hi, lo - tau) / dyn.stall[j], j
+
+
+def best_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The LP bound's excess at points with (a, b): per point the least max relative excess over any
+    grasp wrenches f with A f = y(a, b, μ) (passive torques 0), one small LP per point.
+
+    Args:
+        dyn: the PathDynamics of 'lp' (N points).
+        mass: kg, μ.
+        a: (N,) 1/s², s̈.
+        b: (N,) 1/s², ṡ².
+
+    Returns:
+        tuple: (N,) the least excess relative to τ_s (≤ 0: some distribution keeps every line), and (N, rk)
+        the grasp wrenches reaching it.
+
+    Raises:
+        RetimeError: HiGHS fails on a point.
+    """
+    j = np.flatnonzero(dyn.active & np.isfinite(dyn.stall))
+    N, rk = len(dyn.path.s), dyn.JT.shape[2]
+    ta = dyn.torques(mass, a, b)
+    qd = dyn.path.d1[:, j] * np.sqrt(np.maximum(b, 0.0))[:, None]
+    drop = dyn.slope[j] * qd
+    JT = dyn.JT[:, j, :]
+    ts = np.broadcast_to(dyn.stall[j], (N, len(j)))[:, :, None]
+    A_ub = np.concatenate([np.concatenate([JT, -ts], 2), np.concatenate([-JT, -ts], 2)], 1)
+    b_ub = np.concatenate([dyn.stall[j] - drop - ta[:, j], ta[:, j] + dyn.stall[j] + drop], 1)
+    Y = dyn.y[0] + mass * dyn.y[1]
+    y = Y[0] + a[:, None] * Y[1] + b[:, None] * Y[2]
+    pas = ~dyn.active
+    A_eq = np.concatenate([np.concatenate([dyn.A, np.zeros((N, dyn.A.shape[1], 1))], 2),
+                           np.concatenate([dyn.JT[:, pas, :], np.zeros((N, int(pas.sum()), 1))], 2)], 1)
+    b_eq = np.concatenate([y, -ta[:, pas]], 1)
+    c = np.zeros(rk + 1)
+    c[-1] = 1.0
+    lp = solve_lps(c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (rk + 1))
+    if np.any(lp.status != 0):
+        i = int(np.flatnonzero(lp.status != 0)[0])
+        raise RetimeError(f"lp: HiGHS failed at s={dyn.path.s[i]:.6g}: {lp.messages[i]}")
+    return lp.x[:, -1], lp.x[:, :rk]
 
 
 def check_time_law(dyn: PathDynamics, r: Retiming) -> dict:
