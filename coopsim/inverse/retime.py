@@ -466,7 +466,30 @@ def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dic
         return None, stats
     if lp:
         stats["f"] = r.x[N:].reshape(K, 2, rk)
+    stats["certificate"] = _certificate(r, b_ub[keep], b_eq, bounds, np.flatnonzero(keep), K, G.shape[1], st, j)
     return np.maximum(r.x[:N], 0.0), stats
+
+
+def _certificate(r, b_ub, b_eq, bounds, rows, K, m, st, joints) -> dict:
+    """The grid LP's dual certificate: the dual objective (equal to the primal's at an optimum, its duals of
+    the right sign), their gap, how many motor-line rows bind (nonzero dual) and the one of largest dual
+    (its grid point, stacked joint, side of the interval and line)."""
+    y_ub = r.ineqlin.marginals
+    dual = float(b_ub @ y_ub + (0.0 if b_eq is None else b_eq @ r.eqlin.marginals)
+                 + np.where(np.isfinite(bounds[:, 1]), bounds[:, 1], 0.0) @ r.upper.marginals
+                 + np.where(np.isfinite(bounds[:, 0]), bounds[:, 0], 0.0) @ r.lower.marginals)
+    big = np.abs(y_ub) > 1e-9 * max(float(np.max(np.abs(y_ub), initial=0.0)), 1e-300)
+    out = {"primal": float(r.fun), "dual": dual, "gap": abs(float(r.fun) - dual), "sign_ok": bool(np.all(y_ub <= 0)),
+           "binding_rows": int(big.sum())}
+    if np.any(big):
+        k = int(rows[int(np.argmax(np.abs(y_ub)))])
+        side, rest = divmod(k, K * m)
+        stage, col = divmod(rest, m)
+        n_a = len(joints)
+        out["largest"] = {"point": int(st[stage] + side), "joint": int(joints[col % n_a]),
+                          "interval_side": "start" if side == 0 else "end",
+                          "line": "tau_max" if col < n_a else "tau_min", "dual": float(y_ub[int(np.argmax(np.abs(y_ub)))])}
+    return out
 
 
 def _lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv):

@@ -242,6 +242,19 @@ def _retiming_entry(model: Model, r: rt.Retiming | None) -> dict | None:
             "linearisations": r.iterations, "solver": r.solver}
 
 
+def _certificate_entry(r: rt.Retiming, names: list[str]) -> dict | None:
+    """The grid LP's dual certificate with its largest dual's point as s and its joint by name."""
+    c = (r.stats or {}).get("certificate")
+    if c is None:
+        return None
+    c = dict(c)
+    if "largest" in c:
+        big = dict(c["largest"])
+        big["s"], big["motor"] = float(r.law.s[big.pop("point")]), names[big.pop("joint")]
+        c["largest"] = big
+    return c
+
+
 def retime_summary(study: RetimeStudy) -> dict:
     """JSON-ready summary of a retiming study (SI units).
 
@@ -253,7 +266,8 @@ def retime_summary(study: RetimeStudy) -> dict:
         method: before (the scenario's own time law: capacity kg, saturating motor), after (heaviest load
         within T_max, its duration, the critical point and motor), bare-object minimum time, asked payload,
         payload–time curve, the exact check on the grid and the finer grid, the saturating motor at each
-        grid point, solver statistics and wall times.
+        grid point, the grid LP's dual certificate (primal and dual objectives, their gap, the binding motor
+        line of largest dual), solver statistics and wall times.
     """
     m = study.model
     names = joint_labels(m)
@@ -283,7 +297,9 @@ def retime_summary(study: RetimeStudy) -> dict:
             "on_line_per_point": [bool(x) for x in sat["on_line"]],
             "solver": {"name": use.solver, "heaviest_load_evaluations": mr.evaluations,
                        "heaviest_load_wall_s": mr.wall_s, "bare_object_retime_wall_s": mr.retime_s,
-                       **({} if not use.stats else {kk: v for kk, v in use.stats.items() if kk != "f"})},
+                       **({} if not use.stats else {kk: v for kk, v in use.stats.items()
+                                                    if kk not in ("f", "certificate")})},
+            "dual_certificate": _certificate_entry(use, names),
         }
     return {
         "scenario": m.name, "mode": study.mode,
