@@ -194,7 +194,7 @@ def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
 
     Returns:
         dict: max_excess (relative to τ_s), s and joint of the worst point (the LP bound: with the best
-        grasp wrenches at each point, `coopsim.inverse.retime.best_excess`).
+        grasp wrenches at each point, `coopsim.inverse.retime.best_excess`), and max_speed_excess.
     """
     a, b = r.law.at(fine.path.s, fine.path.points.piece)
     f = None
@@ -202,10 +202,12 @@ def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
         best, f = rt.best_excess(fine, r.mass, a, b)
         i = int(np.argmax(best))
         ex, j = rt.line_excess(fine, r.mass, a[i:i + 1], b[i:i + 1], f[i:i + 1])
-        return {"max_excess": float(best[i]), "s": float(fine.path.s[i]), "joint": int(j[int(np.argmax(ex[0]))])}
+        return {"max_excess": float(best[i]), "s": float(fine.path.s[i]), "joint": int(j[int(np.argmax(ex[0]))]),
+                "max_speed_excess": rt.speed_excess(fine, b)}
     ex, j = rt.line_excess(fine, r.mass, a, b, f)
     i, jj = np.unravel_index(int(np.argmax(ex)), ex.shape)
-    return {"max_excess": float(ex[i, jj]), "s": float(fine.path.s[i]), "joint": int(j[jj])}
+    return {"max_excess": float(ex[i, jj]), "s": float(fine.path.s[i]), "joint": int(j[jj]),
+            "max_speed_excess": rt.speed_excess(fine, b)}
 
 
 def max_velocity_curve(dyn: rt.PathDynamics, r: rt.Retiming) -> np.ndarray:
@@ -289,9 +291,11 @@ def retime_summary(study: RetimeStudy) -> dict:
             "payload": _retiming_entry(m, mr.chosen),
             "payload_time_curve": [{"mass_kg": a, "duration_s": t} for a, t in mr.curve],
             "check_grid": {"max_excess": mr.grid_check["max_excess"], "s": mr.grid_check["s"],
+                           "max_speed_excess": mr.grid_check["max_speed_excess"],
                            "motor": None if mr.grid_check["joint"] is None else names[mr.grid_check["joint"]],
                            "law": "payload" if mr.chosen is not None else "after"},
             "check_fine_grid": {"max_excess": mr.fine_check["max_excess"], "s": mr.fine_check["s"],
+                                "max_speed_excess": mr.fine_check["max_speed_excess"],
                                 "motor": names[mr.fine_check["joint"]], "points_per_interval": FINE},
             "saturating_motor_per_point": [names[j] for j in sat["joint"]],
             "on_line_per_point": [bool(x) for x in sat["on_line"]],
@@ -357,12 +361,7 @@ def retime_series(study: RetimeStudy) -> list:
         r = mr.law_of
         law = r.law
         keep = np.concatenate([np.diff(law.t) > 0, [True]])       # one sample per time (knots once)
-        f = None
-        if r.f is not None:
-            st = np.flatnonzero(law.piece[1:] == law.piece[:-1])
-            f = np.zeros((len(law.s), r.f.shape[2]))
-            f[st], f[st[-1] + 1] = r.f[:, 0], r.f[-1, 1]
-        tau = mr.dyn.torques(r.mass, law.a, law.b, f)
+        tau = mr.dyn.torques(r.mass, law.point_accel(), law.b, rt.point_wrenches(r))
         qd = mr.dyn.path.d1 * np.sqrt(law.b)[:, None]
         drop = mr.dyn.slope * qd
         out.append(Series(f"/optimize/{k}/law", "coopsim.optimize.Law", law.t[keep],
