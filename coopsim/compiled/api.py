@@ -708,8 +708,11 @@ def object_motion_ik(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
     announce_compile("extras")
     law = object_motion.LAWS[motion.time_law]
     rest = model.q0 if motion.rest_posture is None else motion.rest_posture
+    law_t, law_s, law_rate = ((motion.samples.t, motion.samples.s, motion.samples.rate) if law == object_motion.SAMPLED
+                              else (motion.times[:2], np.zeros(2), np.zeros(2)))
     mo = object_motion.Motion(_f(motion.times).copy(), _f(motion.positions).copy(), _f(motion.rotations).copy(),
-                              _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain))
+                              _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain),
+                              _f(law_t).copy(), _f(law_s).copy(), _f(law_rate).copy())
     red = np.array(redundant, dtype=np.int64)
     square = np.array([m for m in range(len(P.dof) - 1) if m not in redundant], dtype=np.int64)
     idx = np.array([j for m in redundant for j in range(P.dof[m], P.dof[m + 1])], dtype=np.int64)

@@ -36,8 +36,8 @@ from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.core.model import PRISMATIC
 
 OK, OUT_OF_REACH, SINGULAR, NOT_CONVERGED, OFF_PLANE, CROSSES, STEP_COLLAPSED = range(7)
-QUINTIC, CUBIC = 0, 1
-LAWS = {"quintic": QUINTIC, "cubic": CUBIC}
+QUINTIC, CUBIC, SAMPLED = 0, 1, 2
+LAWS = {"quintic": QUINTIC, "cubic": CUBIC, "sampled": SAMPLED}
 
 
 class Motion(NamedTuple):
@@ -48,9 +48,13 @@ class Motion(NamedTuple):
         positions: (w, 3) m, the centre of mass C at the waypoints, world.
         rotations: (w, 3, 3) world ← object, at the waypoints.
         origin: (3,) m, world: the point positions are taken relative to (the first waypoint).
-        law: QUINTIC or CUBIC.
+        law: QUINTIC, CUBIC or SAMPLED.
         rest: (N,) rad or m, the stacked rest posture of the redundant arms' null-space pull.
         gain: 1/s, the pull's gain.
+        law_t: (K,) s, a SAMPLED law's sample times (`coopsim.core.model.SampledTimeLaw`; any two values
+            otherwise).
+        law_s: (K,) its path parameter σ at the samples (waypoint i at σ = i/(w − 1)).
+        law_rate: (K,) 1/s, its σ̇ at the samples (σ̈ constant between them).
     """
 
     times: np.ndarray
@@ -60,6 +64,9 @@ class Motion(NamedTuple):
     law: int
     rest: np.ndarray
     gain: float
+    law_t: np.ndarray
+    law_s: np.ndarray
+    law_rate: np.ndarray
 
 
 class Buffers(NamedTuple):
@@ -133,6 +140,32 @@ def time_law(law, u):
 
 
 @kernel
+def segment_law(mo, i, t, T):
+    """(s, ds/du, d²s/du²) on waypoint segment i (duration T s) at time t: the normalised law at
+    u = (t − t_i)/T, or of a SAMPLED law σ(t) (`coopsim.inverse.trajectory.sampled_time_law_at`):
+    s = (w − 1)σ − i, ds/du = (w − 1)σ̇T, d²s/du² = (w − 1)σ̈T².
+
+    Args:
+        mo: the Motion.
+        i: the segment (waypoints i and i + 1).
+        t: s, the time, within the waypoints' span.
+        T: s, the segment's duration.
+
+    Returns:
+        tuple[float, float, float]: s, ds/du and d²s/du².
+    """
+    if mo.law != SAMPLED:
+        return time_law(mo.law, (t - mo.times[i]) / T)
+    ts, K, w1 = mo.law_t, len(mo.law_t), len(mo.times) - 1
+    tc = min(max(t, ts[0]), ts[K - 1])
+    k = K - 2 if tc >= ts[K - 2] else bisect(ts, 0, K - 2, tc)
+    tau = tc - ts[k]
+    acc = (mo.law_rate[k + 1] - mo.law_rate[k]) / (ts[k + 1] - ts[k])
+    sigma = mo.law_s[k] + mo.law_rate[k] * tau + 0.5 * acc * tau * tau
+    return w1 * sigma - i, w1 * (mo.law_rate[k] + acc * tau) * T, w1 * acc * T**2
+
+
+@kernel
 def object_state(mo, t, B):
     """The object at time t (clamped to the waypoints): B.pc, B.Ro, B.tw, B.ac.
 
@@ -149,7 +182,7 @@ def object_state(mo, t, B):
     t = min(max(t, ts[0]), ts[w - 1])
     i = w - 2 if t >= ts[w - 2] else bisect(ts, 0, w - 2, t)
     T = ts[i + 1] - ts[i]
-    s, ds, dds = time_law(mo.law, (t - ts[i]) / T)
+    s, ds, dds = segment_law(mo, i, t, T)
     Ra, Rb, E, phi = Rs[i], Rs[i + 1], B.E, B.v
     for a in range(3):
         for b in range(3):
