@@ -14,13 +14,13 @@ waiting for what the other one compiles:
                      once the constructors are on disk, the inverse-dynamics terms; once
                      `chain_forward` is, the evaluation entry; once the projection kernels are, the
                      consistent projection;
-  child "control" (with `control`): once `chain_forward` is on disk, the extras (inverse kinematics,
-                     the capacity objective), the controller entries and the time loop with a
-                     controller in it.
+  child "control" (with `control`): once `chain_forward` is on disk, the extras (inverse
+                     kinematics, the capacity objective, the linear resolutions' pass), the controller
+                     entries and the time loop with a controller in it.
 Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
-it needs itself. Without `control` the extras compile on their first use (`capacity`, object-motion
-trajectories), the controllers on the first closed-loop run (`warm_up_group`). The children end with
+it needs itself. Without `control` the extras compile on their first use (`inverse`, `capacity`,
+object-motion trajectories), the controllers on the first closed-loop run (`warm_up_group`). The children end with
 this process however it ends (`coopsim.io.processes`), and are stopped when it is interrupted.
 `python -m coopsim.apps.warmup` compiles everything.
 """
@@ -143,7 +143,7 @@ def compile_inverse_terms(model) -> None:
 
 def compile_extras(model) -> None:
     """Compile the entries some commands use: inverse kinematics (one arm's, and an object motion's in one
-    pass) and the capacity objective.
+    pass), the capacity objective and the linear resolutions' pass.
 
     Args:
         model: the warm-up scene's Model.
@@ -155,6 +155,12 @@ def compile_extras(model) -> None:
     z = np.zeros((1, 1, 1))
     min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
                              np.ones(1, bool), np.ones(1, bool), 1e-12)
+    n, k, r = model.n_total, model.rows.shape[0], model.r
+    lim = np.zeros((1, n))
+    api.linear_pass(np.zeros((1, n, r * k)), np.zeros((1, k, r * k)), lim, np.zeros((1, r, 6, 6)), np.eye(3)[None],
+                    model.rows, np.ones(r), np.zeros((r, 3, 3)), np.zeros((1, r * k, k)), np.zeros((1, r * k, 0)),
+                    np.ones(1, bool), model.motors.passive, np.ones(n), np.zeros((1, 1, k)), np.ones(3, bool), 0, lim,
+                    lim, [(0, 0)], 1e-12)
 
 
 def compile_evaluations(model) -> None:

@@ -34,6 +34,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     object_motion.py closed-chain inverse kinematics of a prescribed object motion, every sample in one pass
                     (square arms by Newton, redundant ones by their least-velocity ODE, DOP853)
     capacity.py     the minimum-energy load capacity of one weight vector (the weight optimiser's objective)
+    distributions.py the linear redundancy resolutions over all samples in one pass: grasp wrenches,
+                    torques, internal wrenches and the load-capacity ratio test
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 
 The first compile, on two cores with no kernel compiled twice, is `coopsim.apps.warmup`'s.

@@ -19,7 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled import capacity, closed_chain, control, ik, integrate, manifold, object_motion, sample
+from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, manifold, object_motion,
+                              sample)
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
@@ -60,11 +61,13 @@ class Compiled(NamedTuple):
 
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles
-    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories) and the capacity objective (`capacity`, a
+    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion
+    trajectories), the capacity objective and the linear resolutions' pass (`inverse`, `capacity`, a
     trajectory given as object motion: their first use compiles them, a few seconds); "control", the
     controllers (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
-            "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval),
+            "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval,
+                       distributions.linear_pass),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -289,6 +292,13 @@ def chain_terms(model: Model, q: np.ndarray, qd: np.ndarray) -> Workspace:
 
 def _f(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def _w(x, dtype=np.float64) -> np.ndarray:
+    """x as a writable C-contiguous array of dtype (a copy only where x is not one already): a read-only
+    argument would make numba compile an entry again, for the read-only signature."""
+    x = np.ascontiguousarray(x, dtype=dtype)
+    return x if x.flags.writeable else x.copy()
 
 
 MIN_PER_THREAD = 200   # states per thread below which a batch runs on the calling thread (the pool's cost outweighs it)
@@ -566,6 +576,70 @@ def inverse_terms(model: Model, Q: np.ndarray, QD: np.ndarray, QDD: np.ndarray,
     _map(run, chunks)
     return out
 
+
+class LinearPass(NamedTuple):
+    """The linear resolutions over the samples (`distributions.linear_pass`); method axis PAPER,
+    NONSQUEEZING, MIN_ENERGY of `coopsim.compiled.distributions`.
+
+    Attributes:
+        f: (3, s, N, m) [N; N·m], the grasp wrenches in the rows S of each net wrench, world axes.
+        tau: (3, s, N, n) N·m (N on a prismatic joint), the torques.
+        internal_paper: (3, N, r, 6) [N; N·m], the paper internal wrenches at C of the net wrench asked for.
+        internal_nonsqueezing: (3, N, r, 6) [N; N·m], the non-squeezing ones.
+        up: (3, P, N, n) kg, the largest carried mass each motor line allows, per ratio test.
+        dn: (3, P, N, n) kg, the smallest.
+        unsure: (3, N) bool, the samples left to the NumPy path (the arrays above are not written there).
+    """
+
+    f: np.ndarray
+    tau: np.ndarray
+    internal_paper: np.ndarray
+    internal_nonsqueezing: np.ndarray
+    up: np.ndarray
+    dn: np.ndarray
+    unsure: np.ndarray
+
+
+def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular, passive, weights, ys, which,
+                wrench_of: int, lo, hi, pairs, rank_tol: float) -> LinearPass:
+    """The linear resolutions of s net wrenches at N samples in one compiled pass (`distributions.linear_pass`).
+
+    Args:
+        JT: (N, n, m) Jᵀ, the end-effector Jacobians in the rows S, transposed (m = rk).
+        A: (N, k, m) A = [S W_1 Sᵀ … S W_r Sᵀ].
+        tau_arms: (N, n) N·m (N on a prismatic joint), τ_arms.
+        W: (N, r, 6, 6) the grasp matrices.
+        R_o: (N, 3, 3) the object rotation, world ← object frame.
+        rows: (k, 6) the constraint rows S.
+        masses: (r,) kg, the non-squeezing virtual masses.
+        inertias: (r, 3, 3) kg·m², the virtual inertias, object frame.
+        Cp: (N, m, c) C⁺ of the minimum-energy constraints C = [A; P Jᵀ].
+        Z: (N, m, d) an orthonormal basis of null(C).
+        regular: (N,) bool, C of full row rank.
+        passive: (n,) bool, the passive joints.
+        weights: (n,) the energy weights (passive joints' entries ignored).
+        ys: (s, N, k) [N; N·m], the net object wrenches, rows S, world axes.
+        which: (3,) bool, the methods computed.
+        wrench_of: the index into ys whose internal wrenches are computed (−1: none).
+        lo, hi: (N, n) N·m, the motor lines (ignored without pairs).
+        pairs: (P, 2) int, the (y₀, y₀ + y₁) indices into ys of each ratio test (P may be 0).
+        rank_tol: the forward model's rank tolerance.
+
+    Returns:
+        LinearPass: the grasp wrenches, torques, internal wrenches and ratio tests, with the samples left
+        to the NumPy path.
+    """
+    announce_compile("extras")
+    N, n, m = JT.shape
+    r, s, P = W.shape[1], len(ys), len(pairs)
+    passive = np.asarray(passive, dtype=bool)
+    out = LinearPass(np.zeros((3, s, N, m)), np.zeros((3, s, N, n)), np.zeros((3, N, r, 6)), np.zeros((3, N, r, 6)),
+                     np.zeros((3, P, N, n)), np.zeros((3, P, N, n)), np.zeros((3, N), dtype=bool))
+    distributions.linear_pass(_w(JT), _w(A), _w(tau_arms), _w(W), _w(R_o), _w(rows), _w(masses), _w(inertias), _w(Cp),
+                              _w(Z), _w(regular, bool), np.flatnonzero(passive).astype(np.int64),
+                              np.where(passive, 0.0, _w(weights)), _w(ys), _w(which, bool), int(wrench_of), _w(lo),
+                              _w(hi), _w(np.reshape(pairs, (P, 2)), np.int64), float(rank_tol), *out)
+    return out
 
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,

@@ -8,7 +8,7 @@ object wrenches of zero payload and of one unit of payload), per sample i
     H = Dᵀ Q D,  g = Dᵀ Q u,  H z = −g (Cholesky),  τ = u + D z        (two right-hand sides),
 
 then τ(μ) = a + μ b with a = τ₀, b = τ₁ − τ₀, and the mass interval of lo ≤ τ(μ) ≤ hi over the active
-joints — `coopsim.inverse.capacity.mass_limits` and `mass_interval`, sample by sample. Where C lost rank or H
+joints — `coopsim.inverse.distributions.mass_limits` and `coopsim.inverse.capacity.mass_interval`, sample by sample. Where C lost rank or H
 is not certified well-conditioned — λ_min/λ_max ≥ 1/(trace(H)·trace(H⁻¹)) > rank_tol, the forward
 model's rank rule with a bound within a factor d² of the eigenvalues (`coopsim.inverse.distributions._spd_solve`
 decides by eigenvalues where its bound is not enough) — the result is marked uncertain and the caller

@@ -24,22 +24,26 @@ Beyond the paper:
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
 from coopsim.core.model import Model, Motors, torque_limits
 from coopsim.inverse.distributions import (
+    LINEAR_ROWS,
     MinEnergySetup,
     grasp_line_frames,
     internal_bound_components,
     internal_operator,
+    linear_pass,
+    mass_limits,
     min_energy_setup,
     min_energy_solve,
 )
 from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem, torques_of
 from coopsim.inverse.qp import LPBatch, QPError, solve_lps
 from coopsim.inverse.resolutions import LINEAR_METHODS, resolution_method
-from coopsim.inverse.solve import distribute, energy, nan_peak, resolve
+from coopsim.inverse.solve import compiled_engine, distribute, energy, nan_peak, resolve
 
 MODES = ("scaled", "payload")
 
@@ -101,45 +105,26 @@ def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"unknown capacity mode {mode!r}; expected one of {', '.join(MODES)}")
 
 
-def affine_torques(prob: InverseProblem, res: Resolution, mode: str) -> tuple[np.ndarray, np.ndarray]:
+def affine_torques(prob: InverseProblem, res: Resolution, mode: str,
+                   engine: str = "compiled") -> tuple[np.ndarray, np.ndarray]:
     """(a, b) (N, n): τ(μ) = a + μ b for resolution `res` (two evaluations, exact for linear ones).
 
     Args:
         prob: the InverseProblem (N samples, n joints).
         res: the Resolution (linear in the net object wrench for the result to be exact).
         mode: 'scaled' or 'payload' (`mass_line`).
+        engine: 'compiled' (one pass for both evaluations) or 'reference' (`coopsim.inverse.solve.ENGINES`).
 
     Returns:
         tuple[np.ndarray, np.ndarray]: a (N, n) N·m, the torques at μ = 0, and b (N, n) N·m per kg (N
         and N per kg on a prismatic joint).
     """
     y0, y1 = mass_line(prob, mode)
-    a = torques_of(prob, distribute(prob, y0, res))
-    return a, torques_of(prob, distribute(prob, y0 + y1, res)) - a
-
-
-def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi the largest and smallest μ.
-
-    b > 0 gives (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs
-    lo <= a <= hi (up = −inf where it does not hold); nan (0/0, ∞/∞) counts as no limit.
-
-    Args:
-        a: (N, n) N·m (N on a prismatic joint), the torques at μ = 0.
-        b: (N, n) N·m per kg, the torques' rate with the carried mass.
-        lo, hi: (N, n) N·m, the lower and upper torque limits (±inf: none).
-
-    Returns:
-        tuple[np.ndarray, np.ndarray]: up (N, n) kg, the largest μ per constraint (+inf: no upper limit,
-        −inf: none feasible), and dn (N, n) kg, the smallest (−inf: no lower limit).
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        to_hi, to_lo = (hi - a) / b, (lo - a) / b
-    pos, neg = b > 0, b < 0
-    up = np.where(pos, to_hi, np.where(neg, to_lo, np.inf))
-    dn = np.where(pos, to_lo, np.where(neg, to_hi, -np.inf))
-    up = np.where((b == 0) & ((a < lo) | (a > hi)), -np.inf, up)
-    return np.where(np.isnan(up), np.inf, up), dn
+    if compiled_engine(engine, res.method):
+        tau = linear_pass(prob, res, np.stack([y0, y0 + y1]), (res.method,)).tau[LINEAR_ROWS[res.method]]
+        return tau[0], tau[1] - tau[0]
+    a = torques_of(prob, distribute(prob, y0, res, engine=engine))
+    return a, torques_of(prob, distribute(prob, y0 + y1, res, engine=engine)) - a
 
 
 def mass_interval(up: np.ndarray, dn: np.ndarray) -> tuple[float, float, bool]:
@@ -175,21 +160,37 @@ def affine_capacity(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
         and the per-sample largest masses (N,) kg.
     """
     sel = np.ones(a.shape[1], bool) if joints is None else joints
-    idx = np.flatnonzero(sel)
     up, dn = mass_limits(a[:, sel], b[:, sel], lo[:, sel], hi[:, sel])
+    return limits_capacity(up, dn, b[:, sel], t, np.flatnonzero(sel))
+
+
+def limits_capacity(up: np.ndarray, dn: np.ndarray, b: np.ndarray, t: np.ndarray, joints: np.ndarray) -> Capacity:
+    """The Capacity of per-constraint mass limits (`mass_limits`) over some joints.
+
+    Args:
+        up: (N, n') kg, the largest μ per sample and counted joint.
+        dn: (N, n') kg, the smallest.
+        b: (N, n') N·m per kg, the torques' rate with the carried mass at those joints (the side).
+        t: (N,) s, the sample times.
+        joints: (n',) int, the stacked indices of the counted joints.
+
+    Returns:
+        Capacity: the mass interval, the first motor to saturate (stacked index, sample, time, side)
+        and the per-sample largest masses (N,) kg.
+    """
     mass, lower, feasible = mass_interval(up, dn)
     i, j = np.unravel_index(int(np.argmin(up)), up.shape)
-    side = "upper" if b[i, idx[j]] > 0 else "lower"
+    side = "upper" if b[i, j] > 0 else "lower"
     per_sample = np.min(up, axis=1)
     if not np.isfinite(mass):
         return Capacity(mass, lower, feasible, None, None, None, None,
                         "" if mass > 0 else "a torque is outside its limits at every mass", per_sample)
-    return Capacity(mass, lower, feasible, int(idx[j]), int(i), float(t[i]), side,
+    return Capacity(mass, lower, feasible, int(joints[j]), int(i), float(t[i]), side,
                     "" if feasible else "no mass keeps every torque within its limits", per_sample)
 
 
 def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode: str = "scaled",
-                    passive_tol: float = 1e-9) -> Capacity:
+                    passive_tol: float = 1e-9, engine: str = "compiled") -> Capacity:
     """DLCC of resolution `res` in closed form (eq. 36), for the resolutions linear in the net object wrench.
 
     Those are the ones the registry marks linear (`coopsim.inverse.resolutions.LINEAR_METHODS`); any
@@ -205,6 +206,7 @@ def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode:
         mode: 'scaled' (object mass) or 'payload' (point payload mass).
         passive_tol: N·m (N on a prismatic joint), the largest passive-joint torque (or its rate per kg)
             tolerated.
+        engine: 'compiled' (`linear_study`) or 'reference' (`coopsim.inverse.solve.ENGINES`).
 
     Returns:
         Capacity: over the active joints; infeasible (note says why) when a resolution other than
@@ -213,19 +215,88 @@ def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode:
     Raises:
         ValueError: a resolution that is not linear in the net object wrench, or an unknown mode.
     """
-    method = resolution_method(res.method)
+    _check_linear(res.method)
+    if compiled_engine(engine, res.method):
+        return linear_study(prob, res, (res.method,), motors, (mode,), passive_tol).caps[res.method, mode]
+    a, b = affine_torques(prob, res, mode, engine)
+    lo, hi = torque_limits(motors, prob.qd)
+    return _passive_checked(affine_capacity(a, b, lo, hi, prob.t, ~res.passive), res, a, b, passive_tol)
+
+
+def _check_linear(name: str) -> None:
+    """Raise the registry's reason when resolution `name` has no closed-form capacity."""
+    method = resolution_method(name)
     if not method.linear:
-        raise ValueError(f"method_capacity: resolution {res.method!r} has no closed-form capacity: "
+        raise ValueError(f"method_capacity: resolution {name!r} has no closed-form capacity: "
                          f"{method.nonlinear_why} (closed form for {', '.join(LINEAR_METHODS)}; lp_capacity with "
                          f"internal_bound bounds every distribution within the bounds)")
-    a, b = affine_torques(prob, res, mode)
-    lo, hi = torque_limits(motors, prob.qd)
+
+
+def _passive_checked(cap: Capacity, res: Resolution, a: np.ndarray, b: np.ndarray, passive_tol: float) -> Capacity:
+    """cap, made infeasible where a resolution other than 'min_energy' puts torque (a + μ b) on passive joints."""
     passive = res.passive
-    cap = affine_capacity(a, b, lo, hi, prob.t, ~passive)
     if np.any(passive) and res.method != "min_energy":
         if np.max(np.abs(a[:, passive])) > passive_tol or np.max(np.abs(b[:, passive])) > passive_tol:
             return replace(cap, feasible=False, note=f"'{res.method}' puts torque on passive joints")
     return cap
+
+
+class LinearStudy(NamedTuple):
+    """The linear resolutions' torques and closed-form capacities from one compiled pass (`linear_study`).
+
+    Attributes:
+        torques: {method: τ (N, n) N·m at the nominal net wrench prob.y}.
+        caps: {(method, mode): Capacity}, as `method_capacity` gives it.
+        affine: {(method, mode): (a, b)}, as `affine_torques` gives them (N, n) N·m and N·m per kg.
+    """
+
+    torques: dict
+    caps: dict
+    affine: dict
+
+
+def linear_study(prob: InverseProblem, res: Resolution, methods, motors: Motors, modes,
+                 passive_tol: float = 1e-9) -> LinearStudy:
+    """Torques and closed-form capacities of linear resolutions in several modes, in one compiled pass.
+
+    The net wrenches prob.y and each mode's y₀, y₀ + y₁ (`mass_line`) distributed by every method, the
+    torques and the ratio tests against the motor lines in one pass over the samples
+    (`coopsim.inverse.distributions.linear_pass`); the same numbers as `resolve`, `affine_torques` and
+    `method_capacity` of each (method, mode).
+
+    Args:
+        prob: the InverseProblem (N samples, n joints).
+        res: the Resolution whose settings every method uses (weights, passive joints, virtual bodies).
+        methods: the linear resolutions (names in `coopsim.inverse.resolutions.LINEAR_METHODS`).
+        motors: the Motors (eq. 36 lines).
+        modes: the capacity modes ('scaled', 'payload').
+        passive_tol: N·m (N on a prismatic joint), the largest passive-joint torque tolerated
+            (`method_capacity`).
+
+    Returns:
+        LinearStudy: the torques at the nominal mass, the Capacity and (a, b) of every (method, mode).
+
+    Raises:
+        ValueError: a resolution that is not linear, or an unknown mode.
+    """
+    for name in methods:
+        _check_linear(name)
+    lines = [mass_line(prob, mode) for mode in modes]
+    ys = np.stack([prob.y] + [y for y0, y1 in lines for y in (y0, y0 + y1)])
+    lo, hi = torque_limits(motors, prob.qd)
+    pairs = [(1 + 2 * p, 2 + 2 * p) for p in range(len(modes))]
+    out = linear_pass(prob, res, ys, methods, limits=(lo, hi), pairs=pairs)
+    act = np.flatnonzero(~res.passive)
+    torques, caps, affine = {}, {}, {}
+    for name in methods:
+        row, one = LINEAR_ROWS[name], replace(res, method=name)
+        torques[name] = out.tau[row, 0]
+        for p, mode in enumerate(modes):
+            a = out.tau[row, 1 + 2 * p]
+            b = out.tau[row, 2 + 2 * p] - a
+            cap = limits_capacity(out.up[row, p][:, act], out.dn[row, p][:, act], b[:, act], prob.t, act)
+            caps[name, mode], affine[name, mode] = _passive_checked(cap, one, a, b, passive_tol), (a, b)
+    return LinearStudy(torques, caps, affine)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -51,7 +51,7 @@ from coopsim.inverse.qp import solve_qps
 from coopsim.forward.diagnostics import describe_state
 from coopsim.inverse.stress import grasp_line_axes, line_frame
 from coopsim.inverse.problem import (InverseProblem, InverseRankWarning, Resolution, SampleFailure,
-                                     SampleFailureWarning, failure_text)
+                                     SampleFailureWarning, failure_text, sample_problem, torques_of)
 
 
 def paper_distribution(prob: InverseProblem, y: np.ndarray) -> np.ndarray:
@@ -273,23 +273,31 @@ def min_energy_solve(prob: InverseProblem, setup: MinEnergySetup, weights: np.nd
     z, ok = _spd_solve(_weighted_sum(Q, setup.DD), -_weighted_sum(Q, setup.Du), prob.rank_tol)
     f = setup.fp + sum(setup.Z[:, a, None] * z[a] for a in range(len(z)))
     f = np.ascontiguousarray(np.moveaxis(f, 0, -1))
-    lost = []
-    for i in np.flatnonzero(~(setup.regular & ok)):
-        f[:, i], ranks = _min_energy_min_norm(prob, i, setup.ys[:, i], Q, setup.passive)
-        if ranks is not None:
-            lost.append((i, "constraints rank {} of {}, energy Hessian rank {} of {}".format(*ranks)))
-    _warn_rank_lost(prob, "minimum energy: the equations", lost)
+    _min_norm_at(prob, np.flatnonzero(~(setup.regular & ok)), setup.ys, Q, setup.passive, f)
     return f
 
 
-def _warn_rank_lost(prob: InverseProblem, what: str, lost: list[tuple[int, str]], shown: int = 3) -> None:
+def _min_norm_at(prob: InverseProblem, idx: np.ndarray, ys: np.ndarray, Q: np.ndarray, passive: np.ndarray,
+                 f: np.ndarray) -> None:
+    """f[:, i] (written) ← the minimum-norm minimum-energy distributions of ys[:, i] (s, k) at the samples
+    idx (`_min_energy_min_norm`), with one InverseRankWarning naming those that lost rank."""
+    lost = []
+    for i in idx:
+        f[:, i], ranks = _min_energy_min_norm(prob, i, ys[:, i], Q, passive)
+        if ranks is not None:
+            lost.append((i, "constraints rank {} of {}, energy Hessian rank {} of {}".format(*ranks)))
+    _warn_rank_lost(prob, "minimum energy: the equations", lost, stacklevel=4)
+
+
+def _warn_rank_lost(prob: InverseProblem, what: str, lost: list[tuple[int, str]], shown: int = 3,
+                    stacklevel: int = 3) -> None:
     """An InverseRankWarning that `what` lost rank at the samples of `lost` ((index, ranks text) pairs),
     naming the first `shown` times and configurations; nothing when `lost` is empty."""
     if lost:
         where = "; ".join(f"{describe_state(prob.t[i], prob.q[i])} ({ranks})" for i, ranks in lost[:shown])
         warnings.warn(f"{what} lost rank (rank_tol {prob.rank_tol:.3g}) at {len(lost)} of {len(prob.t)} samples: "
                       f"{where}{'; ...' if len(lost) > shown else ''}; using minimum-norm grasp wrenches there",
-                      InverseRankWarning, stacklevel=3)
+                      InverseRankWarning, stacklevel=stacklevel)
 
 
 def _weighted_sum(Q: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -616,3 +624,146 @@ def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
         axis (the plane normal in a planar scene), world axes.
     """
     return line_frame(grasp_line_axes(prob.grasp_offset), prob.normal)
+
+
+# ------------------------------------------------------------------------------------------------
+# The compiled pass of the linear resolutions
+# ------------------------------------------------------------------------------------------------
+
+LINEAR_ROWS = {"paper": 0, "nonsqueezing": 1, "min_energy": 2}   # method → its row in a pass's method axis
+
+
+class MinEnergyBasis(NamedTuple):
+    """What the minimum-energy distributions need of C = [A; P Jᵀ] whatever the net wrenches and weights.
+
+    From the SVD C = U Σ Vᵀ per sample (as `min_energy_setup` factors it), ρ = min(c, m): every solution
+    of C f = b is f = C⁺ b + Z z where C has full row rank.
+
+    Attributes:
+        pinv: (N, m, c) C⁺ = V_ρ Σ_ρ⁻¹ U_ρᵀ (zero singular values left out).
+        Z: (N, m, d) an orthonormal basis of null(C), d = m − ρ.
+        regular: (N,) bool, C of full row rank by the forward model's rule (`gram_rank`, the problem's
+            rank_tol).
+    """
+
+    pinv: np.ndarray
+    Z: np.ndarray
+    regular: np.ndarray
+
+
+def min_energy_basis(prob: InverseProblem, passive: np.ndarray) -> MinEnergyBasis:
+    """The MinEnergyBasis of the problem for these passive joints, factored once per problem (`InverseProblem.factor`).
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        passive: (n,) bool, the passive joints (τ_j = 0 enforced).
+
+    Returns:
+        MinEnergyBasis: C⁺, the null-space basis and the samples where C has full row rank.
+    """
+    passive = np.asarray(passive, dtype=bool)
+    return prob.factor(("min_energy_basis", passive.tobytes()), lambda: _min_energy_basis(prob, passive))
+
+
+def _min_energy_basis(prob: InverseProblem, passive: np.ndarray) -> MinEnergyBasis:
+    C = np.concatenate([prob.A, prob.JT[:, passive, :]], axis=1)
+    c, m = C.shape[1:]
+    U, sv, Vt = np.linalg.svd(C)
+    rank = min(c, m)
+    regular = (c <= m) & (gram_rank(sv, prob.rank_tol) == rank)
+    inv_s = np.divide(1.0, sv, out=np.zeros_like(sv), where=sv > 0)
+    pinv = np.swapaxes(Vt[:, :rank], 1, 2) @ (inv_s[..., None] * np.swapaxes(U[:, :, :rank], 1, 2))
+    return MinEnergyBasis(pinv, np.swapaxes(Vt[:, rank:], 1, 2), regular)
+
+
+def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi the largest and smallest μ.
+
+    b > 0 gives (lo − a)/b <= μ <= (hi − a)/b, b < 0 the same with lo, hi exchanged, b = 0 needs
+    lo <= a <= hi (up = −inf where it does not hold); nan (0/0, ∞/∞) counts as no limit.
+
+    Args:
+        a: (N, n) N·m (N on a prismatic joint), the torques at μ = 0.
+        b: (N, n) N·m per kg, the torques' rate with the carried mass.
+        lo, hi: (N, n) N·m, the lower and upper torque limits (±inf: none).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: up (N, n) kg, the largest μ per constraint (+inf: no upper limit,
+        −inf: none feasible), and dn (N, n) kg, the smallest (−inf: no lower limit).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_hi, to_lo = (hi - a) / b, (lo - a) / b
+    pos, neg = b > 0, b < 0
+    up = np.where(pos, to_hi, np.where(neg, to_lo, np.inf))
+    dn = np.where(pos, to_lo, np.where(neg, to_hi, -np.inf))
+    up = np.where((b == 0) & ((a < lo) | (a > hi)), -np.inf, up)
+    return np.where(np.isnan(up), np.inf, up), dn
+
+
+def linear_pass(prob: InverseProblem, res: Resolution, ys: np.ndarray, methods, wrench_of: int | None = None,
+                limits: tuple[np.ndarray, np.ndarray] | None = None, pairs=()):
+    """The linear resolutions of several net wrenches at every sample, compiled (`coopsim.compiled.distributions`).
+
+    The same distributions as `paper_distribution`, `nonsqueezing_distribution` and
+    `min_energy_distribution`, the torques `torques_of`, the internal wrenches `internal_wrench` by both
+    definitions and the ratio tests `mass_limits`, in one pass over the samples.
+    The samples the pass leaves (the minimum-energy equations not certified of full rank and
+    well-conditioned) are solved by the NumPy path, with its InverseRankWarning where they lost rank.
+
+    Args:
+        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
+        res: the Resolution whose settings are used (weights, passive joints, virtual bodies; not its method).
+        ys: (s, N, k) [N; N·m], the net object wrenches S Y at C in the rows S, world axes.
+        methods: the names of the linear resolutions computed (keys of LINEAR_ROWS).
+        wrench_of: the index into ys whose internal wrenches are computed; None: none.
+        limits: (τ_min, τ_max) (N, n) N·m, the motor lines of the ratio tests; None: no test.
+        pairs: (y₀, y₀ + y₁) index pairs into ys, one ratio test each (τ(μ) = a + μ b, a = τ(y₀),
+            b = τ(y₀ + y₁) − a).
+
+    Returns:
+        coopsim.compiled.api.LinearPass: per method row (LINEAR_ROWS) f (3, s, N, rk), τ (3, s, N, n),
+        the internal wrenches (3, N, r, 6) of ys[wrench_of] and the ratio tests' up, dn (3, P, N, n) kg;
+        rows of methods not asked for are zeros.
+    """
+    from coopsim.compiled import api
+
+    ys = np.asarray(ys, dtype=float)
+    N, n, m = prob.JT.shape
+    which = np.array([name in methods for name in LINEAR_ROWS])
+    if which[LINEAR_ROWS["min_energy"]]:
+        basis = min_energy_basis(prob, res.passive)
+    else:
+        basis = MinEnergyBasis(np.zeros((N, m, 0)), np.zeros((N, m, 0)), np.zeros(N, bool))
+    lo, hi = limits if limits is not None else (np.zeros((N, n)), np.zeros((N, n)))
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2) if limits is not None else np.zeros((0, 2), np.int64)
+    out = api.linear_pass(prob.JT, prob.A, prob.tau_arms, prob.W, prob.R_o, prob.rows, res.masses, res.inertias,
+                          basis.pinv, basis.Z, basis.regular, res.passive, res.weights, ys, which,
+                          -1 if wrench_of is None else wrench_of, lo, hi, pairs, prob.rank_tol)
+    for name, row in LINEAR_ROWS.items():
+        idx = np.flatnonzero(out.unsure[row])
+        if which[row] and len(idx):
+            _numpy_rows(prob, res, ys, name, idx, out, wrench_of, lo, hi, pairs)
+    return out
+
+
+def _numpy_rows(prob: InverseProblem, res: Resolution, ys: np.ndarray, name: str, idx: np.ndarray, out,
+                wrench_of: int | None, lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray) -> None:
+    """The pass's outputs of method `name` at the samples idx, written by the NumPy path."""
+    row = LINEAR_ROWS[name]
+    f = out.f[row]
+    sub = sample_problem(prob, idx)
+    if name == "min_energy":
+        _min_norm_at(prob, idx, ys, np.where(res.passive, 0.0, res.weights), np.asarray(res.passive, bool), f)
+    elif name == "nonsqueezing":
+        Mstar = nonsqueezing_metric(sub, res.masses, res.inertias)
+        f[:, idx] = [nonsqueezing_distribution(sub, y[idx], Mstar) for y in ys]
+    else:
+        f[:, idx] = [paper_distribution(sub, y[idx]) for y in ys]
+    out.tau[row][:, idx] = [torques_of(sub, fq[idx]) for fq in f]
+    if wrench_of is not None:
+        out.internal_paper[row][idx] = internal_wrench(sub, f[wrench_of, idx], "paper")
+        out.internal_nonsqueezing[row][idx] = internal_wrench(sub, f[wrench_of, idx], "nonsqueezing",
+                                                              nonsqueezing_metric(sub, res.masses, res.inertias))
+    for p, (i0, i1) in enumerate(pairs):
+        a = out.tau[row, i0][idx]
+        out.up[row, p][idx], out.dn[row, p][idx] = mass_limits(a, out.tau[row, i1][idx] - a, lo[idx], hi[idx])

@@ -12,7 +12,7 @@ There are k(r − 1) more unknowns than equations: each choice of f is a redunda
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -108,6 +108,9 @@ class InverseProblem:
         grasp_pos: (r, 3) m, the grasp points (end-effector frame origins), object frame.
         rank_tol: the scenario's integrator.rank_tol, the relative eigenvalue below which a Gram matrix of
             the equations counts as rank-deficient (as for the forward model's Λ𝐈⁻¹Λᵀ).
+        factors: the factorisations of the problem's equations computed so far, by what they depend on
+            besides the problem (`factor`); a copy made by `dataclasses.replace` starts empty. The arrays
+            above are not to be changed once a factorisation is kept.
     """
 
     t: np.ndarray
@@ -134,6 +137,22 @@ class InverseProblem:
     box: np.ndarray
     grasp_pos: np.ndarray
     rank_tol: float = 1e-10
+    factors: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def factor(self, key: tuple, build):
+        """The factorisation `key` of the problem's equations, built by `build()` on first use and kept.
+
+        Args:
+            key: what the factorisation depends on besides the problem (e.g. its name and the passive
+                joints' bytes); hashable.
+            build: a callable taking no arguments that computes it.
+
+        Returns:
+            what `build` returned, the first time for this key.
+        """
+        if key not in self.factors:
+            self.factors[key] = build()
+        return self.factors[key]
 
     @property
     def r(self) -> int:
@@ -234,6 +253,24 @@ def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.nd
                           W, T.p_C, T.R_o, T.twist, T.acc, -T.s, S,
                           None if model.plane is None else model.plane[2], g, obj.mass, obj.inertia, obj.box,
                           obj.grasp_pos, model.integrator.rank_tol)
+
+
+SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist", "acc",
+           "grasp_offset")   # the InverseProblem fields with one row per sample
+
+
+def sample_problem(prob: InverseProblem, idx: np.ndarray) -> InverseProblem:
+    """The problem at some of its samples only.
+
+    Args:
+        prob: the InverseProblem (N samples).
+        idx: (N',) int, the samples kept (indices into the trajectory, in the order wanted).
+
+    Returns:
+        InverseProblem: N' samples, the same scene data (no factorisation kept).
+    """
+    return replace(prob, **{f.name: getattr(prob, f.name)[idx] for f in fields(prob)
+                            if f.name in SAMPLED and getattr(prob, f.name) is not None})
 
 
 def payload_wrench(rho: np.ndarray, twist: np.ndarray, acc: np.ndarray, g: np.ndarray) -> np.ndarray:

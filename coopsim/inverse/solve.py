@@ -1,6 +1,11 @@
 """Solving the inverse-dynamics problem: a resolution chosen by name (`resolution_for`), the grasp
 wrenches it distributes at every sample (`distribute`), the resolved torques, their energy (eq. 33)
 and the default internal-wrench bounds of the 'bounded' resolution.
+
+Two engines give the same numbers (ENGINES): 'compiled', the default, runs the linear resolutions in one
+compiled pass over the samples (`coopsim.inverse.distributions.linear_pass`); 'reference' runs every
+resolution's registered NumPy function (`coopsim.inverse.resolutions.RESOLUTIONS`), the readable
+reference. 'bounded' is a QP in both.
 """
 
 from __future__ import annotations
@@ -11,9 +16,9 @@ import numpy as np
 
 from coopsim.core.model import Model
 from coopsim.inverse.resolutions import resolution_method
-from coopsim.inverse.distributions import (RowKind, grasp_line_frames, internal_bound_components, internal_operator,
-                                           internal_wrench, min_energy_distribution, nonsqueezing_metric,
-                                           virtual_inertias, virtual_masses)
+from coopsim.inverse.distributions import (LINEAR_ROWS, RowKind, grasp_line_frames, internal_bound_components,
+                                           internal_operator, internal_wrench, linear_pass, min_energy_distribution,
+                                           nonsqueezing_metric, virtual_inertias, virtual_masses)
 from coopsim.inverse.problem import InverseProblem, InverseResult, Resolution, SampleFailure, grasp_wrenches, torques_of
 
 
@@ -40,11 +45,34 @@ def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                       virtual_inertias(masses, obj.mass, obj.inertia), force_bound, moment_bound, bound_definition)
 
 
-def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None) -> np.ndarray:
+ENGINES = ("compiled", "reference")
+
+
+def compiled_engine(engine: str, method: str) -> bool:
+    """Whether `engine` runs resolution `method` in the compiled pass (a linear resolution, engine 'compiled').
+
+    Args:
+        engine: 'compiled' or 'reference' (ENGINES).
+        method: the resolution's name.
+
+    Returns:
+        bool: True for a linear resolution with engine 'compiled'.
+
+    Raises:
+        ValueError: an unknown engine.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
+    return engine == "compiled" and method in LINEAR_ROWS
+
+
+def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None,
+               engine: str = "compiled") -> np.ndarray:
     """Grasp wrenches f (N, rk) of resolution `res` for the net object wrenches y (N, k).
 
-    The resolution's registered function distributes them; f is nan at the samples it cannot solve
-    ('bounded' only), which are appended to `failures`.
+    The compiled pass distributes them for a linear resolution (engine 'compiled'), else the
+    resolution's registered function; f is nan at the samples it cannot solve ('bounded' only), which are
+    appended to `failures`.
 
     Args:
         prob: the InverseProblem (N samples, k rows, r arms).
@@ -52,10 +80,13 @@ def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: l
         res: the Resolution.
         failures: a list the SampleFailures of the unsolved samples are appended to (written); None:
             not reported.
+        engine: 'compiled' or 'reference' (ENGINES).
 
     Returns:
         np.ndarray: (N, rk) [N; N·m] grasp wrenches in the rows S, arm after arm, world axes.
     """
+    if compiled_engine(engine, res.method):
+        return linear_pass(prob, res, np.asarray(y)[None], (res.method,)).f[LINEAR_ROWS[res.method], 0]
     f, bad = resolution_method(res.method).distribute(prob, y, res)
     if failures is not None:
         failures.extend(bad)
@@ -97,19 +128,40 @@ def result_of(prob: InverseProblem, method: str, f: np.ndarray, res: Resolution,
                          tuple(failures))
 
 
-def resolve(prob: InverseProblem, res: Resolution) -> InverseResult:
+def pass_result(prob: InverseProblem, res: Resolution, out, q: int = 0) -> InverseResult:
+    """The InverseResult of resolution `res` in a compiled pass (`coopsim.inverse.distributions.linear_pass`).
+
+    Args:
+        prob: the InverseProblem (N samples).
+        res: the Resolution (a linear one, computed in the pass; its weights for the cost).
+        out: the pass (`coopsim.compiled.api.LinearPass`), with the internal wrenches of net wrench q.
+        q: the index of the net wrench (prob.y) in the pass's ys.
+
+    Returns:
+        InverseResult: as `result_of` gives it.
+    """
+    row = LINEAR_ROWS[res.method]
+    f, tau = out.f[row, q], out.tau[row, q]
+    return InverseResult(res.method, prob.t, tau, grasp_wrenches(prob, f), out.internal_paper[row],
+                         out.internal_nonsqueezing[row], cost_of(tau, res.weights), f, ())
+
+
+def resolve(prob: InverseProblem, res: Resolution, engine: str = "compiled") -> InverseResult:
     """The inverse dynamics of a problem resolved by one resolution.
 
     Args:
         prob: the InverseProblem (N samples).
         res: the Resolution.
+        engine: 'compiled' or 'reference' (ENGINES).
 
     Returns:
         InverseResult: per sample τ (N, n) N·m, grasp wrenches F_e (N, r, 6), the internal wrench
         (N, r, 6) by both definitions, the cost ½ τᵀQτ; nan at the samples listed in its `failures`.
     """
+    if compiled_engine(engine, res.method):
+        return pass_result(prob, res, linear_pass(prob, res, prob.y[None], (res.method,), wrench_of=0))
     failures: list[SampleFailure] = []
-    f = distribute(prob, prob.y, res, failures)
+    f = distribute(prob, prob.y, res, failures, engine)
     return result_of(prob, res.method, f, res, failures)
 
 

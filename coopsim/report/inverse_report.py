@@ -24,7 +24,7 @@ from coopsim.inverse.distributions import distribution_of_torques, grasp_line_fr
 from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem
 from coopsim.inverse.replay import replay
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
-from coopsim.inverse.solve import default_bounds, energy, nan_peak, resolution_for, resolve, result_of
+from coopsim.inverse.solve import cost_of, default_bounds, energy, nan_peak, resolution_for, resolve, result_of
 from coopsim.inverse.stress import SectionLoads, decompose_internal, section_loads
 from coopsim.inverse.trajectory import JointTrajectory, from_simulation, shared_object_motion_trajectory
 from coopsim.io.mcap_codec import Series, nonfinite_name
@@ -379,7 +379,7 @@ class CapacityStudy:
 
 def capacity_study(model: Model, duration: float | None = None, payload_position=None, with_lp: bool = True,
                    optimise: bool = True, check: bool = False, methods=LINEAR_METHODS,
-                   progress: Progress | None = None) -> CapacityStudy:
+                   progress: Progress | None = None, engine: str = "compiled") -> CapacityStudy:
     """The dynamic load carrying capacity (eq. 36 motor lines) along the scenario's trajectory, as
     `coopsim capacity` runs it.
 
@@ -392,6 +392,8 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
         check: also the brute-force check of each capacity.
         methods: the linear resolutions (`coopsim.inverse.resolutions.LINEAR_METHODS`).
         progress: hears the stages forward (or ik), capacity, lp and weights.
+        engine: 'compiled' (one pass over the samples for every resolution and mode) or 'reference' (the
+            NumPy functions, one call per resolution and mode) (`coopsim.inverse.solve.ENGINES`).
 
     Returns:
         CapacityStudy: per (resolution, mode) the Capacity (kg, the saturating motor, time and side)
@@ -401,18 +403,14 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
     payload = payload_position if payload_position is not None else model.inverse.payload_position
     prob = inverse_problem(model, traj, payload)
     modes = ("scaled",) if payload is None else cap.MODES
-    caps, tau_at, checks, energies = {}, {}, {}, {}
-    for i, k in enumerate(methods):
-        _report(progress, "capacity", i / len(methods))
-        res = resolution_for(model, k)
-        energies[k] = energy(resolve(prob, res))
-        for mode in modes:
-            c = cap.method_capacity(prob, res, model.motors, mode)
-            caps[k, mode] = c
-            a, b = cap.affine_torques(prob, res, mode)
-            tau_at[k, mode] = a + (c.mass if np.isfinite(c.mass) else 0.0) * b
-            if check and c.feasible and np.isfinite(c.mass):
-                checks[k, mode] = cap.brute_force_check(model, traj, res, mode, c, payload)
+    _report(progress, "capacity", 0.0)
+    caps, affine, energies = _linear_capacities(model, prob, methods, modes, engine)
+    tau_at, checks = {}, {}
+    for (k, mode), c in caps.items():
+        a, b = affine[k, mode]
+        tau_at[k, mode] = a + (c.mass if np.isfinite(c.mass) else 0.0) * b
+        if check and c.feasible and np.isfinite(c.mass):
+            checks[k, mode] = cap.brute_force_check(model, traj, resolution_for(model, k), mode, c, payload)
     _report(progress, "capacity", 1.0)
     zero_ok = all(caps[k, m].feasible and caps[k, m].lower == 0.0 for k in methods for m in modes)
     lp = {}
@@ -426,11 +424,29 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
         _report(progress, "weights", 0.0)
         base = resolution_for(model, "min_energy")
         w, c = cap.optimise_weights(prob, base, model.motors)
-        a, b = cap.affine_torques(prob, replace(base, weights=w), "scaled")
+        a, b = cap.affine_torques(prob, replace(base, weights=w), "scaled", engine)
         optimised = (w, c, a + c.mass * b)
         _report(progress, "weights", 1.0)
     return CapacityStudy(model, traj, prob, modes, caps, tau_at, lp, optimised, energies, checks,
                          torque_limits(model.motors, traj.qd), payload)
+
+
+def _linear_capacities(model: Model, prob, methods, modes, engine: str) -> tuple[dict, dict, dict]:
+    """({(method, mode): Capacity}, {(method, mode): (a, b)}, {method: energy at the nominal mass}) of the
+    linear resolutions with the scenario's settings: one compiled pass, or the reference's calls."""
+    if engine == "compiled":
+        base = resolution_for(model, "min_energy")
+        lin = cap.linear_study(prob, base, methods, model.motors, modes)
+        energies = {k: float(np.trapezoid(cost_of(lin.torques[k], base.weights), prob.t)) for k in methods}
+        return lin.caps, lin.affine, energies
+    caps, affine, energies = {}, {}, {}
+    for k in methods:
+        res = resolution_for(model, k)
+        energies[k] = energy(resolve(prob, res, engine))
+        for mode in modes:
+            caps[k, mode] = cap.method_capacity(prob, res, model.motors, mode, engine=engine)
+            affine[k, mode] = cap.affine_torques(prob, res, mode, engine)
+    return caps, affine, energies
 
 
 def _capacity_entry(model: Model, c: cap.Capacity) -> dict:

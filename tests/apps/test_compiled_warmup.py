@@ -7,6 +7,7 @@ import pytest
 
 from coopsim.compiled import api, object_motion
 from coopsim.apps import warmup
+from coopsim.compiled.distributions import linear_pass
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 from coopsim.inverse.trajectory import object_motion_trajectory, shared_object_motion_trajectory
 from inverse_cases import model, short_motion
@@ -32,3 +33,9 @@ def test_object_motion_passes_use_the_warm_up_signature():
         shared_object_motion_trajectory(m, motion)
         object_motion_trajectory(m, motion)
     assert len(object_motion.trajectory._cache._cache_file._load_index()) == 1
+
+
+def test_the_linear_pass_has_one_signature():
+    """Every caller reaches the linear resolutions' pass through `api.linear_pass`, which passes writable
+    contiguous arrays: the warm-up's compile is the only one."""
+    assert len(linear_pass._cache._cache_file._load_index()) == 1

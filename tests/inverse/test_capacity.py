@@ -8,7 +8,7 @@ import pytest
 
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.distributions import nonsqueezing_metric
-from coopsim.inverse.problem import inverse_problem, torques_of
+from coopsim.inverse.problem import inverse_problem, sample_problem, torques_of
 from coopsim.inverse.solve import default_bounds, distribute, resolution_for, resolve
 from coopsim.inverse import solve
 from coopsim.core.model import Motors, torque_limits
@@ -172,8 +172,7 @@ def test_energy_stress_curve():
     shrinks: at the full peak it is the minimum energy, at zero the non-squeezing one (1e-9 relative)."""
     m, _, _ = run(PAPER)
     P = problem(PAPER)
-    sub = type(P)(**{k: (getattr(P, k)[::10] if k in _SAMPLED and getattr(P, k) is not None else getattr(P, k))
-                     for k in P.__dataclass_fields__})
+    sub = sample_problem(P, np.arange(0, len(P.t), 10))
     R = resolution_for(m, "min_energy")
     peak = default_bounds(sub, R, fraction=1.0)
     curve = cap.energy_stress_curve(sub, R, peak)
@@ -181,10 +180,6 @@ def test_energy_stress_curve():
     assert np.all(np.diff(energies) >= -1e-12)
     assert energies[0] == pytest.approx(solve.energy(resolve(sub, R)), rel=1e-9)
     assert energies[-1] == pytest.approx(solve.energy(resolve(sub, replace(R, method="nonsqueezing"))), rel=1e-9)
-
-
-_SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist",
-            "acc", "grasp_offset")
 
 
 def test_method_capacity_refuses_the_nonlinear_bounded_resolution():

@@ -8,7 +8,7 @@ import pytest
 from scipy.optimize import minimize
 
 from coopsim.inverse.distributions import grasp_line_frames, internal_bound_components, internal_bound_rows, internal_operator, internal_wrench, min_energy_distribution, min_energy_torques_jacobian_form, nonsqueezing_metric, paper_distribution, virtual_masses
-from coopsim.inverse.problem import InverseProblem, InverseRankWarning, grasp_wrenches, torques_of
+from coopsim.inverse.problem import InverseRankWarning, grasp_wrenches, sample_problem, torques_of
 from coopsim.inverse.solve import cost_of, resolution_for
 from coopsim.inverse import distributions
 from coopsim.inverse import replay
@@ -103,13 +103,7 @@ def _null(A):
 
 
 def _subproblem(P, sl):
-    fields = {k: getattr(P, k) for k in P.__dataclass_fields__}
-    for k in ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "W", "p_C", "R_o", "twist", "acc",
-              "grasp_offset"):
-        fields[k] = fields[k][sl]
-    if fields["y_payload"] is not None:
-        fields["y_payload"] = fields["y_payload"][sl]
-    return InverseProblem(**fields)
+    return sample_problem(P, np.arange(len(P.t))[sl])
 
 
 def test_paper_energy_form_equals_grasp_wrench_form():
