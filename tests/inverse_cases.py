@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from coopsim.inverse import capacity as cap
 from coopsim.inverse.problem import inverse_problem
 from coopsim.io.scenario import load_scenario
 from coopsim.forward.simulate import simulate
@@ -62,3 +63,14 @@ def short_motion(m, scale: float = 0.25) -> ObjectMotion:
     ax = ang / np.linalg.norm(ang)
     Rs = [R, R @ axis_angle_to_rot(ax, scale * 0.04), R @ axis_angle_to_rot(ax, -scale * 0.02)]
     return ObjectMotion(np.array([0.0, 0.3, 0.6]), np.array([p, p + lin, p - 0.5 * lin]), np.array(Rs), "quintic", 0.05)
+
+
+def capacity_lps(name, mode, motors=True):
+    """lp_capacity's per-sample LPs (max μ) of a bundled scene; motors from `with_motors` (or the
+    scene's own: none on spatial_6r_pair, every row then left out)."""
+    m, res, traj = run(name)
+    m = with_motors(m, res, traj) if motors else m
+    A_ub, b_ub, A_eq, b_eq = cap._lp_rows(problem(name), m.motors, m.motors.passive, mode, None, None, "nonsqueezing")
+    c = np.zeros(A_ub.shape[2])
+    c[-1] = -1.0
+    return c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (len(c) - 1) + [(0, None)]

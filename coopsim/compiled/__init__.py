@@ -36,6 +36,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     capacity.py     the minimum-energy load capacity of one weight vector (the weight optimiser's objective)
     distributions.py the linear redundancy resolutions over all samples in one pass: grasp wrenches,
                     torques, internal wrenches and the load-capacity ratio test
+    lp.py           LP vertices at given bases, certified optimal or unbounded (the LP bound's batches)
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 
 The first compile, on two cores with no kernel compiled twice, is `coopsim.apps.warmup`'s.

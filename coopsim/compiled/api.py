@@ -19,8 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, manifold, object_motion,
-                              sample)
+from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, lp, manifold,
+                              object_motion, sample)
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
@@ -60,14 +60,14 @@ class Compiled(NamedTuple):
 
 
 def _group_entries(group: str) -> tuple:
-    """The entries of a compile group: "base", what every native command uses (the first run compiles
-    it, `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion
-    trajectories), the capacity objective and the linear resolutions' pass (`inverse`, `capacity`, a
-    trajectory given as object motion: their first use compiles them, a few seconds); "control", the
-    controllers (the first closed-loop run)."""
+    """The entries of a compile group: "base", what every native command uses (the first run compiles it,
+    `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories), the
+    capacity objective, the linear resolutions' pass and the LP vertices (`inverse`, `capacity`, a trajectory given
+    as object motion: their first use compiles them, a few seconds); "control", the controllers (the first
+    closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
             "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval,
-                       distributions.linear_pass),
+                       distributions.linear_pass, lp.lp_vertices),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -640,6 +640,34 @@ def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular,
                               np.where(passive, 0.0, _w(weights)), _w(ys), _w(which, bool), int(wrench_of), _w(lo),
                               _w(hi), _w(np.reshape(pairs, (P, 2)), np.int64), float(rank_tol), *out)
     return out
+
+
+def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, held, tols) -> tuple:
+    """Vertices of k LPs at given bases, certified optimal or unbounded, compiled (`lp.lp_vertices`).
+
+    Args:
+        G: (k, r + v, v) the rows: r constraint rows, then the identity of the v columns.
+        g_lo, g_hi: (k, r + v) their bounds, the columns' capped (±inf: none).
+        norm: (k, r + v) max |G_ij| per row.
+        bound: (k,) the largest finite row bound per problem.
+        c: (v,) the cost.
+        lo, hi: (v,) the columns' uncapped bounds.
+        cap_lo, cap_hi: (v,) the columns' capped bounds.
+        r: the number of constraint rows.
+        held: (k, r + v) int8 HiGHS's basis codes of the rows, then the columns.
+        tols: (primal, dual, stationarity) relative tolerances of the certificates.
+
+    Returns:
+        tuple: x (k, v), the rows' duals (k, r + v), ok (k,) bool (certified optimal) and unbounded (k,)
+        bool (certified at a cap with a descent ray).
+    """
+    announce_compile("extras")
+    k, R, v = np.shape(G)
+    x, dual = np.empty((k, v)), np.empty((k, R))
+    ok, unbounded = np.empty(k, bool), np.empty(k, bool)
+    lp.lp_vertices(_w(G), _w(g_lo), _w(g_hi), _w(norm), _w(bound), _w(c), _w(lo), _w(hi), _w(cap_lo), _w(cap_hi),
+                   int(r), _w(held, np.int8), *(float(t) for t in tols), x, dual, ok, unbounded)
+    return x, dual, ok, unbounded
 
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,

@@ -31,7 +31,8 @@ positive *semi*definite Hessian, here H = RᵀR), then polished to the exact min
 `solve_lps` solves a batch of small LPs with HiGHS's simplex method (`highspy`): every
 LP_SEED_STRIDE-th problem first, as one block-diagonal LP; every other problem then at the optimal
 basis of a seed beside it (along a trajectory the basis rarely changes between samples), its vertex
-computed and certified in NumPy (`_vertices`: feasible, its duals of the right sign — optimal; at an
+computed and certified in one compiled pass (`_vertices`, `coopsim.compiled.lp`; the NumPy reference
+`_vertices_reference`: feasible, its duals of the right sign — optimal; at an
 artificial cap with a feasible descent ray — unbounded); what is not certified goes to HiGHS, as one
 block-diagonal LP started from those bases.
 """
@@ -333,6 +334,28 @@ def _basis_codes(h, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _vertices(P: _LPs, idx: np.ndarray, col_basis: np.ndarray, row_basis: np.ndarray):
+    """`_vertices_reference`, compiled (`coopsim.compiled.lp`): the same certificates, the same vertices
+    to rounding (one LU with partial pivoting per problem for both solves).
+
+    Args:
+        P: the batch (`_LPs`).
+        idx: (k,) int, the problems.
+        col_basis: (k, v) int8 HiGHS's basis codes of their columns.
+        row_basis: (k, r) int8 those of their rows.
+
+    Returns:
+        tuple: x (k, v), row duals (k, r), ok (k,) bool and unbounded (k,) bool.
+    """
+    from coopsim.compiled import api
+
+    held = np.concatenate([row_basis, col_basis], axis=1)
+    x, dual, ok, unbounded = api.lp_vertices(P.G[idx], P.g_lo[idx], P.g_hi[idx], P.norm[idx], P.bound[idx], P.c, P.lo,
+                                             P.hi, P.cap_lo, P.cap_hi, P.r, held,
+                                             (PRIMAL_TOL, DUAL_TOL, STATIONARITY_TOL))
+    return x, dual[:, :P.r], ok, unbounded
+
+
+def _vertices_reference(P: _LPs, idx: np.ndarray, col_basis: np.ndarray, row_basis: np.ndarray):
     """(x (k, v), row duals (k, r), ok (k,)) of the problems idx (capped bounds) at the bases (HiGHS's
     codes, col (k, v), row (k, r)): the v constraints a basis holds (its nonbasic rows and columns, at
     their lower or upper bound, a free column at 0) solved for x, and Mᵀλ = c (M their rows) for the
@@ -409,8 +432,9 @@ def _store(out: LPBatch, idx: np.ndarray, status: int, message: str, x, duals, P
     """Write the status, message, x (len(idx), v) and row duals (len(idx), r) of the problems idx into out
     (x nan and duals 0 unless optimal; the duals of the inequality rows left out 0)."""
     out.status[idx], out.x[idx], out.marginals[idx] = status, np.nan, 0.0
-    for i in idx:
-        out.messages[i] = message
+    messages = out.messages
+    for i in idx.tolist():
+        messages[i] = message
     if status == 0:
         out.x[idx] = x
         out.marginals[idx] = np.where(P.keep[idx], duals[:, :P.mu], 0.0)

@@ -8,6 +8,7 @@ import pytest
 from coopsim.compiled import api, object_motion
 from coopsim.apps import warmup
 from coopsim.compiled.distributions import linear_pass
+from coopsim.compiled.lp import lp_vertices
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 from coopsim.inverse.trajectory import object_motion_trajectory, shared_object_motion_trajectory
 from inverse_cases import model, short_motion
@@ -35,7 +36,8 @@ def test_object_motion_passes_use_the_warm_up_signature():
     assert len(object_motion.trajectory._cache._cache_file._load_index()) == 1
 
 
-def test_the_linear_pass_has_one_signature():
-    """Every caller reaches the linear resolutions' pass through `api.linear_pass`, which passes writable
-    contiguous arrays: the warm-up's compile is the only one."""
-    assert len(linear_pass._cache._cache_file._load_index()) == 1
+@pytest.mark.parametrize("entry", [linear_pass, lp_vertices], ids=lambda e: e.__name__)
+def test_an_inverse_entry_has_one_signature(entry):
+    """Every caller reaches the linear resolutions' pass and the LP vertices through `api`, which passes
+    writable contiguous arrays: the warm-up's compile is the only one."""
+    assert len(entry._cache._cache_file._load_index()) == 1

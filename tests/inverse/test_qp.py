@@ -19,7 +19,7 @@ from coopsim.report.inverse_report import format_inverse_summary, inverse_study,
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.qp import QPError, solve_lps, solve_qp, solve_qps
 from helpers import SCENARIOS, run_cli
-from inverse_cases import BUNDLED, problem, run, with_motors
+from inverse_cases import BUNDLED, capacity_lps, problem, run
 
 
 def _random_qp(rng, n=6, p=8, q=2, m=10):
@@ -272,17 +272,6 @@ def test_bounded_resolution_is_exact_on_the_paper_run():
 LP_TOL = 1e-9     # objective, μ: relative to max(1, |value|)
 
 
-def _capacity_lps(name, mode, motors=True):
-    """lp_capacity's per-sample LPs (max μ) of a bundled scene; motors from `with_motors` (or the
-    scene's own: none on spatial_6r_pair, every row then left out)."""
-    m, res, traj = run(name)
-    m = with_motors(m, res, traj) if motors else m
-    A_ub, b_ub, A_eq, b_eq = cap._lp_rows(problem(name), m.motors, m.motors.passive, mode, None, None, "nonsqueezing")
-    c = np.zeros(A_ub.shape[2])
-    c[-1] = -1.0
-    return c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (len(c) - 1) + [(0, None)]
-
-
 def _linprog_one(lp, i):
     """scipy's linprog on problem i alone (rows with an infinite bound left out): the result and the
     inequality marginals over all rows (0 on those left out)."""
@@ -337,7 +326,7 @@ def test_lps_match_linprog_on_the_bundled_scenes(name):
     and equal to them (1e-9) wherever both reach the same nondegenerate vertex."""
     for mode in cap.MODES:
         for sense in (1.0, -1.0):
-            lp = _capacity_lps(name, mode)
+            lp = capacity_lps(name, mode)
             lp = (sense * lp[0],) + lp[1:]
             N = len(lp[1])
             batch = solve_lps(*lp)
@@ -355,7 +344,7 @@ def test_lps_infeasible_and_unbounded_problems_match_linprog():
     unbounded at others (no mass column in the equality rows: any μ carries), and a scene with no motor
     limits (every problem unbounded): the statuses are linprog's (2, 3) at those problems, and the
     other problems' solutions stay as without them."""
-    lp = _capacity_lps("paper_planar_2x3_carry", "scaled")
+    lp = capacity_lps("paper_planar_2x3_carry", "scaled")
     base = solve_lps(*lp)
     for bad in ([0, 130, 131], [130, 131]):
         b_ub = lp[2].copy()
@@ -370,7 +359,7 @@ def test_lps_infeasible_and_unbounded_problems_match_linprog():
         assert np.array_equal(batch.status[rest], base.status[rest])
         ok = rest[base.status[rest] == 0]
         assert np.max(np.abs(batch.x[ok, -1] - base.x[ok, -1]) / np.maximum(1.0, base.x[ok, -1])) <= LP_TOL
-    free = _capacity_lps("spatial_6r_pair", "scaled", motors=False)
+    free = capacity_lps("spatial_6r_pair", "scaled", motors=False)
     batch = solve_lps(*free)
     assert np.all(batch.status == 3)
     _agree(batch, free, np.arange(0, 301, 10))
