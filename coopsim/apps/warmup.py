@@ -15,8 +15,8 @@ waiting for what the other one compiles:
                      `chain_forward` is, the evaluation entry; once the projection kernels are, the
                      consistent projection;
   child "control" (with `control`): once `chain_forward` is on disk, the extras (inverse
-                     kinematics, the capacity objective, the linear resolutions' pass, the LP vertices),
-                     the controller entries and the time loop with a controller in it.
+                     kinematics, the capacity objective, the linear resolutions' pass, the LP vertices, the
+                     section loads), the controller entries and the time loop with a controller in it.
 Then this process loads what the children wrote. A wait ends when the kernel is on disk, when the
 child compiling it has ended (this process's waits), or after WAIT_S; the process then compiles what
 it needs itself. Without `control` the extras compile on their first use (`inverse`, `capacity`,
@@ -143,7 +143,7 @@ def compile_inverse_terms(model) -> None:
 
 def compile_extras(model) -> None:
     """Compile the entries some commands use: inverse kinematics (one arm's, and an object motion's in one pass), the
-    capacity objective, the linear resolutions' pass and the LP vertices.
+    capacity objective, the linear resolutions' pass, the LP vertices and the section loads.
 
     Args:
         model: the warm-up scene's Model.
@@ -162,7 +162,11 @@ def compile_extras(model) -> None:
                     np.ones(1, bool), model.motors.passive, np.ones(n), np.zeros((1, 1, k)), np.ones(3, bool), 0, lim,
                     lim, [(0, 0)], 1e-12)
     api.lp_vertices(np.eye(2)[None], np.zeros((1, 2)), np.ones((1, 2)), np.ones((1, 2)), np.ones(1), np.ones(1),
-                    np.zeros(1), np.ones(1), np.zeros(1), np.ones(1), 1, np.zeros((1, 2), np.int8), (1e-12, 1e-10, 1e-9))
+                    np.zeros(1), np.ones(1), np.zeros(1), np.ones(1), 1, np.zeros((1, 2), np.int8),
+                    (1e-12, 1e-10, 1e-9))
+    one = np.ones((1, 3))
+    api.section_loads(1.0, np.eye(3)[None], np.zeros((1, 6)), np.zeros((1, 6)), model.gravity, np.zeros((1, r, 6)),
+                      model.rows, model.object.grasp_pos, 0, np.ones(1), one, one, one, np.ones((r, 1)), np.ones(4))
 
 
 def compile_evaluations(model) -> None:

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, lp, manifold,
-                              object_motion, sample)
+                              object_motion, sample, stress)
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
@@ -62,12 +62,12 @@ class Compiled(NamedTuple):
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles it,
     `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories), the
-    capacity objective, the linear resolutions' pass and the LP vertices (`inverse`, `capacity`, a trajectory given
-    as object motion: their first use compiles them, a few seconds); "control", the controllers (the first
-    closed-loop run)."""
+    capacity objective, the linear resolutions' pass, the LP vertices and the section loads (`inverse`, `capacity`,
+    a trajectory given as object motion: their first use compiles them, a few seconds); "control", the controllers
+    (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
             "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval,
-                       distributions.linear_pass, lp.lp_vertices),
+                       distributions.linear_pass, lp.lp_vertices, stress.section_loads),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -668,6 +668,38 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, h
     lp.lp_vertices(_w(G), _w(g_lo), _w(g_hi), _w(norm), _w(bound), _w(c), _w(lo), _w(hi), _w(cap_lo), _w(cap_hi),
                    int(r), _w(held, np.int8), *(float(t) for t in tols), x, dual, ok, unbounded)
     return x, dual, ok, unbounded
+
+
+def section_loads(mass: float, R_o, twist, acc, gravity, F_e, rows, grasp_pos, axis: int, frac, K_diag, c_o, ps_o,
+                  on, sides) -> tuple:
+    """Section loads of a box object at c cuts of N samples, compiled (`stress.section_loads`).
+
+    Args:
+        mass: kg, the object's mass.
+        R_o: (N, 3, 3) the object's orientation, world ← object frame.
+        twist: (N, 6) [v_C; ω] m/s, rad/s, world axes.
+        acc: (N, 6) [a_C; ω̇] m/s², rad/s², world axes.
+        gravity: (3,) m/s², world axes.
+        F_e: (N, r, 6) [f; n] N, N·m, the grasp wrenches at the grasp points, world axes.
+        rows: (k, 6) the row selector S.
+        grasp_pos: (r, 3) m, the grasp points, object frame.
+        axis: the box axis the cuts are across.
+        frac: (c,) the parts' mass fractions.
+        K_diag: (c, 3) kg·m², the parts' inertias about their centres, box axes.
+        c_o: (c, 3) m, the parts' centres, object frame.
+        ps_o: (c, 3) m, the section centres, object frame.
+        on: (r, c) 1.0 where a grasp is on the part, else 0.0.
+        sides: (d₁, d₂, b, t) m, the section's sides along the other two box axes, the larger and the smaller.
+
+    Returns:
+        tuple: axial, shear (N, c) N; torsion, bending (N, c) N·m; peak normal and shear stresses (N,) Pa.
+    """
+    announce_compile("extras")
+    N, C = len(R_o), len(frac)
+    out = tuple(np.empty((N, C)) for _ in range(4)) + (np.empty(N), np.empty(N))
+    stress.section_loads(float(mass), _w(R_o), _w(twist), _w(acc), _w(gravity), _w(F_e), _w(rows), _w(grasp_pos),
+                         int(axis), _w(frac), _w(K_diag), _w(c_o), _w(ps_o), _w(on), _w(sides), *out)
+    return out
 
 
 def consistent_state(model: Model, q: np.ndarray, qd: np.ndarray, tol: float | None = None,

@@ -113,7 +113,7 @@ def affine_torques(prob: InverseProblem, res: Resolution, mode: str,
         prob: the InverseProblem (N samples, n joints).
         res: the Resolution (linear in the net object wrench for the result to be exact).
         mode: 'scaled' or 'payload' (`mass_line`).
-        engine: 'compiled' (one pass for both evaluations) or 'reference' (`coopsim.inverse.solve.ENGINES`).
+        engine: 'compiled' (one pass for both evaluations) or 'reference' (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         tuple[np.ndarray, np.ndarray]: a (N, n) N·m, the torques at μ = 0, and b (N, n) N·m per kg (N
@@ -206,7 +206,7 @@ def method_capacity(prob: InverseProblem, res: Resolution, motors: Motors, mode:
         mode: 'scaled' (object mass) or 'payload' (point payload mass).
         passive_tol: N·m (N on a prismatic joint), the largest passive-joint torque (or its rate per kg)
             tolerated.
-        engine: 'compiled' (`linear_study`) or 'reference' (`coopsim.inverse.solve.ENGINES`).
+        engine: 'compiled' (`linear_study`) or 'reference' (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         Capacity: over the active joints; infeasible (note says why) when a resolution other than

@@ -24,6 +24,27 @@ from coopsim.core.spatial import cross, rigid_acceleration
 from coopsim.inverse.trajectory import JointTrajectory
 
 
+ENGINES = ("compiled", "reference")   # the inverse side's two engines: compiled passes, or the NumPy reference
+
+
+def check_engine(engine: str) -> str:
+    """The engine, checked.
+
+    Args:
+        engine: 'compiled' (the compiled passes over the samples) or 'reference' (the readable NumPy
+            functions, which give the same numbers to rounding).
+
+    Returns:
+        str: engine.
+
+    Raises:
+        ValueError: an unknown engine.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
+    return engine
+
+
 class InverseError(CoopsimError):
     """The inverse dynamics cannot be resolved as asked (e.g. an infeasible bound with passive joints)."""
 

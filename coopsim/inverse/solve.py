@@ -2,24 +2,26 @@
 wrenches it distributes at every sample (`distribute`), the resolved torques, their energy (eq. 33)
 and the default internal-wrench bounds of the 'bounded' resolution.
 
-Two engines give the same numbers (ENGINES): 'compiled', the default, runs the linear resolutions in one
-compiled pass over the samples (`coopsim.inverse.distributions.linear_pass`); 'reference' runs every
-resolution's registered NumPy function (`coopsim.inverse.resolutions.RESOLUTIONS`), the readable
-reference. 'bounded' is a QP in both.
+Two engines give the same numbers to rounding (`coopsim.inverse.problem.ENGINES`): 'compiled', the
+default, runs the linear resolutions in one compiled pass over the samples
+(`coopsim.inverse.distributions.linear_pass`); 'reference' runs every resolution's registered NumPy
+function (`coopsim.inverse.resolutions.RESOLUTIONS`), the readable reference. 'bounded' is a QP in both.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
 from coopsim.core.model import Model
 from coopsim.inverse.resolutions import resolution_method
 from coopsim.inverse.distributions import (LINEAR_ROWS, RowKind, grasp_line_frames, internal_bound_components,
-                                           internal_operator, internal_wrench, linear_pass, min_energy_distribution,
-                                           nonsqueezing_metric, virtual_inertias, virtual_masses)
-from coopsim.inverse.problem import InverseProblem, InverseResult, Resolution, SampleFailure, grasp_wrenches, torques_of
+                                           internal_operator, internal_wrench, linear_pass, nonsqueezing_metric,
+                                           virtual_inertias, virtual_masses)
+from coopsim.inverse.problem import (InverseProblem, InverseResult, Resolution, SampleFailure, check_engine,
+                                     grasp_wrenches, torques_of)
 
 
 def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
@@ -45,14 +47,11 @@ def resolution_for(model: Model, method: str, weights: np.ndarray | None = None,
                       virtual_inertias(masses, obj.mass, obj.inertia), force_bound, moment_bound, bound_definition)
 
 
-ENGINES = ("compiled", "reference")
-
-
 def compiled_engine(engine: str, method: str) -> bool:
     """Whether `engine` runs resolution `method` in the compiled pass (a linear resolution, engine 'compiled').
 
     Args:
-        engine: 'compiled' or 'reference' (ENGINES).
+        engine: 'compiled' or 'reference' (`coopsim.inverse.problem.ENGINES`).
         method: the resolution's name.
 
     Returns:
@@ -61,9 +60,7 @@ def compiled_engine(engine: str, method: str) -> bool:
     Raises:
         ValueError: an unknown engine.
     """
-    if engine not in ENGINES:
-        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
-    return engine == "compiled" and method in LINEAR_ROWS
+    return check_engine(engine) == "compiled" and method in LINEAR_ROWS
 
 
 def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: list | None = None,
@@ -80,7 +77,7 @@ def distribute(prob: InverseProblem, y: np.ndarray, res: Resolution, failures: l
         res: the Resolution.
         failures: a list the SampleFailures of the unsolved samples are appended to (written); None:
             not reported.
-        engine: 'compiled' or 'reference' (ENGINES).
+        engine: 'compiled' or 'reference' (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         np.ndarray: (N, rk) [N; N·m] grasp wrenches in the rows S, arm after arm, world axes.
@@ -152,7 +149,7 @@ def resolve(prob: InverseProblem, res: Resolution, engine: str = "compiled") -> 
     Args:
         prob: the InverseProblem (N samples).
         res: the Resolution.
-        engine: 'compiled' or 'reference' (ENGINES).
+        engine: 'compiled' or 'reference' (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         InverseResult: per sample τ (N, n) N·m, grasp wrenches F_e (N, r, 6), the internal wrench
@@ -165,7 +162,8 @@ def resolve(prob: InverseProblem, res: Resolution, engine: str = "compiled") -> 
     return result_of(prob, res.method, f, res, failures)
 
 
-def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5) -> tuple[float, float]:
+def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5,
+                   engine: str = "compiled") -> tuple[float, float]:
     """The default internal-wrench bounds of the 'bounded' resolution, (force N, moment N·m).
 
     They are `fraction` of the peak internal-wrench components (grasp-line frames, res.bound_definition)
@@ -175,12 +173,14 @@ def default_bounds(prob: InverseProblem, res: Resolution, fraction: float = 0.5)
         prob: the InverseProblem (N samples).
         res: the Resolution (its weights, passive joints, virtual bodies and bound_definition).
         fraction: the share of the peaks taken (0.5: half).
+        engine: 'compiled' or 'reference' (`coopsim.inverse.problem.ENGINES`), for the minimum-energy
+            distribution.
 
     Returns:
         tuple[float, float]: the force bound N and the moment bound N·m of the 'bounded' resolution (0
         where the internal wrench has no component of that kind).
     """
-    f = min_energy_distribution(prob, prob.y, res.weights, res.passive)
+    f = distribute(prob, prob.y, replace(res, method="min_energy"), engine=engine)
     Mstar = nonsqueezing_metric(prob, res.masses, res.inertias)
     rows = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, res.bound_definition, Mstar))
     v = np.abs(np.einsum("nij,nj->ni", rows.C, f))

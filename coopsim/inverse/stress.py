@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.core.spatial import box_inertia, cross, rigid_acceleration
+from coopsim.inverse.problem import check_engine
 
 
 class SectionLoads(NamedTuple):
@@ -128,7 +129,7 @@ def grasp_axis(box: np.ndarray, grasp_pos: np.ndarray) -> int:
 
 def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.ndarray, twist: np.ndarray,
                   acc: np.ndarray, gravity: np.ndarray, F_e: np.ndarray, rows: np.ndarray,
-                  cuts: int = 81) -> SectionLoads:
+                  cuts: int = 81, engine: str = "compiled") -> SectionLoads:
     """Section loads of a uniform box object along the box axis a holding the grasps, over N samples.
 
     The axis a is `grasp_axis`'s, of length L; the cuts are `cuts` planes evenly inside (−L/2, L/2).
@@ -140,7 +141,8 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
         N_cut = K_p ω̇ + ω × K_p ω + (ρ − p_s) × m_p (a_c − g) − Σ [n_m + (p_m − p_s) × f_m].
     Resolved in the section frame (e_a and the two other box axes): axial = F_cut·e_a (tension > 0),
     shear, torsion = N_cut·e_a, bending. Every sample and cut at once, in the object frame (where K_p is
-    diagonal and c, p_s, p_m are constant).
+    diagonal and c, p_s, p_m are constant): one compiled pass over the samples (`coopsim.compiled.stress`),
+    or in NumPy (engine 'reference', the readable reference; the same numbers to rounding).
 
     Args:
         mass: kg, the object's mass (uniform density).
@@ -155,6 +157,7 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
         rows: (k, 6) the row selector S (world axes), restricting the loads to the modelled rows (planar:
             in-plane force, moment about the normal).
         cuts: the number of section planes c.
+        engine: 'compiled' or 'reference' (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         SectionLoads: the cuts xi (c,), the axis, the resultants (N, c) and the peak stresses (N,).
@@ -169,6 +172,15 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
     K_diag = np.diagonal(box_inertia(mass * frac, sizes), axis1=-2, axis2=-1)   # part inertias, box axes (c, 3)
     c_o, ps_o = np.zeros((cuts, 3)), np.zeros((cuts, 3))
     c_o[:, a], ps_o[:, a] = (xi - L / 2) / 2, xi        # part centre, section centre (object frame)
+    on = (grasp_pos[:, a][:, None] < xi).astype(float)  # grasp m on the part x < ξ (r, c)
+    d1, d2 = box[others[0]], box[others[1]]
+    b, t = max(d1, d2), min(d1, d2)
+    if check_engine(engine) == "compiled":
+        from coopsim.compiled import api
+
+        loads = api.section_loads(mass, R_o, twist, acc, gravity, F_e, rows, grasp_pos, a, frac, K_diag, c_o, ps_o, on,
+                                  (d1, d2, b, t))
+        return SectionLoads(xi, a, *loads)
 
     def body(v):                                        # world vectors (N, …, 3) → object frame
         return np.einsum("nji,n...j->n...i", R_o, v)
@@ -176,7 +188,6 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
     w, dw = body(twist[:, 3:])[:, None], body(acc[:, 3:])[:, None]     # (N, 1, 3), object frame
     a_c = rigid_acceleration(body(acc[:, :3])[:, None], w, dw, c_o)    # every sample × cut (N, c, 3)
     inert_f = (mass * frac)[:, None] * (a_c - body(np.broadcast_to(gravity, (len(R_o), 3)))[:, None])
-    on = (grasp_pos[:, a][:, None] < xi).astype(float)  # grasp m on the part x < ξ (r, c)
     f_m, n_m = body(F_e[..., :3]), body(F_e[..., 3:])
     f_on = np.einsum("nmk,mc->nck", f_m, on)
     force = inert_f - f_on
@@ -190,11 +201,9 @@ def section_loads(mass: float, box: np.ndarray, grasp_pos: np.ndarray, R_o: np.n
     out = {"axial": fl[..., a], "torsion": ml[..., a], "shear": np.hypot(fl[..., others[0]], fl[..., others[1]]),
            "bending": np.hypot(ml[..., others[0]], ml[..., others[1]]), "m1": ml[..., others[0]],
            "m2": ml[..., others[1]]}
-    d1, d2 = box[others[0]], box[others[1]]
     area = d1 * d2
     Z1, Z2 = d1 * d2 ** 2 / 6.0, d2 * d1 ** 2 / 6.0    # a moment about axis 1 varies the stress along axis 2
     normal = np.abs(out["axial"]) / area + np.abs(out["m1"]) / Z1 + np.abs(out["m2"]) / Z2
-    b, t = max(d1, d2), min(d1, d2)
     shear = 1.5 * out["shear"] / area + np.abs(out["torsion"]) * (3 * b + 1.8 * t) / (b * b * t * t)
     return SectionLoads(xi, a, out["axial"], out["shear"], out["torsion"], out["bending"],
                         normal.max(axis=1), shear.max(axis=1))

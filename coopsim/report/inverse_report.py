@@ -98,7 +98,7 @@ class InverseStudy:
 
 def inverse_study(model: Model, methods=METHODS, duration: float | None = None, with_replay: bool = False,
                   bounds: tuple[float | None, float | None] = (None, None), curve: bool = True,
-                  progress: Progress | None = None) -> InverseStudy:
+                  progress: Progress | None = None, engine: str = "compiled") -> InverseStudy:
     """The scenario's inverse-dynamics study, as `coopsim inverse` runs it.
 
     Args:
@@ -109,17 +109,18 @@ def inverse_study(model: Model, methods=METHODS, duration: float | None = None, 
         bounds: (N, N·m) the 'bounded' resolution's internal-wrench bounds; None: the defaults.
         curve: also the energy–stress trade-off curve.
         progress: hears the stages forward (or ik), inverse, replay and curve.
+        engine: 'compiled' or 'reference' (`solve_study`).
 
     Returns:
         InverseStudy: the trajectory, each resolution's result, internal-wrench components and object
         stress, the torque limits, replays and the curve where asked.
     """
-    return add_checks(solve_study(model, methods, duration, bounds, progress), with_replay, curve, progress)
+    return add_checks(solve_study(model, methods, duration, bounds, progress, engine), with_replay, curve, progress)
 
 
 def solve_study(model: Model, methods=METHODS, duration: float | None = None,
                 bounds: tuple[float | None, float | None] = (None, None),
-                progress: Progress | None = None) -> InverseStudy:
+                progress: Progress | None = None, engine: str = "compiled") -> InverseStudy:
     """The inverse study without its checks (no replays, no trade-off curve).
 
     Trajectory, every resolution of `methods`, internal wrenches and stress — all that `inverse_series`
@@ -132,6 +133,8 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
         bounds: (N, N·m) the 'bounded' resolution's internal-wrench bounds; None entries: the
             scenario's, else the defaults (`coopsim.inverse.solve.default_bounds`).
         progress: hears the stages forward (or ik) and inverse; None: silent.
+        engine: 'compiled' (the linear resolutions and the section loads in compiled passes) or
+            'reference' (the NumPy functions) (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         InverseStudy: with empty replays and curve.
@@ -142,7 +145,7 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
     f_b = bounds[0] if bounds[0] is not None else model.inverse.internal_force_bound
     m_b = bounds[1] if bounds[1] is not None else model.inverse.internal_moment_bound
     if f_b is None or m_b is None:
-        d_f, d_m = default_bounds(prob, base)
+        d_f, d_m = default_bounds(prob, base, engine=engine)
         f_b, m_b = (d_f if f_b is None else f_b), (d_m if m_b is None else m_b)
     resolutions = {k: replace(base, method=k, force_bound=f_b, moment_bound=m_b) for k in methods}
     results: dict[str, InverseResult] = {}
@@ -151,7 +154,7 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
         results["forward"] = result_of(prob, "forward", f, base)
     for i, (k, res) in enumerate(resolutions.items()):
         _report(progress, "inverse", i / len(resolutions))
-        results[k] = resolve(prob, res)
+        results[k] = resolve(prob, res, engine)
     _report(progress, "inverse", 1.0)
     components, stress = {}, {}
     axes = grasp_line_frames(prob)[:, :, 0]
@@ -160,7 +163,7 @@ def solve_study(model: Model, methods=METHODS, duration: float | None = None,
         components[k] = {d: decompose_internal(getattr(r, f"internal_{d}"), axes) for d in DEFINITIONS}
         if box:
             stress[k] = section_loads(model.object.mass, model.object.box, model.object.grasp_pos, prob.R_o,
-                                      prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows)
+                                      prob.twist, prob.acc, model.gravity, r.grasp_wrench, model.rows, engine=engine)
     return InverseStudy(model, traj, sim, prob, resolutions, results, components, stress,
                         torque_limits(model.motors, traj.qd), {}, [], (f_b, m_b))
 
@@ -393,7 +396,7 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
         methods: the linear resolutions (`coopsim.inverse.resolutions.LINEAR_METHODS`).
         progress: hears the stages forward (or ik), capacity, lp and weights.
         engine: 'compiled' (one pass over the samples for every resolution and mode) or 'reference' (the
-            NumPy functions, one call per resolution and mode) (`coopsim.inverse.solve.ENGINES`).
+            NumPy functions, one call per resolution and mode) (`coopsim.inverse.problem.ENGINES`).
 
     Returns:
         CapacityStudy: per (resolution, mode) the Capacity (kg, the saturating motor, time and side)

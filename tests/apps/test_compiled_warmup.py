@@ -9,6 +9,7 @@ from coopsim.compiled import api, object_motion
 from coopsim.apps import warmup
 from coopsim.compiled.distributions import linear_pass
 from coopsim.compiled.lp import lp_vertices
+from coopsim.compiled.stress import section_loads
 from coopsim.compiled.structs import PACKED_T, WORKSPACE_T
 from coopsim.inverse.trajectory import object_motion_trajectory, shared_object_motion_trajectory
 from inverse_cases import model, short_motion
@@ -37,7 +38,10 @@ def test_object_motion_passes_use_the_warm_up_signature():
 
 
 @pytest.mark.parametrize("entry", [linear_pass, lp_vertices], ids=lambda e: e.__name__)
+
+
+@pytest.mark.parametrize("entry", [linear_pass, lp_vertices, section_loads], ids=lambda e: e.__name__)
 def test_an_inverse_entry_has_one_signature(entry):
-    """Every caller reaches the linear resolutions' pass and the LP vertices through `api`, which passes
-    writable contiguous arrays: the warm-up's compile is the only one."""
+    """Every caller reaches the linear resolutions' pass, the LP vertices and the section loads through `api`,
+    which passes writable contiguous arrays: the warm-up's compile is the only one."""
     assert len(entry._cache._cache_file._load_index()) == 1

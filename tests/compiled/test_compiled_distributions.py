@@ -25,7 +25,7 @@ from coopsim.inverse.distributions import LINEAR_ROWS, linear_pass
 from coopsim.inverse.problem import InverseRankWarning
 from coopsim.inverse.resolutions import LINEAR_METHODS
 from coopsim.inverse.solve import distribute, resolution_for, resolve
-from coopsim.report.inverse_report import capacity_study
+from coopsim.report.inverse_report import capacity_study, solve_study
 from inverse_cases import BUNDLED, model, problem, run, with_motors
 
 CASES = BUNDLED + ["robots/panda_ceiling_carry", "hard/passive_joints", "hard/spatial_3arm_mixed"]
@@ -33,8 +33,10 @@ REL = 1e-12
 
 
 def _close(got, ref, scale=None):
-    scale = np.max(np.abs(ref)) if scale is None else scale
-    assert np.max(np.abs(got - ref), initial=0.0) <= REL * max(scale, 1e-300)
+    """got within REL·scale of ref (default scale: max |ref|), nan exactly where ref is (unsolved samples)."""
+    assert np.array_equal(np.isnan(got), np.isnan(ref))
+    scale = np.nanmax(np.abs(ref), initial=0.0) if scale is None else scale
+    assert np.nanmax(np.abs(got - ref), initial=0.0) <= REL * max(scale, 1e-300)
 
 
 def _capacity_close(got: cap.Capacity, ref: cap.Capacity, a, b, lo, hi, act):
@@ -154,3 +156,20 @@ def test_unknown_engine_is_refused():
     m, P = model("paper_planar_2x3"), problem("paper_planar_2x3", 0.2)
     with pytest.raises(ValueError, match="engine"):
         resolve(P, resolution_for(m, "paper"), engine="fast")
+
+
+@pytest.mark.filterwarnings("ignore::coopsim.inverse.problem.SampleFailureWarning")
+@pytest.mark.parametrize("name", ["paper_planar_2x3_carry", "hard/passive_joints"])
+def test_inverse_study_equals_the_reference(name):
+    """`solve_study` (what `coopsim inverse` runs: every resolution, 'bounded' at its default bounds — which
+    passive joints make infeasible at every sample of hard/passive_joints: nan in both —, the
+    internal-wrench components and the section loads) against its reference engine."""
+    got = solve_study(model(name), duration=0.3)
+    ref = solve_study(model(name), duration=0.3, engine="reference")
+    assert got.bounds == pytest.approx(ref.bounds, rel=REL)
+    for k, r in ref.results.items():
+        _close(got.results[k].tau, r.tau)
+        _close(got.results[k].internal_nonsqueezing, r.internal_nonsqueezing, np.nanmax(np.abs(r.grasp_wrench),
+                                                                                        initial=0.0))
+    for k, s in ref.stress.items():
+        _close(got.stress[k].peak_normal, s.peak_normal)
