@@ -162,8 +162,8 @@ def compile_extras(model) -> None:
                     np.ones(1, bool), model.motors.passive, np.ones(n), np.zeros((1, 1, k)), np.ones(3, bool), 0, lim,
                     lim, [(0, 0)], 1e-12)
     api.lp_vertices(np.eye(2)[None], np.zeros((1, 2)), np.ones((1, 2)), np.ones((1, 2)), np.ones(1), np.ones(1),
-                    np.zeros(1), np.ones(1), np.zeros(1), np.ones(1), 1, np.zeros((1, 2), np.int8),
-                    (1e-12, 1e-10, 1e-9))
+                    np.zeros(1), np.ones(1), np.zeros(1), np.ones(1), 1, np.zeros(1, np.int64),
+                    np.zeros((1, 2), np.int8), (1e-12, 1e-10, 1e-9))
     one = np.ones((1, 3))
     api.section_loads(1.0, np.eye(3)[None], np.zeros((1, 6)), np.zeros((1, 6)), model.gravity, np.zeros((1, r, 6)),
                       model.rows, model.object.grasp_pos, 0, np.ones(1), one, one, one, np.ones((r, 1)), np.ones(4))

@@ -642,18 +642,19 @@ def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular,
     return out
 
 
-def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, held, tols) -> tuple:
-    """Vertices of k LPs at given bases, certified optimal or unbounded, compiled (`lp.lp_vertices`).
+def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, idx, held, tols) -> tuple:
+    """Vertices of k of a batch's LPs at given bases, certified optimal or unbounded, compiled (`lp.lp_vertices`).
 
     Args:
-        G: (k, r + v, v) the rows: r constraint rows, then the identity of the v columns.
-        g_lo, g_hi: (k, r + v) their bounds, the columns' capped (±inf: none).
-        norm: (k, r + v) max |G_ij| per row.
-        bound: (k,) the largest finite row bound per problem.
+        G: (N, r + v, v) the batch's rows: r constraint rows, then the identity of the v columns.
+        g_lo, g_hi: (N, r + v) their bounds, the columns' capped (±inf: none).
+        norm: (N, r + v) max |G_ij| per row.
+        bound: (N,) the largest finite row bound per problem.
         c: (v,) the cost.
         lo, hi: (v,) the columns' uncapped bounds.
         cap_lo, cap_hi: (v,) the columns' capped bounds.
         r: the number of constraint rows.
+        idx: (k,) int, the problems.
         held: (k, r + v) int8 HiGHS's basis codes of the rows, then the columns.
         tols: (primal, dual, stationarity) relative tolerances of the certificates.
 
@@ -662,11 +663,11 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, h
         bool (certified at a cap with a descent ray).
     """
     announce_compile("extras")
-    k, R, v = np.shape(G)
+    k, (R, v) = len(idx), np.shape(G)[1:]
     x, dual = np.empty((k, v)), np.empty((k, R))
     ok, unbounded = np.empty(k, bool), np.empty(k, bool)
     lp.lp_vertices(_w(G), _w(g_lo), _w(g_hi), _w(norm), _w(bound), _w(c), _w(lo), _w(hi), _w(cap_lo), _w(cap_hi),
-                   int(r), _w(held, np.int8), *(float(t) for t in tols), x, dual, ok, unbounded)
+                   int(r), _w(idx, np.int64), _w(held, np.int8), *(float(t) for t in tols), x, dual, ok, unbounded)
     return x, dual, ok, unbounded
 
 

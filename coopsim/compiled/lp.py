@@ -80,19 +80,20 @@ def _row_dot(G, i, x):
 
 
 @entry
-def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, primal_tol, dual_tol, stat_tol,
-                x, dual, ok, unbounded):
-    """Vertices of k LPs at given bases, certified optimal or unbounded (module docstring).
+def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, idx, held, primal_tol, dual_tol,
+                stat_tol, x, dual, ok, unbounded):
+    """Vertices of k of a batch's LPs at given bases, certified optimal or unbounded (module docstring).
 
     Args:
-        G: (k, R, v) the rows: r constraint rows, then the identity (R = r + v).
-        g_lo, g_hi: (k, R) their bounds, the columns' capped (±inf: none).
-        norm: (k, R) max |G_ij| per row.
-        bound: (k,) the largest finite row bound per problem.
+        G: (N, R, v) the batch's rows: r constraint rows, then the identity (R = r + v).
+        g_lo, g_hi: (N, R) their bounds, the columns' capped (±inf: none).
+        norm: (N, R) max |G_ij| per row.
+        bound: (N,) the largest finite row bound per problem.
         c: (v,) the cost.
         lo, hi: (v,) the columns' uncapped bounds.
         cap_lo, cap_hi: (v,) the columns' capped bounds.
         r: the number of constraint rows.
+        idx: (k,) int64, the problems.
         held: (k, R) int8 the basis codes per row (0 lower, 1 basic, 2 upper, 3 zero).
         primal_tol, dual_tol, stat_tol: the certificates' relative tolerances (`coopsim.inverse.qp`).
         x: (k, v), written: the vertices.
@@ -100,7 +101,7 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, 
         ok: (k,) bool, written: certified optimal.
         unbounded: (k,) bool, written: certified optimal at a cap with a descent ray (unbounded without it).
     """
-    k, R, v = G.shape
+    k, (R, v) = idx.shape[0], G.shape[1:]
     M, t, lam = np.empty((v, v)), np.empty(v), np.empty(v)
     order, piv = np.empty(v, np.int64), np.empty(v, np.int64)
     d = np.empty(v)
@@ -108,6 +109,7 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, 
     for j in range(v):
         cmax = max(cmax, abs(c[j]))
     for p in range(k):
+        q = idx[p]
         ok[p], unbounded[p] = False, False
         for i in range(R):
             dual[p, i] = 0.0
@@ -127,11 +129,11 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, 
         for a in range(v):
             i = order[a]
             h = held[p, i]
-            t[a] = g_hi[p, i] if h == 2 else (0.0 if h == 3 else g_lo[p, i])
+            t[a] = g_hi[q, i] if h == 2 else (0.0 if h == 3 else g_lo[q, i])
             if not np.isfinite(t[a]):
                 valid = False
             for j in range(v):
-                M[a, j] = G[p, i, j]
+                M[a, j] = G[q, i, j]
         if not valid or not _lu(M, v, piv):
             continue
         for a in range(v):
@@ -144,28 +146,28 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, 
             finite = finite and np.isfinite(x[p, a]) and np.isfinite(lam[a])
         if not finite:
             continue
-        pscale, viol, res = bound[p], -np.inf, 0.0
+        pscale, viol, res = bound[q], -np.inf, 0.0
         for i in range(R):
-            gx, mag = _row_dot(G[p], i, x[p])
+            gx, mag = _row_dot(G[q], i, x[p])
             pscale = max(pscale, mag)
-            viol = max(viol, max(g_lo[p, i] - gx, gx - g_hi[p, i]))
+            viol = max(viol, max(g_lo[q, i] - gx, gx - g_hi[q, i]))
         for a in range(v):
             dual[p, order[a]] = lam[a]
-            gx, _ = _row_dot(G[p], order[a], x[p])
+            gx, _ = _row_dot(G[q], order[a], x[p])
             res = max(res, abs(gx - t[a]))
         dscale, wrong = cmax, -np.inf
         for i in range(R):
             h = held[p, i]
-            weight = abs(dual[p, i]) * norm[p, i]
+            weight = abs(dual[p, i]) * norm[q, i]
             dscale = max(dscale, weight)
-            if g_lo[p, i] == g_hi[p, i]:
+            if g_lo[q, i] == g_hi[q, i]:
                 w = 0.0
             elif h == 3:
                 w = weight
             elif h == 0:
-                w = -dual[p, i] * norm[p, i]
+                w = -dual[p, i] * norm[q, i]
             elif h == 2:
-                w = dual[p, i] * norm[p, i]
+                w = dual[p, i] * norm[q, i]
             else:
                 w = 0.0
             wrong = max(wrong, w)
@@ -173,12 +175,12 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r, held, 
         for j in range(v):
             acc = 0.0
             for a in range(v):
-                acc += lam[a] * G[p, order[a], j]
+                acc += lam[a] * G[q, order[a], j]
             stat = max(stat, abs(acc - c[j]))
         ok[p] = (viol <= primal_tol * pscale and res <= primal_tol * pscale and wrong <= dual_tol * dscale
                  and stat <= stat_tol * dscale)
         if ok[p]:
-            unbounded[p] = _ray(G[p], g_lo[p], g_hi[p], c, lo, hi, cap_lo, cap_hi, r, held[p], order, M, piv, d,
+            unbounded[p] = _ray(G[q], g_lo[q], g_hi[q], c, lo, hi, cap_lo, cap_hi, r, held[p], order, M, piv, d,
                                 primal_tol, dual_tol)
 
 

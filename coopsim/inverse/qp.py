@@ -180,7 +180,7 @@ class _LPs(NamedTuple):
         lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], float)
         hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], float)
         cap_lo, cap_hi = np.where((c > 0) & (lo < -cap), -cap, lo), np.where((c < 0) & (hi > cap), cap, hi)
-        G = np.concatenate([A_ub, A_eq, np.broadcast_to(np.eye(v), (N, v, v))], axis=1).astype(float)
+        G = np.concatenate([A_ub, A_eq, np.broadcast_to(np.eye(v), (N, v, v))], axis=1, dtype=float)
         row_lo = np.concatenate([np.full(b_ub.shape, -np.inf), b_eq], axis=1)
         row_hi = np.concatenate([np.where(keep, b_ub, np.inf), b_eq], axis=1)
         finite = np.where(np.isfinite(row_lo), np.abs(row_lo), 0.0), np.where(np.isfinite(row_hi), np.abs(row_hi), 0.0)
@@ -349,9 +349,8 @@ def _vertices(P: _LPs, idx: np.ndarray, col_basis: np.ndarray, row_basis: np.nda
     from coopsim.compiled import api
 
     held = np.concatenate([row_basis, col_basis], axis=1)
-    x, dual, ok, unbounded = api.lp_vertices(P.G[idx], P.g_lo[idx], P.g_hi[idx], P.norm[idx], P.bound[idx], P.c, P.lo,
-                                             P.hi, P.cap_lo, P.cap_hi, P.r, held,
-                                             (PRIMAL_TOL, DUAL_TOL, STATIONARITY_TOL))
+    x, dual, ok, unbounded = api.lp_vertices(P.G, P.g_lo, P.g_hi, P.norm, P.bound, P.c, P.lo, P.hi, P.cap_lo, P.cap_hi,
+                                             P.r, idx, held, (PRIMAL_TOL, DUAL_TOL, STATIONARITY_TOL))
     return x, dual[:, :P.r], ok, unbounded
 
 
