@@ -1,9 +1,10 @@
 """Stage 7 against MuJoCo: every resolution's torques and grasp wrenches, applied to MuJoCo's own model
 of the arms, produce the prescribed motion, and the grasp wrenches move the object as prescribed.
 
-Per bundled scenario (the trajectory each one inverts: its forward run, or for
-`paper_planar_2x3_carry` the IK of its `inverse.object_motion`), per resolution (paper, nonsqueezing,
-min_energy, bounded at half the minimum-energy peak) and at six samples:
+Per bundled scenario, the panda carry (robots/) and a spatial three-arm scene (hard/) (the trajectory
+each one inverts: its forward run, or for the carries the IK of their `inverse.object_motion`), per
+resolution (paper, nonsqueezing, min_energy, bounded at half the minimum-energy peak), per engine (the
+compiled passes and the NumPy reference) and at six samples:
 
 * arms: MuJoCo's open arms (no object, no welds). `mj_inverse` at the sample's (q, q̇, q̈) gives
   M q̈ + c; the end-effector of arm m receives the reaction −F_e^m of the wrench it applies to the
@@ -25,7 +26,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from coopsim.inverse.problem import inverse_problem
+from coopsim.inverse.problem import ENGINES, inverse_problem
 from coopsim.inverse.resolutions import METHODS
 from coopsim.inverse.solve import default_bounds, resolution_for, resolve
 from coopsim.twin.mjcf import build_spec, dof_address, qpos_address, static_settings
@@ -89,9 +90,9 @@ def _sampled_problem(name: str):
     return m, inverse_problem(m, sub)
 
 
-def _resolutions(m, P):
+def _resolutions(m, P, engine="compiled"):
     base = resolution_for(m, "min_energy")
-    fb, mb = default_bounds(P, base)
+    fb, mb = default_bounds(P, base, engine=engine)
     return {k: replace(base, method=k, force_bound=fb, moment_bound=mb) for k in METHODS}
 
 
@@ -99,20 +100,21 @@ def _rel(a, b) -> float:
     return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(1.0, np.max(np.abs(b))))
 
 
-@pytest.mark.parametrize("name", BUNDLED)
-def test_resolutions_move_mujocos_arms_and_object_as_prescribed(name):
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("name", BUNDLED + ["robots/panda_ceiling_carry", "hard/spatial_3arm_mixed"])
+def test_resolutions_move_mujocos_arms_and_object_as_prescribed(name, engine):
     """Every resolution, every sample: τ = mj_inverse(q, q̇, q̈) + Σ_m J_mᵀ F_e^m (<= 1e-9 relative),
     MuJoCo's forward dynamics of τ with the reactions −F_e^m applied returns q̈ (<= 1e-9 relative),
     and the object's Newton–Euler equations hold with MuJoCo's object motion (<= 1e-9 relative, in
     the scene's rows). Measured: torques 1e-14, q̈ 2e-12, object 1e-13; the same checks with the
     reaction's sign flipped, or the grasp wrenches not moved to C, fail by 0.5–5 and 0.07–0.7. The
     bounded resolution has at least one bound active (it differs from min_energy), so the QP path is
-    what is checked."""
+    what is checked. Both engines: the compiled passes and the NumPy reference."""
     m, P = _sampled_problem(name)
     arms, carried = OpenArms(m, with_object=False), OpenArms(m, with_object=True)
     S = m.rows
     worst = {"torque": 0.0, "qdd": 0.0, "object": 0.0}
-    results = {k: resolve(P, res) for k, res in _resolutions(m, P).items()}
+    results = {k: resolve(P, res, engine) for k, res in _resolutions(m, P, engine).items()}
     assert not results["bounded"].failures
     assert np.max(np.abs(results["bounded"].tau - results["min_energy"].tau)) > 1e-6
     for i in range(len(P.t)):
