@@ -158,9 +158,8 @@ def compile_extras(model) -> None:
     n, k, r = model.n_total, model.rows.shape[0], model.r
     lim = np.zeros((1, n))
     api.linear_pass(np.zeros((1, n, r * k)), np.zeros((1, k, r * k)), lim, np.zeros((1, r, 6, 6)), np.eye(3)[None],
-                    model.rows, np.ones(r), np.zeros((r, 3, 3)), np.zeros((1, r * k, k)), np.zeros((1, r * k, 0)),
-                    np.ones(1, bool), model.motors.passive, np.ones(n), np.zeros((1, 1, k)), np.ones(3, bool), 0, lim,
-                    lim, [(0, 0)], 1e-12)
+                    model.rows, np.ones(r), np.zeros((r, 3, 3)), model.motors.passive, np.ones(n), np.zeros((1, 1, k)),
+                    np.ones(3, bool), 0, lim, lim, [(0, 0)], 1e-12)
     api.lp_vertices(np.eye(2)[None], np.zeros((1, 2)), np.ones((1, 2)), np.ones((1, 2)), np.ones(1), np.ones(1),
                     np.zeros(1), np.ones(1), np.zeros(1), np.ones(1), 1, np.zeros(1, np.int64),
                     np.zeros((1, 2), np.int8), (1e-12, 1e-10, 1e-9))

@@ -600,8 +600,8 @@ class LinearPass(NamedTuple):
     unsure: np.ndarray
 
 
-def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular, passive, weights, ys, which,
-                wrench_of: int, lo, hi, pairs, rank_tol: float) -> LinearPass:
+def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, passive, weights, ys, which, wrench_of: int, lo, hi,
+                pairs, rank_tol: float) -> LinearPass:
     """The linear resolutions of s net wrenches at N samples in one compiled pass (`distributions.linear_pass`).
 
     Args:
@@ -613,9 +613,6 @@ def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular,
         rows: (k, 6) the constraint rows S.
         masses: (r,) kg, the non-squeezing virtual masses.
         inertias: (r, 3, 3) kg·m², the virtual inertias, object frame.
-        Cp: (N, m, c) C⁺ of the minimum-energy constraints C = [A; P Jᵀ].
-        Z: (N, m, d) an orthonormal basis of null(C).
-        regular: (N,) bool, C of full row rank.
         passive: (n,) bool, the passive joints.
         weights: (n,) the energy weights (passive joints' entries ignored).
         ys: (s, N, k) [N; N·m], the net object wrenches, rows S, world axes.
@@ -635,8 +632,8 @@ def linear_pass(JT, A, tau_arms, W, R_o, rows, masses, inertias, Cp, Z, regular,
     passive = np.asarray(passive, dtype=bool)
     out = LinearPass(np.zeros((3, s, N, m)), np.zeros((3, s, N, n)), np.zeros((3, N, r, 6)), np.zeros((3, N, r, 6)),
                      np.zeros((3, P, N, n)), np.zeros((3, P, N, n)), np.zeros((3, N), dtype=bool))
-    distributions.linear_pass(_w(JT), _w(A), _w(tau_arms), _w(W), _w(R_o), _w(rows), _w(masses), _w(inertias), _w(Cp),
-                              _w(Z), _w(regular, bool), np.flatnonzero(passive).astype(np.int64),
+    distributions.linear_pass(_w(JT), _w(A), _w(tau_arms), _w(W), _w(R_o), _w(rows), _w(masses), _w(inertias),
+                              np.flatnonzero(passive).astype(np.int64),
                               np.where(passive, 0.0, _w(weights)), _w(ys), _w(which, bool), int(wrench_of), _w(lo),
                               _w(hi), _w(np.reshape(pairs, (P, 2)), np.int64), float(rank_tol), *out)
     return out

@@ -9,16 +9,16 @@ m = rk unknowns, n joints), per sample:
     'nonsqueezing'  f = M* Aᵀ K⁻¹ y,  K = A M* Aᵀ (Cholesky),  M* = blockdiag(S diag(m_i* I₃, R_o J_i* R_oᵀ) Sᵀ);
     'min_energy'    f = f_p + Z z,  f_p = C⁺ b,  b = [y; −P τ_arms],  D = Jᵀ Z,  (Dᵀ Q D) z = −Dᵀ Q (τ_arms + Jᵀ f_p),
 
-with C⁺ and Z (the minimum-norm inverse and a null-space basis of C = [A; P Jᵀ]) factored once per
-problem by the reference's SVD (`coopsim.inverse.distributions.min_energy_basis`); τ = τ_arms + Jᵀ f.
+with C⁺ = Q₁ R⁻ᵀ and Z = Q₂ from a Householder QR of Cᵀ = Q [R; 0] (C = [A; P Jᵀ], factored once per
+sample for every net wrench; the reference takes an SVD, and the minimiser f is the same); τ = τ_arms + Jᵀ f.
 Internal wrenches at C (`coopsim.inverse.distributions.internal_operator`), projected on the modelled
 rows: paper F_I^m = SᵀS (W_m Sᵀ f_m − Σ_j W_j Sᵀ f_j / r), non-squeezing F_I^m = SᵀS W_m Sᵀ [f − M* Aᵀ K⁻¹ A f]_m.
 The ratio test is `coopsim.inverse.distributions.mass_limits` of τ(μ) = a + μ b, a = τ(y₀), b = τ(y₀ + y₁) − a.
 
-A sample whose minimum-energy equations the pass cannot certify (C not of full row rank by the
-reference's SVD, or Dᵀ Q D not certified well-conditioned: rank_tol·trace(H)·trace(H⁻¹) ≥ 1, the bound of
-`coopsim.compiled.capacity`) or whose K is not positive definite is flagged; the caller takes the NumPy
-path there.
+A sample whose minimum-energy equations the pass cannot certify well-conditioned (C Cᵀ = RᵀR or
+H = Dᵀ Q D with rank_tol·trace(G)·trace(G⁻¹) ≥ 1, the bound of `coopsim.compiled.capacity`: it holds at every
+sample where the forward model's rank rule finds the rank lost, and at a few ill-conditioned ones) or
+whose K is not positive definite is flagged; the caller takes the NumPy path there.
 """
 
 import numpy as np
@@ -179,6 +179,70 @@ def _energy_factor(JT, Z, Q, rank_tol, D, H, x):
 
 
 @kernel
+def _constraint_basis(A, JT, pidx, rank_tol, X, V, Qm, L, Cp, Z, x):
+    """Cp ← C⁺ = Q₁ R⁻ᵀ (m, c) and Z ← Q₂ (m, d) of C = [A; P Jᵀ] (c = k + #passive rows, m columns) from a
+    Householder QR of Cᵀ = Q [R; 0]; False unless c ≤ m and C Cᵀ = RᵀR is certified well-conditioned,
+    rank_tol·trace(RᵀR)·trace((RᵀR)⁻¹) < 1 (X, V (m, c), Qm (m, m), L (c, c), x (c,) work)."""
+    k, m = A.shape
+    c = k + pidx.shape[0]
+    if c > m:
+        return False
+    for a in range(m):
+        for q in range(k):
+            X[a, q] = A[q, a]
+        for p in range(c - k):
+            X[a, k + p] = JT[pidx[p], a]
+    for j in range(c):                            # Householder: X ← H_j X, v_j in V[j:, j]
+        norm = 0.0
+        for a in range(j, m):
+            norm += X[a, j] * X[a, j]
+        norm = np.sqrt(norm)
+        alpha = -norm if X[j, j] >= 0.0 else norm
+        vv = 0.0
+        for a in range(j, m):
+            V[a, j] = X[a, j] - (alpha if a == j else 0.0)
+            vv += V[a, j] * V[a, j]
+        if not vv > 0.0:
+            return False
+        for q in range(j, c):
+            acc = 0.0
+            for a in range(j, m):
+                acc += V[a, j] * X[a, q]
+            acc *= 2.0 / vv
+            for a in range(j, m):
+                X[a, q] -= acc * V[a, j]
+        x[j] = vv
+    trace = 0.0
+    for i in range(c):                            # L = Rᵀ, R the upper triangle of X
+        for j in range(c):
+            L[i, j] = X[j, i] if j <= i else 0.0
+            trace += L[i, j] * L[i, j]
+        if L[i, i] == 0.0:
+            return False
+    for a in range(m):                            # Qm = H_0 … H_{c-1}
+        for q in range(m):
+            Qm[a, q] = 1.0 if a == q else 0.0
+    for j in range(c - 1, -1, -1):
+        vv = x[j]
+        for q in range(m):
+            acc = 0.0
+            for a in range(j, m):
+                acc += V[a, j] * Qm[a, q]
+            acc *= 2.0 / vv
+            for a in range(j, m):
+                Qm[a, q] -= acc * V[a, j]
+    for a in range(m):                            # Cp[a] = R⁻¹ Q₁[a]ᵀ (back substitution), Z = Q₂
+        for q in range(c - 1, -1, -1):
+            acc = Qm[a, q]
+            for p in range(q + 1, c):
+                acc -= L[p, q] * Cp[a, p]
+            Cp[a, q] = acc / L[q, q]
+        for q in range(m - c):
+            Z[a, q] = Qm[a, c + q]
+    return rank_tol * trace * _trace_of_inverse(L, c, x) < 1.0
+
+
+@kernel
 def _min_energy(JT, ta, Cp, Z, D, H, pidx, Q, y, f, b, u, z):
     """f ← f_p + Z z, the minimum-energy distribution of y (one sample; D, H from `_energy_factor`; b (c,),
     u (n,), z (d,) work)."""
@@ -289,8 +353,8 @@ def _limits(a, t1, lo, hi, up, dn):
 
 
 @entry
-def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, Cp, Z, regular, pidx, Q, ys, which, wrench_of, lo, hi, pairs,
-                rank_tol, f, tau, Fp, Fn, up, dn, unsure):
+def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, pidx, Q, ys, which, wrench_of, lo, hi, pairs, rank_tol, f, tau, Fp, Fn,
+                up, dn, unsure):
     """The linear resolutions of s net object wrenches at N samples, their internal wrenches and ratio tests.
 
     Rows of the method axis: PAPER, NONSQUEEZING, MIN_ENERGY (module docstring); a method's outputs are
@@ -305,17 +369,14 @@ def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, Cp, Z, regular, pidx, Q, ys, which
         S: (k, 6) the constraint rows.
         vm: (r,) kg, the non-squeezing virtual masses m_i*.
         vJ: (r, 3, 3) kg·m², the virtual inertias J_i*, object frame.
-        Cp: (N, m, c) C⁺, the minimum-norm inverse of C = [A; P Jᵀ] (c = k + #passive).
-        Z: (N, m, d) an orthonormal basis of null(C).
-        regular: (N,) bool, C of full row rank (by the reference's SVD).
-        pidx: (c − k,) int64, the passive joints' indices.
+        pidx: (p,) int64, the passive joints' indices (the rows P Jᵀ of C).
         Q: (n,) the energy weights (0 on passive joints).
         ys: (s, N, k) [N; N·m] the net object wrenches, rows S, world axes.
         which: (3,) bool, the methods to compute.
         wrench_of: the index into ys whose internal wrenches are written (−1: none).
         lo, hi: (N, n) N·m, the motor lines τ_min, τ_max.
         pairs: (P, 2) int64, the (y₀, y₀ + y₁) indices into ys of each ratio test.
-        rank_tol: the forward model's rank tolerance (λ_min/λ_max) for Dᵀ Q D's certificate.
+        rank_tol: the forward model's rank tolerance (λ_min/λ_max) for the certificates of C Cᵀ and Dᵀ Q D.
         f: (3, s, N, m) [N; N·m], written: the grasp wrenches.
         tau: (3, s, N, n) N·m, written: the torques.
         Fp: (3, N, r, 6) [N; N·m], written: the paper internal wrenches at C of ys[wrench_of].
@@ -323,11 +384,14 @@ def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, Cp, Z, regular, pidx, Q, ys, which
         up: (3, P, N, n) kg, written: the largest carried mass per motor line (`mass_limits`).
         dn: (3, P, N, n) kg, written: the smallest.
         unsure: (3, N) bool, written: the samples the NumPy path is to solve (K not positive definite
-            for every method when internal wrenches are asked; C or Dᵀ Q D for min_energy).
+            for every method when internal wrenches are asked; C Cᵀ or Dᵀ Q D for min_energy).
     """
     N, n, m = JT.shape
     k, r, s = A.shape[1], W.shape[1], ys.shape[0]
-    c, d = Cp.shape[2], Z.shape[2]
+    c = k + pidx.shape[0]
+    d = max(m - c, 0)
+    X, V, Qm, L = np.empty((m, c)), np.empty((m, c)), np.empty((m, m)), np.empty((c, c))
+    Cp, Z, xc = np.empty((m, c)), np.empty((m, d)), np.empty(c)
     MAt, K = np.empty((m, k)), np.empty((k, k))
     B, T = np.empty((6, 6)), np.empty((k, 6))
     D, H = np.empty((n, max(d, 1))), np.empty((max(d, 1), max(d, 1)))
@@ -341,7 +405,8 @@ def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, Cp, Z, regular, pidx, Q, ys, which
         if need_k:
             k_ok = _nonsqueezing_factor(A[i], R_o[i], S, vm, vJ, MAt, K, B, T)
         if which[MIN_ENERGY]:
-            unsure[MIN_ENERGY, i] = not (regular[i] and _energy_factor(JT[i], Z[i], Q, rank_tol, D, H, xd))
+            unsure[MIN_ENERGY, i] = not (_constraint_basis(A[i], JT[i], pidx, rank_tol, X, V, Qm, L, Cp, Z, xc)
+                                         and _energy_factor(JT[i], Z, Q, rank_tol, D, H, xd))
         for meth in range(3):
             if not which[meth]:
                 continue
@@ -355,7 +420,7 @@ def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, Cp, Z, regular, pidx, Q, ys, which
                 elif meth == NONSQUEEZING:
                     _nonsqueezing(MAt, K, ys[q, i], fq, x)
                 else:
-                    _min_energy(JT[i], ta[i], Cp[i], Z[i], D, H, pidx, Q, ys[q, i], fq, b, u, z)
+                    _min_energy(JT[i], ta[i], Cp, Z, D, H, pidx, Q, ys[q, i], fq, b, u, z)
                 _torques(JT[i], ta[i], fq, tau[meth, q, i])
             if wrench_of >= 0:
                 _internal(W[i], S, MAt, K, f[meth, wrench_of, i], Fp[meth, i], Fn[meth, i], g, x, v6, w6)

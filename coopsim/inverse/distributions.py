@@ -633,49 +633,6 @@ def grasp_line_frames(prob: InverseProblem) -> np.ndarray:
 LINEAR_ROWS = {"paper": 0, "nonsqueezing": 1, "min_energy": 2}   # method → its row in a pass's method axis
 
 
-class MinEnergyBasis(NamedTuple):
-    """What the minimum-energy distributions need of C = [A; P Jᵀ] whatever the net wrenches and weights.
-
-    From the SVD C = U Σ Vᵀ per sample (as `min_energy_setup` factors it), ρ = min(c, m): every solution
-    of C f = b is f = C⁺ b + Z z where C has full row rank.
-
-    Attributes:
-        pinv: (N, m, c) C⁺ = V_ρ Σ_ρ⁻¹ U_ρᵀ (zero singular values left out).
-        Z: (N, m, d) an orthonormal basis of null(C), d = m − ρ.
-        regular: (N,) bool, C of full row rank by the forward model's rule (`gram_rank`, the problem's
-            rank_tol).
-    """
-
-    pinv: np.ndarray
-    Z: np.ndarray
-    regular: np.ndarray
-
-
-def min_energy_basis(prob: InverseProblem, passive: np.ndarray) -> MinEnergyBasis:
-    """The MinEnergyBasis of the problem for these passive joints, factored once per problem (`InverseProblem.factor`).
-
-    Args:
-        prob: the InverseProblem along the trajectory (N samples, n joints, r arms, k rows S).
-        passive: (n,) bool, the passive joints (τ_j = 0 enforced).
-
-    Returns:
-        MinEnergyBasis: C⁺, the null-space basis and the samples where C has full row rank.
-    """
-    passive = np.asarray(passive, dtype=bool)
-    return prob.factor(("min_energy_basis", passive.tobytes()), lambda: _min_energy_basis(prob, passive))
-
-
-def _min_energy_basis(prob: InverseProblem, passive: np.ndarray) -> MinEnergyBasis:
-    C = np.concatenate([prob.A, prob.JT[:, passive, :]], axis=1)
-    c, m = C.shape[1:]
-    U, sv, Vt = np.linalg.svd(C)
-    rank = min(c, m)
-    regular = (c <= m) & (gram_rank(sv, prob.rank_tol) == rank)
-    inv_s = np.divide(1.0, sv, out=np.zeros_like(sv), where=sv > 0)
-    pinv = np.swapaxes(Vt[:, :rank], 1, 2) @ (inv_s[..., None] * np.swapaxes(U[:, :, :rank], 1, 2))
-    return MinEnergyBasis(pinv, np.swapaxes(Vt[:, rank:], 1, 2), regular)
-
-
 def mass_limits(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(up, dn) (N, n) kg: per constraint lo <= a + μ b <= hi the largest and smallest μ.
 
@@ -730,15 +687,11 @@ def linear_pass(prob: InverseProblem, res: Resolution, ys: np.ndarray, methods, 
     ys = np.asarray(ys, dtype=float)
     N, n, m = prob.JT.shape
     which = np.array([name in methods for name in LINEAR_ROWS])
-    if which[LINEAR_ROWS["min_energy"]]:
-        basis = min_energy_basis(prob, res.passive)
-    else:
-        basis = MinEnergyBasis(np.zeros((N, m, 0)), np.zeros((N, m, 0)), np.zeros(N, bool))
     lo, hi = limits if limits is not None else (np.zeros((N, n)), np.zeros((N, n)))
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2) if limits is not None else np.zeros((0, 2), np.int64)
     out = api.linear_pass(prob.JT, prob.A, prob.tau_arms, prob.W, prob.R_o, prob.rows, res.masses, res.inertias,
-                          basis.pinv, basis.Z, basis.regular, res.passive, res.weights, ys, which,
-                          -1 if wrench_of is None else wrench_of, lo, hi, pairs, prob.rank_tol)
+                          res.passive, res.weights, ys, which, -1 if wrench_of is None else wrench_of, lo, hi, pairs,
+                          prob.rank_tol)
     for name, row in LINEAR_ROWS.items():
         idx = np.flatnonzero(out.unsure[row])
         if which[row] and len(idx):

@@ -12,7 +12,7 @@ There are k(r − 1) more unknowns than equations: each choice of f is a redunda
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -129,9 +129,6 @@ class InverseProblem:
         grasp_pos: (r, 3) m, the grasp points (end-effector frame origins), object frame.
         rank_tol: the scenario's integrator.rank_tol, the relative eigenvalue below which a Gram matrix of
             the equations counts as rank-deficient (as for the forward model's Λ𝐈⁻¹Λᵀ).
-        factors: the factorisations of the problem's equations computed so far, by what they depend on
-            besides the problem (`factor`); a copy made by `dataclasses.replace` starts empty. The arrays
-            above are not to be changed once a factorisation is kept.
     """
 
     t: np.ndarray
@@ -158,22 +155,6 @@ class InverseProblem:
     box: np.ndarray
     grasp_pos: np.ndarray
     rank_tol: float = 1e-10
-    factors: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def factor(self, key: tuple, build):
-        """The factorisation `key` of the problem's equations, built by `build()` on first use and kept.
-
-        Args:
-            key: what the factorisation depends on besides the problem (e.g. its name and the passive
-                joints' bytes); hashable.
-            build: a callable taking no arguments that computes it.
-
-        Returns:
-            what `build` returned, the first time for this key.
-        """
-        if key not in self.factors:
-            self.factors[key] = build()
-        return self.factors[key]
 
     @property
     def r(self) -> int:

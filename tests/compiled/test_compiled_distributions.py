@@ -6,10 +6,10 @@ trajectory, the robot carry with its object motion, the passive-joint scene and 
 Tolerance 1e-12 relative, to the largest magnitude of the quantity compared (for the internal wrenches, of
 the grasp wrenches: they vanish for the resolution that zeroes them): both engines evaluate the same
 formulas in the same floating-point arithmetic, differing in summation order, fused multiply-adds and the
-factorisation of the small k × k and d × d systems (Cholesky against LU or the SVD); the rounding that
-leaves is a few eps times the condition numbers of those systems, measured on these scenes as ≤ 2e-14
+factorisation of the small systems (Cholesky and Householder QR against LU and the SVD); the rounding that
+leaves is a few eps times the condition numbers of those systems, measured on these scenes as ≤ 5e-14
 for the torques. A capacity μ = (τ_lim − a)/b inherits the torques' error divided by the rate b at the
-binding motor line: ≤ 1.5e-14 relative for the feasible capacities here, 5e-13 for an
+binding motor line: ≤ 1e-13 relative for the capacities here but one, 5e-13 for an
 infeasible one (μ = −2561 kg, a motor beyond its line at zero mass whose rate b is 3000 times smaller
 than its torque); the test allows REL times the larger of |μ| and max |τ_j| / |b|."""
 
