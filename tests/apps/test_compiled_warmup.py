@@ -37,9 +37,6 @@ def test_object_motion_passes_use_the_warm_up_signature():
     assert len(object_motion.trajectory._cache._cache_file._load_index()) == 1
 
 
-@pytest.mark.parametrize("entry", [linear_pass, lp_vertices], ids=lambda e: e.__name__)
-
-
 @pytest.mark.parametrize("entry", [linear_pass, lp_vertices, section_loads], ids=lambda e: e.__name__)
 def test_an_inverse_entry_has_one_signature(entry):
     """Every caller reaches the linear resolutions' pass, the LP vertices and the section loads through `api`,
