@@ -31,6 +31,7 @@ from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, r
 from coopsim.dynamics.closed_chain import arm_poses, carrier_object
 from coopsim.dynamics.kinematics import arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate, reach_check
 from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
+from coopsim.inverse.spline_path import spline_state
 
 
 class TrajectoryError(CoopsimError):
@@ -180,7 +181,8 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
     On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a: p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ)
     with φ = log(R_aᵀ R_b) (one fixed axis), so v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ,
     a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ (ṡ = ds/du, s̈ = d²s/du², `time_law`). With `origin`, p_C is
-    (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded.
+    (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded. A motion with a B-spline `path`
+    follows it instead, the time law once over the whole span (`coopsim.inverse.spline_path.spline_state`).
 
     Args:
         motion: the ObjectMotion (waypoints, world axes, and time law).
@@ -196,6 +198,8 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
     i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
     T = ts[i + 1] - ts[i]
     s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
+    if motion.path is not None:
+        return spline_state(motion, s, ds / T, dds / T**2, origin)
     dp = motion.positions[i + 1] - motion.positions[i]
     Ra = motion.rotations[i]
     phi = rot_log(Ra.T @ motion.rotations[i + 1])
