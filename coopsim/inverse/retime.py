@@ -1,0 +1,723 @@
+"""Fixed path, free timing: the time law s(t) along a joint path that carries a payload fastest, and the
+heaviest payload a path carries within a duration (the dynamic load carrying capacity with the
+timing free).
+
+Along a joint path θ(s) (`coopsim.inverse.path.JointPath`) with a = s̈ and b = ṡ²,
+θ̇ = θ′√b and θ̈ = θ′a + θ″b, so the inverse dynamics of every linear resolution (paper W⁺,
+non-squeezing, minimum energy with fixed weights) is affine in (a, b) at each path point, and
+affine in the carried mass μ for fixed (a, b) (`coopsim.inverse.capacity.mass_line`):
+
+    τ = C₀ + a C_a + b C_b,   C_x = c_x + μ m_x                                  (`path_dynamics`)
+
+— three evaluations of the inverse dynamics, at (a, b) = (0, 0), (1, 0), (0, 1). The LP bound keeps
+the grasp wrenches f free at each point: τ = τ_arms(a, b) + Jᵀ f with A f = y(a, b, μ).
+
+The motor lines of eq. 36, −τ_s − k θ̇ ≤ τ ≤ τ_s − k θ̇ (k = τ_s/ω_s), are linear in θ̇ = θ′√b, not in
+b. They are linearised in b around the previous solution b̄ by the tangent √b ≈ (√b̄ + b/√b̄)/2 —
+an over-estimate, conservative on the side where the term counts against the torque and exact at b̄ —
+and solved again until b stops changing, then checked exactly (`check_time_law`).
+
+Discretisation (TOPP-RA's first-order interpolation): the grid s_0 < … < s_M on each smooth piece of
+the path, b linear and a = a_i constant on [s_i, s_{i+1}], b_{i+1} = b_i + 2Δ_i a_i, b = 0 at both ends
+of every piece (the path may have a corner there). The constraints hold at both ends of every
+interval with that interval's a, i.e. on both sides of every grid point: the torques of the sampled
+time law are within the lines at every grid point exactly, not only approximately.
+
+Two solvers of the same discrete problem: `reachability` (TOPP-RA: a backward pass of controllable
+sets and a greedy forward pass, each stage a two-variable LP solved exactly in NumPy by its vertices)
+for the linear resolutions, and `grid_lp` (one sparse LP over the whole grid, maximising Σ b, HiGHS)
+for any of them and for the LP bound. The time is Σ 2Δ_i/(√b_i + √b_{i+1}).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import brentq, linprog
+
+from coopsim.core.errors import CoopsimError
+from coopsim.core.model import Model, Motors
+from coopsim.inverse import capacity as cap
+from coopsim.inverse.path import JointPath
+from coopsim.inverse.problem import InverseProblem, inverse_problem
+from coopsim.inverse.solve import resolution_for
+
+LP_BOUND = "lp"                 # the method name of the best distribution (grasp wrenches free per point)
+B_FLOOR = 1e-14                 # relative floor of b̄ in the tangent (b̄ = 0 at a piece's ends)
+BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's LP bounded
+
+
+class RetimeError(CoopsimError):
+    """The retiming cannot be done as asked (no motion meets the bound, the motors cannot hold the load,
+    the solver does not converge)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PathDynamics:
+    """The inverse dynamics along a joint path, affine in (a, b) and the carried mass μ (N points, n joints).
+
+    Attributes:
+        path: the JointPath (N points).
+        method: a linear resolution's name, or 'lp' (the LP bound: grasp wrenches free).
+        mode: 'scaled' (μ the object's mass) or 'payload' (μ a point payload's mass).
+        tau: (2, 3, N, n) N·m (N), the torques' coefficients [mass⁰, mass¹][constant, a, b]: for a
+            resolution τ = Σ_x (tau[0, x] + μ tau[1, x]) x (x = 1, a, b); for 'lp' τ_arms (tau[1] = 0).
+        y: (2, 3, N, k) [N; N·m], the net object wrench's coefficients, likewise ('lp' only; else None).
+        JT: (N, n, rk) Jᵀ ('lp' only; else None).
+        A: (N, k, rk) the grasp-matrix rows A ('lp' only; else None).
+        stall: (n,) N·m (N), τ_s (inf: no limit).
+        slope: (n,) N·m·s/rad, k = τ_s/ω_s (0: flat line).
+        active: (n,) bool, the actuated joints (the passive ones carry zero torque).
+        nominal_mass: kg, μ of the nominal object (the object's mass for 'scaled', 0 for 'payload').
+    """
+
+    path: JointPath
+    method: str
+    mode: str
+    tau: np.ndarray
+    y: np.ndarray | None
+    JT: np.ndarray | None
+    A: np.ndarray | None
+    stall: np.ndarray
+    slope: np.ndarray
+    active: np.ndarray
+    nominal_mass: float
+
+    def torques(self, mass: float, a, b, f: np.ndarray | None = None) -> np.ndarray:
+        """τ (N, n) at carried mass μ and (a, b) per point (for 'lp' the grasp wrenches f (N, rk) too).
+
+        Args:
+            mass: kg, μ.
+            a: (N,) or float, 1/s², s̈.
+            b: (N,) or float, 1/s², ṡ².
+            f: (N, rk) [N; N·m], the grasp wrenches ('lp' only).
+
+        Returns:
+            np.ndarray: (N, n) N·m (N on a prismatic joint).
+        """
+        C = self.tau[0] + mass * self.tau[1]
+        a, b = np.broadcast_to(a, C.shape[1:2])[:, None], np.broadcast_to(b, C.shape[1:2])[:, None]
+        tau = C[0] + a * C[1] + b * C[2]
+        return tau if f is None else tau + np.einsum("nij,nj->ni", self.JT, f)
+
+
+def path_dynamics(model: Model, jp: JointPath, method: str, mode: str = "payload",
+                  payload_position: np.ndarray | None = None) -> PathDynamics:
+    """The affine coefficients of the inverse dynamics along a joint path (`PathDynamics`).
+
+    Three inverse problems, at (a, b) = (0, 0), (1, 0), (0, 1); for a resolution each gives τ(μ) = α + μβ
+    (`coopsim.inverse.capacity.affine_torques`), the coefficients of a and b their differences from
+    the first.
+
+    Args:
+        model: the Model (its motors, weights, passive joints, object).
+        jp: the JointPath.
+        method: a name in `coopsim.inverse.resolutions.LINEAR_METHODS`, or 'lp'.
+        mode: 'scaled' or 'payload'.
+        payload_position: (3,) m, object frame, the point payload's position ('payload'); None: the
+            scenario's.
+
+    Returns:
+        PathDynamics.
+
+    Raises:
+        RetimeError: 'payload' without a payload position.
+    """
+    pos = model.inverse.payload_position if payload_position is None else payload_position
+    if mode == "payload" and pos is None:
+        raise RetimeError("inverse.payload.position: the payload mode needs a payload position")
+    probs = [inverse_problem(model, jp.states(a, b), pos if mode == "payload" else None)
+             for a, b in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))]
+    motors = model.motors
+    y = JT = A = None
+    if method == LP_BOUND:
+        tau = np.stack([np.stack([p.tau_arms for p in probs]), np.zeros((3,) + probs[0].tau_arms.shape)])
+        lines = [cap.mass_line(p, mode) for p in probs]
+        y = np.stack([np.stack([y0 for y0, _ in lines]), np.stack([y1 for _, y1 in lines])])
+        JT, A = probs[0].JT, probs[0].A
+    else:
+        res = resolution_for(model, method)
+        ab = [cap.affine_torques(p, res, mode) for p in probs]
+        tau = np.stack([np.stack([x for x, _ in ab]), np.stack([x for _, x in ab])])
+    tau[:, 1:] -= tau[:, :1]
+    if y is not None:
+        y[:, 1:] -= y[:, :1]
+    return PathDynamics(jp, method, mode, tau, y, JT, A, motors.stall_torque.astype(float), motors.line_slope,
+                        ~motors.passive.astype(bool), model.object.mass if mode == "scaled" else 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class TimeLaw:
+    """A time law on a path grid: b = ṡ² linear and a = s̈ constant on each interval (N grid points).
+
+    Attributes:
+        s: (N,) the grid, piece after piece, each piece's knots at both of its ends.
+        piece: (N,) int, each point's piece.
+        b: (N,) 1/s², ṡ² at the points (0 at each piece's ends).
+        a: (N,) 1/s², s̈ on the interval starting at each point (0 at each piece's last point).
+        t: (N,) s, the time at each point.
+    """
+
+    s: np.ndarray
+    piece: np.ndarray
+    b: np.ndarray
+    a: np.ndarray
+    t: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """s, the time from rest to rest along the whole path."""
+        return float(self.t[-1])
+
+    def at(self, s: np.ndarray, piece: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(a, b) at points s (M,) on pieces `piece` (M,): the interval's a, b = b_i + 2a_i(s − s_i).
+
+        Args:
+            s: (M,) the path parameter.
+            piece: (M,) int, each point's piece.
+
+        Returns:
+            tuple[np.ndarray, np.ndarray]: a (M,) and b (M,) 1/s² (an interval's left end: its own a).
+        """
+        i = np.empty(len(s), dtype=int)
+        for k in np.unique(piece):
+            idx = np.flatnonzero(self.piece == k)
+            sel = piece == k
+            i[sel] = idx[np.clip(np.searchsorted(self.s[idx], s[sel], side="right") - 1, 0, len(idx) - 2)]
+        a = self.a[i]
+        return a, np.maximum(self.b[i] + 2.0 * a * (s - self.s[i]), 0.0)
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, s, ṡ) at the grid points, each knot once: the sampled time law of a scenario.
+
+        Returns:
+            tuple: t (K,) s, s (K,) and ṡ (K,) 1/s (s̈ constant between samples).
+        """
+        keep = np.concatenate([[True], np.diff(self.s) > 0])
+        return self.t[keep].copy(), self.s[keep].copy(), np.sqrt(self.b[keep])
+
+
+def time_of(s: np.ndarray, piece: np.ndarray, b: np.ndarray) -> TimeLaw:
+    """The TimeLaw of b at the grid: a_i = (b_{i+1} − b_i)/(2Δ_i), Δt_i = 2Δ_i/(√b_i + √b_{i+1}).
+
+    Args:
+        s: (N,) the grid (`coopsim.inverse.path.path_grid`).
+        piece: (N,) int, each point's piece.
+        b: (N,) 1/s², ṡ² (≥ 0).
+
+    Returns:
+        TimeLaw (t inf after an interval with b = 0 at both ends).
+    """
+    ds, same = np.diff(s), piece[1:] == piece[:-1]
+    root = np.sqrt(np.maximum(b, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(same, (b[1:] - b[:-1]) / (2 * ds), 0.0)
+        dt = np.where(same, 2 * ds / (root[1:] + root[:-1]), 0.0)
+    return TimeLaw(s, piece, b, np.append(a, 0.0), np.concatenate([[0.0], np.cumsum(dt)]))
+
+
+# ------------------------------------------------------------------------------------------------
+# The constraint rows
+# ------------------------------------------------------------------------------------------------
+
+def _tangent(b_ref: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(λ₀, λ₁) (N,) of the tangent √b ≈ λ₀ + λ₁ b at b̄; (0, 0) where b̄ <= B_FLOOR·scale (a rest point:
+    the velocity term vanishes there)."""
+    r = np.sqrt(np.maximum(b_ref, B_FLOOR * scale))
+    small = b_ref <= B_FLOOR * scale
+    return np.where(small, 0.0, 0.5 * r), np.where(small, 0.0, 0.5 / r)
+
+
+def motor_rows(dyn: PathDynamics, mass: float, lam: tuple[np.ndarray, np.ndarray]):
+    """Motor-line rows G a + H b ≤ E at each point (linearised velocity term), active finite-limit joints.
+
+    Upper line τ + kθ′(λ₀ + λ₁ b) ≤ τ_s, lower line −τ − kθ′(λ₀ + λ₁ b) ≤ τ_s, with τ = C₀ + aC_a + bC_b
+    ('lp': τ_arms; the Jᵀf part is added by the caller).
+
+    Args:
+        dyn: the PathDynamics (N points).
+        mass: kg, μ.
+        lam: (λ₀, λ₁) (N,) the tangent of √b at each point.
+
+    Returns:
+        tuple: G, H, E (N, 2n_a) (upper rows of the n_a joints, then lower), and the joints (n_a,) int.
+    """
+    j = np.flatnonzero(dyn.active & np.isfinite(dyn.stall))
+    C = (dyn.tau[0] + mass * dyn.tau[1])[:, :, j]
+    c = dyn.slope[j] * dyn.path.d1[:, j]
+    lam0, lam1 = lam[0][:, None], lam[1][:, None]
+    G, H, E = C[1], C[2] + c * lam1, dyn.stall[j] - C[0] - c * lam0
+    E_lo = dyn.stall[j] + C[0] + c * lam0
+    return np.concatenate([G, -G], 1), np.concatenate([H, -H], 1), np.concatenate([E, E_lo], 1), j
+
+
+def _stages(s: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """Indices i (K,) of the grid points that start an interval (i and i + 1 on one piece)."""
+    return np.flatnonzero(piece[1:] == piece[:-1])
+
+
+def _stage_rows(G, H, E, s, i):
+    """Rows in (a_i, b_i) of every stage i: point i with (a_i, b_i), point i+1 with (a_i, b_i + 2Δa_i),
+    b_i ≥ 0 and b_{i+1} ≥ 0. Returns G, H, E (K, m) and Δ (K,)."""
+    d = (s[i + 1] - s[i])[:, None]
+    K = len(i)
+    Gs = np.concatenate([G[i], G[i + 1] + 2 * d * H[i + 1], np.zeros((K, 1)), -2 * d], 1)
+    Hs = np.concatenate([H[i], H[i + 1], -np.ones((K, 1)), -np.ones((K, 1))], 1)
+    Es = np.concatenate([E[i], E[i + 1], np.zeros((K, 2))], 1)
+    return Gs, Hs, Es, d[:, 0]
+
+
+# ------------------------------------------------------------------------------------------------
+# TOPP-RA: reachability with exact two-variable LPs
+# ------------------------------------------------------------------------------------------------
+
+def _vertices(G, H, E, tol):
+    """The vertices (a, b) of the polygons {G a + H b ≤ E} (K stages, m rows): (K, P) arrays, nan where
+    a pair of rows does not meet at a feasible point."""
+    m = G.shape[1]
+    r1, r2 = np.triu_indices(m, 1)
+    det = G[:, r1] * H[:, r2] - G[:, r2] * H[:, r1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (E[:, r1] * H[:, r2] - E[:, r2] * H[:, r1]) / det
+        b = (G[:, r1] * E[:, r2] - G[:, r2] * E[:, r1]) / det
+    ok = np.abs(det) > 1e-300
+    lhs = G[:, None, :] * a[:, :, None] + H[:, None, :] * b[:, :, None]
+    ok &= np.all(lhs <= E[:, None, :] + tol[:, None, None], axis=2)
+    return np.where(ok, a, np.nan), np.where(ok, b, np.nan)
+
+
+def _segment_b(G, H, E, d, h, tol):
+    """(min, max) b of the polygon {G a + H b ≤ E} on the line b + 2d a = h (nan: they do not meet)."""
+    g = G - 2 * d * H
+    r = E - H * h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = r / g
+    a_hi = np.min(np.where(g > 0, q, np.inf))
+    a_lo = np.max(np.where(g < 0, q, -np.inf))
+    if a_lo > a_hi + tol or np.any((g == 0) & (r < -tol)):
+        return np.nan, np.nan
+    a_lo, a_hi = min(a_lo, a_hi), max(a_lo, a_hi)
+    return h - 2 * d * a_hi, h - 2 * d * a_lo
+
+
+def _boxed(G, H, E, scale_a, scale_b):
+    """The rows with the box |a| ≤ BIG·scale_a, b ≤ BIG·scale_b appended (bounded polygons)."""
+    K = G.shape[0]
+    one, zero = np.ones((K, 1)), np.zeros((K, 1))
+    return (np.concatenate([G, one, -one, zero], 1), np.concatenate([H, zero, zero, one], 1),
+            np.concatenate([E, BIG * scale_a * one, BIG * scale_a * one, BIG * scale_b * one], 1))
+
+
+def reachability(dyn: PathDynamics, mass: float, lam) -> np.ndarray | None:
+    """ṡ² (N,) of the time-optimal law for the linearised rows, by TOPP-RA; None when none exists.
+
+    Backward: K_M = {0} and K_i = the range of b over the stage polygon cut by b + 2Δa ∈ K_{i+1} (its
+    vertices inside the strip and the polygon's chords on the strip's two lines). Forward from b_0 = 0:
+    the largest a of the polygon at b_i that stays in K_{i+1}.
+
+    Args:
+        dyn: the PathDynamics of a linear resolution.
+        mass: kg, μ.
+        lam: (λ₀, λ₁) (N,) the tangent of √b.
+
+    Returns:
+        np.ndarray | None: b (N,) 1/s², or None (a stage without a controllable state).
+    """
+    s, piece = dyn.path.s, dyn.path.points.piece
+    G, H, E, _ = motor_rows(dyn, mass, lam)
+    st = _stages(s, piece)
+    Gs, Hs, Es, d = _stage_rows(G, H, E, s, st)
+    scale = np.maximum(np.max(np.abs(Es), axis=1), 1e-300)
+    Gs, Hs, Es = _boxed(Gs, Hs, Es, 1.0 / max(np.min(d), 1e-300), 1.0 / max(np.min(d), 1e-300) ** 2)
+    tol = 1e-12 * scale
+    va, vb = _vertices(Gs, Hs, Es, tol)
+    b = np.zeros(len(s))
+    lo, hi = np.zeros(len(s)), np.zeros(len(s))
+    for k in range(len(st) - 1, -1, -1):
+        i = st[k]
+        if piece[i + 1] != piece[min(i + 2, len(s) - 1)] or i + 1 == len(s) - 1:
+            lo[i + 1] = hi[i + 1] = 0.0
+        inside = vb[k] + 2 * d[k] * va[k]
+        sel = (inside >= lo[i + 1] - tol[k]) & (inside <= hi[i + 1] + tol[k])
+        cand = [vb[k][sel], *_segment_b(Gs[k], Hs[k], Es[k], d[k], lo[i + 1], tol[k]),
+                *_segment_b(Gs[k], Hs[k], Es[k], d[k], hi[i + 1], tol[k])]
+        cand = np.concatenate([np.atleast_1d(c) for c in cand])
+        cand = cand[np.isfinite(cand)]
+        if not len(cand):
+            return None
+        lo[i], hi[i] = max(np.min(cand), 0.0), np.max(cand)
+        if i == 0 or piece[i - 1] != piece[i]:
+            if lo[i] > tol[k]:
+                return None
+            lo[i] = hi[i] = 0.0
+    for k, i in enumerate(st):
+        g, r = Gs[k], Es[k] - Hs[k] * b[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a_max = np.min(np.where(g > 0, r / g, np.inf))
+        a = min(a_max, (hi[i + 1] - b[i]) / (2 * d[k]))
+        a = max(a, (lo[i + 1] - b[i]) / (2 * d[k]))
+        b[i + 1] = max(b[i] + 2 * d[k] * a, 0.0)
+    for k in np.unique(piece):
+        b[np.flatnonzero(piece == k)[[0, -1]]] = 0.0
+    return b
+
+
+# ------------------------------------------------------------------------------------------------
+# One LP over the grid (any resolution, and the LP bound)
+# ------------------------------------------------------------------------------------------------
+
+def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dict]:
+    """ṡ² (N,) maximising Σ b over the grid for the linearised rows, one sparse LP (HiGHS); None: infeasible.
+
+    Unknowns b (N,) (a_i = (b_{i+1} − b_i)/(2Δ_i)), for 'lp' also the grasp wrenches f at both ends
+    of every interval (A f = y(a, b, μ), passive torques 0). The maximal ṡ² profile is the pointwise
+    largest feasible one, so it maximises Σ b.
+
+    Args:
+        dyn: the PathDynamics.
+        mass: kg, μ.
+        lam: (λ₀, λ₁) (N,) the tangent of √b.
+
+    Returns:
+        tuple: b (N,) 1/s² or None, and the LP's statistics (status, message, iterations, the grasp
+        wrenches f (K, 2, rk) for 'lp').
+    """
+    s, piece = dyn.path.s, dyn.path.points.piece
+    N = len(s)
+    G, H, E, j = motor_rows(dyn, mass, lam)
+    st = _stages(s, piece)
+    K, d = len(st), s[st + 1] - s[st]
+    lp = dyn.method == LP_BOUND
+    rk = dyn.JT.shape[2] if lp else 0
+    nv = N + 2 * K * rk
+    rows, rhs, eq_rows, eq_rhs = [], [], [], []
+    for side, pt in ((0, st), (1, st + 1)):
+        # a_i = (b_{i+1} − b_i)/(2Δ); the row G a + H b_pt ≤ E − (Jᵀ f)·sign
+        g, h, e = G[pt], H[pt], E[pt]
+        cb0, cb1 = -g / (2 * d[:, None]), g / (2 * d[:, None])
+        (cb0 if side == 0 else cb1)[:] += h
+        m = g.shape[1]
+        r_idx = np.arange(K * m).reshape(K, m)
+        data = [sp.coo_matrix((cb0.ravel(), (r_idx.ravel(), np.repeat(st, m))), shape=(K * m, nv)),
+                sp.coo_matrix((cb1.ravel(), (r_idx.ravel(), np.repeat(st + 1, m))), shape=(K * m, nv))]
+        M = data[0] + data[1]
+        if lp:
+            JT = dyn.JT[pt][:, j, :]                                    # (K, n_a, rk)
+            blk = np.concatenate([JT, -JT], axis=1)                     # upper, lower rows
+            cols = N + (np.arange(K)[:, None] * 2 + side) * rk + np.arange(rk)[None, :]
+            rr = np.repeat(np.arange(K * m).reshape(K, m, 1), rk, axis=2)
+            cc = np.repeat(cols[:, None, :], m, axis=1)
+            M = M + sp.coo_matrix((blk.ravel(), (rr.ravel(), cc.ravel())), shape=(K * m, nv))
+        rows.append(M.tocsr())
+        rhs.append(e.ravel())
+        if lp:
+            eq_rows.append(_lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv))
+    A_ub = sp.vstack(rows).tocsr()
+    b_ub = np.concatenate(rhs)
+    keep = np.isfinite(b_ub)
+    A_eq = b_eq = None
+    if lp:
+        A_eq = sp.vstack([m for m, _ in eq_rows]).tocsr()
+        b_eq = np.concatenate([r for _, r in eq_rows])
+    bounds = np.zeros((nv, 2))
+    bounds[:, 1] = np.inf
+    bounds[N:, 0] = -np.inf
+    for k in np.unique(piece):
+        bounds[np.flatnonzero(piece == k)[[0, -1]], 1] = 0.0
+    c = np.zeros(nv)
+    c[:N] = -1.0
+    r = linprog(c, A_ub=A_ub[keep], b_ub=b_ub[keep], A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
+    stats = {"status": int(r.status), "message": str(r.message), "iterations": int(getattr(r, "nit", 0))}
+    if r.status != 0:
+        return None, stats
+    if lp:
+        stats["f"] = r.x[N:].reshape(K, 2, rk)
+    return np.maximum(r.x[:N], 0.0), stats
+
+
+def _lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv):
+    """A f − y_a a − y_b b = y₀ at the points pt (K,) on `side` of each interval, and Jᵀf = −τ_arms on
+    the passive joints (τ_arms' a, b parts moved to the b columns)."""
+    Y = dyn.y[0] + mass * dyn.y[1]                                      # (3, N, k)
+    k = Y.shape[2]
+    cols_f = N + (np.arange(K)[:, None] * 2 + side) * rk + np.arange(rk)[None, :]
+    blocks = []
+    for Mat, y3, n_r in ((dyn.A[pt], Y[:, pt], k),
+                         (dyn.JT[pt][:, ~dyn.active, :], -dyn.tau[0][:, pt][:, :, ~dyn.active], int((~dyn.active).sum()))):
+        if n_r == 0:
+            continue
+        rr = np.arange(K * n_r).reshape(K, n_r)
+        f_part = sp.coo_matrix((Mat.ravel(), (np.repeat(rr[:, :, None], rk, 2).ravel(),
+                                              np.repeat(cols_f[:, None, :], n_r, 1).ravel())), shape=(K * n_r, nv))
+        ya, yb = y3[1], y3[2]                                           # (K, n_r)
+        cb_i = ya / (2 * d[:, None])                                    # −y_a a = y_a/(2Δ) b_i − y_a/(2Δ) b_{i+1}
+        cb_j = -cb_i
+        if side == 0:
+            cb_i = cb_i - yb
+        else:
+            cb_j = cb_j - yb
+        b_part = (sp.coo_matrix((cb_i.ravel(), (rr.ravel(), np.repeat(st, n_r))), shape=(K * n_r, nv))
+                  + sp.coo_matrix((cb_j.ravel(), (rr.ravel(), np.repeat(st + 1, n_r))), shape=(K * n_r, nv)))
+        blocks.append((f_part + b_part, y3[0].ravel()))
+    return sp.vstack([m for m, _ in blocks]), np.concatenate([r for _, r in blocks])
+
+
+# ------------------------------------------------------------------------------------------------
+# Solving: the linearisation loop, the minimum time, the maximum payload
+# ------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Retiming:
+    """The time-optimal law of one carried mass along a path.
+
+    Attributes:
+        mass: kg, μ.
+        law: the TimeLaw (None: no motion carries μ).
+        feasible: a motion exists.
+        converged: the linearisation converged (max |Δb| ≤ tol·max b).
+        iterations: the linearisations solved.
+        solver: 'reachability' or 'grid_lp'.
+        f: (K, 2, rk) [N; N·m] the LP bound's grasp wrenches at both ends of every interval, or None.
+        stats: the last LP's statistics (grid_lp) or {}.
+    """
+
+    mass: float
+    law: TimeLaw | None
+    feasible: bool
+    converged: bool
+    iterations: int
+    solver: str
+    f: np.ndarray | None = None
+    stats: dict | None = None
+
+    @property
+    def duration(self) -> float:
+        """s, the minimum time (inf when infeasible)."""
+        return self.law.duration if self.feasible else np.inf
+
+
+def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-12, max_iter: int = 60,
+           start: np.ndarray | None = None) -> Retiming:
+    """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module).
+
+    The rows are linearised at b̄ (first without the velocity term, or at `start`), solved, and
+    linearised again at the solution until max |b − b̄| ≤ tol·max b.
+
+    Args:
+        dyn: the PathDynamics.
+        mass: kg, μ.
+        solver: 'reachability' (linear resolutions) or 'grid_lp'; None: reachability for a resolution,
+            grid_lp for the LP bound.
+        tol: the relative change of b that ends the loop.
+        max_iter: the most linearisations.
+        start: (N,) 1/s², b̄ to linearise at first; None: the law without velocity terms.
+
+    Returns:
+        Retiming (infeasible when no motion carries μ).
+    """
+    solver = solver or ("grid_lp" if dyn.method == LP_BOUND else "reachability")
+    N = len(dyn.path.s)
+
+    def solve(lam):
+        if solver == "grid_lp":
+            return grid_lp(dyn, mass, lam)
+        return reachability(dyn, mass, lam), {}
+
+    if start is None:
+        b, stats = solve((np.zeros(N), np.zeros(N)))
+        if b is None and not np.any(dyn.slope):
+            return Retiming(mass, None, False, True, 1, solver, stats=stats)
+        b = np.zeros(N) if b is None else b
+    else:
+        b, stats = start, {}
+    scale = max(float(np.max(b)), 1e-300)
+    for it in range(1, max_iter + 1):
+        new, stats = solve(_tangent(b, scale))
+        if new is None:
+            return Retiming(mass, None, False, True, it, solver, stats=stats)
+        change = float(np.max(np.abs(new - b)))
+        b, scale = new, max(float(np.max(new)), 1e-300)
+        if change <= tol * scale:
+            return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, True, it, solver,
+                            stats.pop("f", None), stats)
+    return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, False, max_iter, solver,
+                    stats.pop("f", None), stats)
+
+
+def static_capacity(dyn: PathDynamics) -> float:
+    """kg, the largest μ the motors hold at rest at every path point (the limit of an ever slower motion).
+
+    Args:
+        dyn: the PathDynamics.
+
+    Returns:
+        float: kg (−inf: not even μ = 0 is held; inf: unbounded).
+    """
+    jp = dyn.path
+    if dyn.method != LP_BOUND:
+        j = dyn.active
+        lo = np.broadcast_to(-dyn.stall, jp.q.shape)
+        up, dn = cap.mass_limits(dyn.tau[0, 0][:, j], dyn.tau[1, 0][:, j], lo[:, j], -lo[:, j])
+        mass, lower, ok = cap.mass_interval(up, dn)
+        return mass if ok else -np.inf
+    r = retime_static_lp(dyn)
+    return r
+
+
+def retime_static_lp(dyn: PathDynamics) -> float:
+    """kg, the LP bound's static capacity: `coopsim.inverse.capacity.lp_capacity` of the path at rest.
+
+    Args:
+        dyn: the PathDynamics of 'lp'.
+
+    Returns:
+        float: kg (−inf: infeasible).
+    """
+    jp = dyn.path
+    n = jp.q.shape[1]
+    prob = _static_problem(dyn)
+    motors = Motors(dyn.stall, np.full(n, np.inf), np.ones(n), ~dyn.active)
+    c = cap.lp_capacity(prob, motors, ~dyn.active, "payload")
+    return c.mass if c.feasible else -np.inf
+
+
+def _static_problem(dyn: PathDynamics):
+    """A stand-in InverseProblem at rest along the path with y₀ = the nominal wrench, y_payload = per kg."""
+    jp, N = dyn.path, len(dyn.path.s)
+    z = np.zeros_like(jp.q)
+    k = dyn.y.shape[3]
+    r = dyn.A.shape[2] // k
+    return InverseProblem(jp.s, jp.q, z, z, dyn.tau[0, 0], dyn.JT, dyn.A, dyn.y[0, 0], dyn.y[1, 0], dyn.y[1, 0],
+                          np.zeros((N, r, 6, 6)), np.zeros((N, 3)), np.zeros((N, 3, 3)), np.zeros((N, 6)),
+                          np.zeros((N, 6)), np.zeros((N, r, 3)), np.zeros((k, 6)), None, np.zeros(3), 1.0,
+                          np.eye(3), np.zeros(3), np.zeros((r, 3)))
+
+
+def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10):
+    """The heaviest carried mass whose minimum time is within `duration`, and its Retiming.
+
+    The minimum time grows with μ; Brent's method on T(μ) − duration between the nominal mass (which
+    must be carried within `duration`) and the static capacity, each T(μ) linearised from the last
+    solution.
+
+    Args:
+        dyn: the PathDynamics.
+        duration: s, T_max.
+        solver: as `retime`.
+        rtol: the relative tolerance on μ.
+
+    Returns:
+        tuple: (mass kg, Retiming at it, evaluations).
+
+    Raises:
+        RetimeError: the motors cannot hold the nominal load at rest, or no motion carries it within
+            the duration.
+    """
+    lo = dyn.nominal_mass
+    top = static_capacity(dyn)
+    if not top > lo:
+        raise RetimeError("motors: the motors cannot hold the bare object at rest along the path "
+                          f"(static capacity {top:.6g} kg)")
+    first = retime(dyn, lo, solver)
+    if not first.feasible or first.duration > duration:
+        raise RetimeError(f"--duration: no motion carries the bare object within {duration:g} s "
+                          f"(its minimum time is {first.duration:.6g} s)")
+    hi = top if np.isfinite(top) else lo + 1e6
+    best = {"r": first}
+    count = [1]
+
+    def excess(mu):
+        count[0] += 1
+        r = retime(dyn, mu, solver)
+        if r.feasible and r.duration <= duration and (mu >= best["r"].mass):
+            best["r"] = r
+        return (r.duration if r.feasible else 1e30) - duration
+
+    hi_ok = excess(hi * (1 - 1e-12))
+    if hi_ok <= 0:
+        return best["r"].mass, best["r"], count[0]
+    brentq(excess, lo, hi * (1 - 1e-12), xtol=rtol * max(abs(hi), 1e-12), rtol=4 * np.finfo(float).eps)
+    return best["r"].mass, best["r"], count[0]
+
+
+# ------------------------------------------------------------------------------------------------
+# The exact check of eq. 36
+# ------------------------------------------------------------------------------------------------
+
+def line_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray, f: np.ndarray | None = None):
+    """max(τ − τ_max(θ̇), τ_min(θ̇) − τ)/τ_s (N, n_a) at the points with (a, b), θ̇ = θ′√b exactly (eq. 36).
+
+    Args:
+        dyn: the PathDynamics (N points).
+        mass: kg, μ.
+        a: (N,) 1/s², s̈.
+        b: (N,) 1/s², ṡ².
+        f: (N, rk) the grasp wrenches ('lp').
+
+    Returns:
+        tuple: the excess relative to τ_s (N, n_a) (≤ 0: within), and the joints (n_a,) int.
+    """
+    j = np.flatnonzero(dyn.active & np.isfinite(dyn.stall))
+    tau = dyn.torques(mass, a, b, f)[:, j]
+    qd = dyn.path.d1[:, j] * np.sqrt(np.maximum(b, 0.0))[:, None]
+    drop = dyn.slope[j] * qd
+    hi, lo = dyn.stall[j] - drop, -dyn.stall[j] - drop
+    return np.maximum(tau - hi, lo - tau) / dyn.stall[j], j
+
+
+def check_time_law(dyn: PathDynamics, r: Retiming) -> dict:
+    """The time law against eq. 36 exactly at every grid point, on both sides (each interval's a).
+
+    Args:
+        dyn: the PathDynamics the law was solved on.
+        r: the Retiming (feasible).
+
+    Returns:
+        dict: max_excess (relative to τ_s; ≤ 0 within), and the worst point's index, s and joint.
+    """
+    law = r.law
+    st = _stages(law.s, law.piece)
+    worst = -np.inf, None, None
+    for side, pt in ((0, st), (1, st + 1)):
+        a = np.zeros(len(law.s))
+        a[pt] = law.a[st]
+        f = None
+        if r.f is not None:
+            f = np.zeros((len(law.s), r.f.shape[2]))
+            f[pt] = r.f[:, side]
+        ex, j = line_excess(dyn, r.mass, a, law.b, f)
+        ex = ex[pt]
+        if ex.size and ex.max() > worst[0]:
+            i, jj = np.unravel_index(int(np.argmax(ex)), ex.shape)
+            worst = float(ex[i, jj]), int(pt[i]), int(j[jj])
+    return {"max_excess": worst[0], "index": worst[1], "s": None if worst[1] is None else float(law.s[worst[1]]),
+            "joint": worst[2]}
+
+
+def saturating(dyn: PathDynamics, r: Retiming, tol: float = 1e-7) -> dict:
+    """The motor closest to its line at each grid point (right side), and the critical point of the law.
+
+    Args:
+        dyn: the PathDynamics.
+        r: the feasible Retiming.
+        tol: relative excess above −tol counts as on the line.
+
+    Returns:
+        dict: joint (N,) int (the stacked joint nearest its line per point), excess (N,) relative to τ_s,
+        on_line (N,) bool, and critical: the point of largest excess (index, s, joint).
+    """
+    law = r.law
+    f = None
+    if r.f is not None:
+        st = _stages(law.s, law.piece)
+        f = np.zeros((len(law.s), r.f.shape[2]))
+        f[st] = r.f[:, 0]
+        f[st[-1] + 1] = r.f[-1, 1]
+    ex, j = line_excess(dyn, r.mass, law.a, law.b, f)
+    k = np.argmax(ex, axis=1)
+    e = ex[np.arange(len(ex)), k]
+    i = int(np.argmax(e))
+    return {"joint": j[k], "excess": e, "on_line": e >= -tol,
+            "critical": {"index": i, "s": float(law.s[i]), "joint": int(j[k[i]])}}
