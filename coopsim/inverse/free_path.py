@@ -39,13 +39,16 @@ from coopsim.forward.diagnostics import manipulability
 from coopsim.inverse.capacity import Capacity, affine_capacity, affine_torques, optimise_weights
 from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
-from coopsim.inverse.spline_path import KIND, straight_control_points
-from coopsim.inverse.trajectory import JointTrajectory, object_motion_trajectory
+from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
+from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
+from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
+from coopsim.inverse.trajectory import object_motion_trajectory
 
 FD_STEP = 1e-7            # forward-difference step in the scaled unknowns (× reach m, × 1 rad)
 START_SPREAD = 0.01       # random starts: standard deviation of the scaled offsets
 OFFSET_BOUND = 0.5        # |offset| <= this × the arms' mean reach (m) or this × π/2 rad
 WEIGHT_ROUNDS = 2         # path / weights rounds with `weights`
+RETIME_ROUNDS = 2         # retimed payloads (path / time law in turn): retime, optimise the path, retime
 INFEASIBLE = -1.0         # every constraint's value where the inverse kinematics refuses the path
 
 
@@ -58,17 +61,18 @@ class PathEvaluation:
     """One free path on the optimiser's grid (N samples, n joints, r arms).
 
     Attributes:
-        traj: the JointTrajectory of the path's closed-chain inverse kinematics.
-        prob: the InverseProblem along it.
-        a: (N, n) N·m (N on a prismatic joint), the torques at μ = 0.
-        b: (N, n) N·m per kg, their rate with the carried mass.
-        lo: (N, n) N·m, τ_min of eq. 36 along the path.
-        hi: (N, n) N·m, τ_max.
-        manip: (N, r) each arm's manipulability (`coopsim.forward.diagnostics.manipulability`).
+        t: (M,) s, the time of each row (a grid point of a retimed law appears twice: with the interval
+            before it and the one after it).
+        prob: the InverseProblem along the path's trajectory (the scenario's time law only; else None).
+        a: (M, n) N·m (N on a prismatic joint), the torques at μ = 0.
+        b: (M, n) N·m per kg, their rate with the carried mass.
+        lo: (M, n) N·m, τ_min of eq. 36 along the path.
+        hi: (M, n) N·m, τ_max.
+        manip: (N, r) each arm's manipulability at the N path points (`coopsim.forward.diagnostics.manipulability`).
     """
 
-    traj: JointTrajectory
-    prob: InverseProblem
+    t: np.ndarray
+    prob: InverseProblem | None
     a: np.ndarray
     b: np.ndarray
     lo: np.ndarray
@@ -108,17 +112,22 @@ class PathOptimum:
     """The optimised free path and how it was found.
 
     Attributes:
-        motion: the ObjectMotion of the optimum (two waypoints and its B-spline path, the scenario's time
-            law and output_dt).
-        capacity: the Capacity at the optimum on the optimiser's grid.
+        motion: the ObjectMotion of the optimum under the scenario's time law (two waypoints and its
+            B-spline path, the scenario's time law and output_dt).
+        capacity: the Capacity of `motion` on the optimiser's grid.
         straight: the Capacity of the straight path on that grid (the first start).
         resolution: the Resolution optimised for (its weights optimised with `weights`).
         mode: 'scaled' or 'payload'.
-        success: the best start converged.
-        starts: one StartResult per run (with `weights`, one per round and start).
+        success: the best start of the first stage converged.
+        starts: one StartResult per optimiser run (first stage: each start, with `weights` each round;
+            then one per retimed round).
         eval_s: s, the wall time of one path evaluation (IK, inverse dynamics, distribution).
         jacobian_s: s, the wall time of one constraint Jacobian (forward differences).
         unknowns: the number of path unknowns (K × k).
+        retimed_motion: the ObjectMotion of the retimed stage's path (the scenario's time law; the law that
+            carries `retimed.mass` is `retimed`), or None without that stage.
+        retimed: the Retiming of the heaviest payload along retimed_motion's path within the duration, or None.
+        retime_rounds: per round {mass_kg, retiming, run} (`_retime_stage`).
         wall_s: s, the whole optimisation's wall time.
     """
 
@@ -132,6 +141,9 @@ class PathOptimum:
     eval_s: float
     jacobian_s: float
     unknowns: int
+    retimed_motion: ObjectMotion | None
+    retimed: Retiming | None
+    retime_rounds: tuple
     wall_s: float
 
 
@@ -185,7 +197,132 @@ def evaluate_motion(model: Model, motion: ObjectMotion, res: Resolution, mode: s
     prob = inverse_problem(model, traj, model.inverse.payload_position, terms=terms)
     a, b = affine_torques(prob, res, mode)
     lo, hi = torque_limits(model.motors, traj.qd)
-    return PathEvaluation(traj, prob, a, b, lo, hi, manipulability(model, terms.J))
+    return PathEvaluation(traj.t, prob, a, b, lo, hi, manipulability(model, terms.J))
+
+
+class SplineGeometry:
+    """A B-spline path as a `coopsim.inverse.path.ObjectPath` (one smooth piece, knots [0, 1]).
+
+    Args:
+        motion: the ObjectMotion (two waypoints and a B-spline `path`).
+
+    Attributes:
+        knots: (2,) [0, 1].
+        spline: the BSplinePath.
+    """
+
+    def __init__(self, motion: ObjectMotion):
+        self.knots = np.array([0.0, 1.0])
+        self.spline = BSplinePath(motion)
+
+    def at(self, s: np.ndarray, piece: np.ndarray) -> PathPoints:
+        """The path at points s (see `coopsim.inverse.path.ObjectPath.at`).
+
+        Args:
+            s: (M,) the path parameter in [0, 1].
+            piece: (M,) int, all 0 (one piece).
+
+        Returns:
+            PathPoints: relative to the first waypoint's position.
+        """
+        pt = self.spline.at(s, self.spline.origin)
+        return PathPoints(np.asarray(s, dtype=float), np.asarray(piece, dtype=int), pt.p, pt.R,
+                          np.concatenate([pt.dp, pt.dw], axis=1), np.concatenate([pt.ddp, pt.ddw], axis=1),
+                          self.spline.origin)
+
+
+def weighted(model: Model, res: Resolution) -> Model:
+    """The model whose energy weights are the resolution's (what `path_dynamics` and `max_payload` read).
+
+    Args:
+        model: the Model.
+        res: the Resolution (its weights).
+
+    Returns:
+        Model: a copy with motors.energy_weight = res.weights.
+    """
+    return replace(model, motors=replace(model.motors, energy_weight=np.asarray(res.weights, dtype=float)))
+
+
+def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: np.ndarray) -> JointPath:
+    """`coopsim.inverse.path.joint_path` of a B-spline motion at the points s.
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path; its initial guess, rest posture and gain).
+        s: (N,) the path points, increasing.
+        piece: (N,) int, zeros.
+
+    Returns:
+        JointPath.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+    """
+    return joint_path(model, SplineGeometry(motion), s, piece, motion.initial_guess, motion.rest_posture,
+                      motion.rest_gain)
+
+
+def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resolution, mode: str) -> PathEvaluation:
+    """A B-spline motion under a retimed law (held fixed as s(t)): rows at both sides of every grid point.
+
+    With the law's b = ṡ² at the points and a = s̈ constant on each interval, each point is checked with
+    the interval before it and the one after it (as `coopsim.inverse.retime.check_time_law`); the torques
+    are those of `coopsim.inverse.retime.path_dynamics`, the lines eq. 36 at θ̇ = θ′√b.
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path).
+        law: the TimeLaw (one piece, its grid s).
+        res: the Resolution (its method and weights).
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        PathEvaluation: 2N rows (before, then after), prob None.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+    """
+    from coopsim.compiled import api
+
+    m = weighted(model, res)
+    jp = spline_joint_path(m, motion, law.s, law.piece)
+    dyn = path_dynamics(m, jp, res.method, mode)
+    b = law.b[:, None]
+    qd = jp.d1 * np.sqrt(np.maximum(b, 0.0))
+    lo, hi = torque_limits(model.motors, qd)
+    sides = [np.append(0.0, law.a[:-1])[:, None], law.a[:, None]]
+    a0, b0 = ([dyn.tau[k, 0] + a * dyn.tau[k, 1] + b * dyn.tau[k, 2] for a in sides] for k in (0, 1))
+    zero = np.zeros_like(jp.q)
+    J = api.inverse_terms(model, jp.q, zero, zero).J
+    return PathEvaluation(np.tile(law.t, 2), None, np.vstack(a0), np.vstack(b0), np.vstack([lo, lo]),
+                          np.vstack([hi, hi]), manipulability(model, J))
+
+
+def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: str, duration: float,
+                     intervals: int) -> tuple[float, Retiming]:
+    """The heaviest payload the B-spline motion's path carries within `duration`, the time law free
+    (`coopsim.inverse.retime.max_payload` on `intervals` equal intervals of s).
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path).
+        res: the Resolution (its method and weights).
+        mode: 'scaled' or 'payload'.
+        duration: s, T_max.
+        intervals: the grid's intervals.
+
+    Returns:
+        tuple[float, Retiming]: the mass kg and its Retiming.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+        RetimeError: as `max_payload`.
+    """
+    m = weighted(model, res)
+    s, piece = path_grid(np.array([0.0, 1.0]), intervals)
+    mass, r, _ = max_payload(path_dynamics(m, spline_joint_path(m, motion, s, piece), res.method, mode), duration)
+    return mass, r
 
 
 class FreePathProblem:
@@ -195,11 +332,14 @@ class FreePathProblem:
         model: the Model (its inverse.object_motion's first and last waypoints, inverse.optimize).
         res: the Resolution (linear in the net object wrench).
         mode: 'scaled' or 'payload'.
+        law: a retimed TimeLaw held fixed (s(t) as it is, `evaluate_law`); None: the scenario's time law
+            on the grid of inverse.optimize.sample_dt (`evaluate_motion`).
 
     Attributes:
         model: the Model.
         res: the Resolution.
         mode: the capacity mode.
+        law: the TimeLaw held fixed, or None.
         ends: the two-waypoint ObjectMotion on the optimiser's grid (inverse.optimize.sample_dt).
         straight: the PathSpline of the straight path (offsets are from it).
         scale: (K·k,) the unknowns' units: the arms' mean reach (m) on position rows, 1 rad on rotation rows.
@@ -207,9 +347,9 @@ class FreePathProblem:
         evaluations: path evaluations so far.
     """
 
-    def __init__(self, model: Model, res: Resolution, mode: str):
+    def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None):
         opt = model.inverse.optimize
-        self.model, self.res, self.mode = model, res, mode
+        self.model, self.res, self.mode, self.law = model, res, mode, law
         self.ends = end_poses(model.inverse.object_motion, opt.sample_dt)
         self.straight = straight_control_points(self.ends, opt.control_points)
         S = model.rows
@@ -275,7 +415,10 @@ class FreePathProblem:
                 self._cache.clear()
             self.evaluations += 1
             try:
-                self._cache[key] = evaluate_motion(self.model, self.motion_of(x), self.res, self.mode)
+                if self.law is None:
+                    self._cache[key] = evaluate_motion(self.model, self.motion_of(x), self.res, self.mode)
+                else:
+                    self._cache[key] = evaluate_law(self.model, self.motion_of(x), self.law, self.res, self.mode)
             except CoopsimError:
                 self._cache[key] = None
         return self._cache[key]
@@ -290,7 +433,7 @@ class FreePathProblem:
             Capacity | None.
         """
         e = self.evaluate(x)
-        return None if e is None else affine_capacity(e.a, e.b, e.lo, e.hi, e.traj.t, ~self.res.passive)
+        return None if e is None else affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~self.res.passive)
 
     def _rows(self, e: PathEvaluation) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(T, U, B, W): (τ_max − a)/τ_s, (a − τ_min)/τ_s, b/τ_s over the active motors, flattened, and
@@ -409,33 +552,64 @@ def _timings(problem: FreePathProblem) -> tuple[float, float]:
 
 
 def optimize_path(model: Model, method: str, mode: str | None = None, weights: bool = False,
-                  progress=None) -> PathOptimum:
+                  duration: float | None = None, retime: bool = True, progress=None) -> PathOptimum:
     """The free path between the first and last waypoint poses that carries the most (module docstring).
+
+    First the path under the scenario's time law (several starts; with `weights` the minimum-energy
+    weights in turn); then, with `retime`, path and time law in turn: the heaviest payload the path
+    carries within `duration` with its time law free (`retimed_capacity`), the path optimised again with
+    that law held fixed as s(t) (`evaluate_law`), RETIME_ROUNDS times; each step keeps the last one's
+    payload feasible, so the payload never drops.
 
     Args:
         model: the Model (inverse.object_motion with at least two waypoints; inverse.optimize).
         method: a linear resolution ('paper', 'nonsqueezing', 'min_energy').
         mode: 'scaled' or 'payload'; None: `capacity_mode`.
         weights: with 'min_energy', optimise its energy weights with the path.
-        progress: called with the fraction done (0 to 1) after each start; None: silent.
+        duration: s, T_max of the retimed stage; None: the waypoints' span.
+        retime: also the retimed stage.
+        progress: called with the fraction done (0 to 1) after each run; None: silent.
 
     Returns:
-        PathOptimum: the best start's path and capacity, every start's statistics, the gradients' cost.
+        PathOptimum: the best paths and payloads, every run's statistics, the gradients' cost.
 
     Raises:
         PathOptimizationError: the straight path is refused by the inverse kinematics, or every start ends
             on a path it refuses.
+        RetimeError: the retimed stage has no motion carrying the bare object within `duration`.
         ValueError: `weights` with another method than 'min_energy'.
     """
     if weights and method != "min_energy":
         raise ValueError("optimize_path: weights are optimised with the minimum-energy resolution only")
     t0 = time.perf_counter()
     opt, mode = model.inverse.optimize, mode or capacity_mode(model)
-    res = resolution_for(model, method)
-    problem = FreePathProblem(model, res, mode)
+    om = model.inverse.object_motion
+    problem = FreePathProblem(model, resolution_for(model, method), mode)
     straight = problem.capacity(np.zeros(problem.size))
     eval_s, jacobian_s = _timings(problem)
-    runs, best = [], None                              # best: (capacity kg, x, problem)
+    total = (WEIGHT_ROUNDS if weights else 1) + (RETIME_ROUNDS if retime else 0)
+    runs, (mass, x, problem, success) = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
+        RETIME_ROUNDS if retime else 0)) / total))
+    quintic = (problem.motion_of(x, om.output_dt), problem.capacity(x))
+    rounds = []
+    if retime:
+        T = float(om.times[-1] - om.times[0]) if duration is None else float(duration)
+        intervals = max(1, int(round((om.times[-1] - om.times[0]) / opt.sample_dt)))
+        x, rounds, runs = _retime_stage(problem, x, T, intervals, runs, progress, total)
+    return PathOptimum(quintic[0], quintic[1], straight, problem.res, mode, success, tuple(runs), eval_s,
+                       jacobian_s, problem.size, problem.motion_of(x, om.output_dt) if retime else None,
+                       rounds[-1]["retiming"] if rounds else None, tuple(rounds), time.perf_counter() - t0)
+
+
+def _tell(progress, fraction: float) -> None:
+    if progress is not None:
+        progress(fraction)
+
+
+def _law_stage(problem: FreePathProblem, weights: bool, progress):
+    """The path under the scenario's time law from every start (and the weights in turn): (runs, best),
+    best = (mass kg, x, problem, converged)."""
+    opt, runs, best = problem.model.inverse.optimize, [], None
     rounds = WEIGHT_ROUNDS if weights else 1
     for rnd in range(rounds):
         starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
@@ -444,14 +618,32 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
             runs.append(run)
             if np.isfinite(run.capacity_kg) and (best is None or run.capacity_kg > best[0]):
                 best = (run.capacity_kg, x, problem, run.success)
-            if progress is not None:
-                progress((rnd + (i + 1) / len(starts)) / rounds)
+            progress((rnd + (i + 1) / len(starts)) / rounds)
         if best is None:
             raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")
         if weights and rnd < rounds - 1:
-            w, _ = optimise_weights(problem.evaluate(best[1]).prob, problem.res, model.motors, mode)
-            problem = FreePathProblem(model, replace(problem.res, weights=w), mode)
-    _, x, problem, success = best
-    return PathOptimum(problem.motion_of(x, model.inverse.object_motion.output_dt), problem.capacity(x), straight,
-                       problem.res, mode, success, tuple(runs), eval_s, jacobian_s, problem.size,
-                       time.perf_counter() - t0)
+            w, _ = optimise_weights(best[2].evaluate(best[1]).prob, best[2].res, problem.model.motors, problem.mode)
+            problem = FreePathProblem(problem.model, replace(problem.res, weights=w), problem.mode)
+    return runs, best
+
+
+def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, intervals: int, runs: list,
+                  progress, total: int):
+    """Path and retimed law in turn from x: (x, rounds, runs); each round a dict of the retimed payload
+    (mass_kg, retiming) at the round's path and the fixed-law run that followed (its StartResult or None)."""
+    model, res, mode = problem.model, problem.res, problem.mode
+    rounds = []
+    for rnd in range(RETIME_ROUNDS):
+        mass, r = retimed_capacity(model, problem.motion_of(x), res, mode, duration, intervals)
+        rounds.append({"mass_kg": mass, "retiming": r, "run": None})
+        _tell(progress, (total - RETIME_ROUNDS + rnd + 0.5) / total)
+        if rnd == RETIME_ROUNDS - 1:
+            break
+        fixed = FreePathProblem(model, res, mode, law=r.law)
+        x_new, run = _solve_start(fixed, x, len(runs), problem.model.inverse.optimize.max_iterations)
+        runs.append(run)
+        rounds[-1]["run"] = run
+        if np.isfinite(run.capacity_kg) and run.capacity_kg > mass:
+            x = x_new
+        _tell(progress, (total - RETIME_ROUNDS + rnd + 1) / total)
+    return x, rounds, runs
