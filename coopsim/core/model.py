@@ -481,6 +481,27 @@ class ValidationThresholds:
 
 
 @dataclass(frozen=True, eq=False)
+class SampledTimeLaw:
+    """A time law s(t) given by samples, s̈ constant between them (the output of `coopsim optimize`).
+
+    s is the path parameter of the waypoint path: waypoint k of w at s = k/(w − 1), the straight line
+    and single-axis rotation uniform in s between waypoints. Between samples k and k + 1,
+    s = s_k + ṡ_k τ + ½ s̈_k τ², s̈_k = (ṡ_{k+1} − ṡ_k)/(t_{k+1} − t_k), τ = t − t_k (so
+    s_{k+1} − s_k = (ṡ_k + ṡ_{k+1})(t_{k+1} − t_k)/2).
+
+    Attributes:
+        t: (K,) s, the sample times, strictly increasing (the first and last waypoints' times at the
+            ends; each waypoint's time among them, with ṡ = 0 there).
+        s: (K,) the path parameter at the samples, non-decreasing from 0 to 1.
+        rate: (K,) 1/s, ṡ at the samples (≥ 0).
+    """
+
+    t: np.ndarray
+    s: np.ndarray
+    rate: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class PathSpline:
     """A free-form object path between an object motion's two waypoints (scenario
     `inverse.object_motion.path`).
@@ -515,14 +536,15 @@ class ObjectMotion:
         times: (w,) s, waypoint times, strictly increasing.
         positions: (w, 3) m, the centre of mass C at the waypoints, world axes.
         rotations: (w, 3, 3) world ← object, at the waypoints.
-        time_law: 'quintic' (s = 10u³ − 15u⁴ + 6u⁵, zero rate and acceleration at both ends) or 'cubic'
-            (s = 3u² − 2u³, zero rate only).
+        time_law: 'quintic' (s = 10u³ − 15u⁴ + 6u⁵, zero rate and acceleration at both ends), 'cubic'
+            (s = 3u² − 2u³, zero rate only) or 'sampled' (`samples`, over the whole path).
         output_dt: s, the sample interval.
         initial_guess: (n_total,) rad, joint angles that pick the inverse-kinematics branch at the first
             waypoint (None: the scenario's initial angles).
         rest_posture: (n_total,) rad, the redundant arms' null-space target (None: the scenario's initial
             angles).
         rest_gain: 1/s, the gain of the null-space pull toward rest_posture.
+        samples: the SampledTimeLaw of time_law 'sampled' (None otherwise).
         path: the free-form path between the two waypoints (then there are exactly two, and the time law
             runs once over their span); None: straight segments between the waypoints.
     """
@@ -535,6 +557,7 @@ class ObjectMotion:
     initial_guess: np.ndarray | None = None
     rest_posture: np.ndarray | None = None
     rest_gain: float = 1.0
+    samples: SampledTimeLaw | None = None
     path: PathSpline | None = None
 
 

@@ -31,14 +31,14 @@ for any of them and for the LP bound. The time is Σ 2Δ_i/(√b_i + √b_{i+1})
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import brentq, linprog
 
 from coopsim.core.errors import CoopsimError
-from coopsim.core.model import Model, Motors
+from coopsim.core.model import Model, Motors, ObjectMotion, SampledTimeLaw
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.path import JointPath
 from coopsim.inverse.problem import InverseProblem, inverse_problem
@@ -46,6 +46,7 @@ from coopsim.inverse.solve import resolution_for
 
 LP_BOUND = "lp"                 # the method name of the best distribution (grasp wrenches free per point)
 B_FLOOR = 1e-14                 # relative floor of b̄ in the tangent (b̄ = 0 at a piece's ends)
+MAX_LINEARISATIONS = 60         # the most linearisations of the motor lines per minimum-time solve
 BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's LP bounded
 
 
@@ -197,6 +198,30 @@ class TimeLaw:
         """
         keep = np.concatenate([[True], np.diff(self.s) > 0])
         return self.t[keep].copy(), self.s[keep].copy(), np.sqrt(self.b[keep])
+
+
+def retimed_motion(motion: ObjectMotion, law: TimeLaw, output_dt: float | None = None) -> ObjectMotion:
+    """The object motion of a waypoint path (`coopsim.inverse.path.WaypointPath`) with a retimed law.
+
+    The waypoints stay; their times become the law's times at the knots, and the time law is 'sampled'
+    (`coopsim.core.model.SampledTimeLaw`, the grid points' t, s and ṡ), starting at the first
+    waypoint's time.
+
+    Args:
+        motion: the ObjectMotion whose waypoints make the path.
+        law: the TimeLaw on a grid of that path.
+        output_dt: s, the sample interval of the motion's trajectory; None: the motion's.
+
+    Returns:
+        ObjectMotion: time_law 'sampled'.
+    """
+    t, s, rate = law.samples()
+    t = t + motion.times[0]
+    s[-1], rate[[0, -1]] = 1.0, 0.0
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(law.piece)) + 1])
+    times = np.append(law.t[starts], law.t[-1]) + motion.times[0]
+    return replace(motion, times=times, time_law="sampled", samples=SampledTimeLaw(t, s, rate),
+                   output_dt=motion.output_dt if output_dt is None else output_dt)
 
 
 def time_of(s: np.ndarray, piece: np.ndarray, b: np.ndarray) -> TimeLaw:
@@ -498,7 +523,7 @@ class Retiming:
         return self.law.duration if self.feasible else np.inf
 
 
-def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-12, max_iter: int = 60,
+def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-12, max_iter: int = MAX_LINEARISATIONS,
            start: np.ndarray | None = None) -> Retiming:
     """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module).
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from coopsim.core.digest import content_digest
 from coopsim.core.errors import ConstraintError, CoopsimError
-from coopsim.core.model import ArmModel, Model, ObjectMotion
+from coopsim.core.model import ArmModel, Model, ObjectMotion, SampledTimeLaw
 from coopsim.core.results import output_times
 from coopsim.core.spatial import axis_angle_to_rot, cross, rigid_acceleration, rot_log
 from coopsim.dynamics.closed_chain import arm_poses, carrier_object
@@ -175,12 +175,33 @@ def time_law(kind: str, u: float) -> tuple[float, float, float]:
     raise ValueError(f"unknown time law {kind!r}")
 
 
+def sampled_time_law_at(law: SampledTimeLaw, t: float) -> tuple[float, float, float]:
+    """(s, ṡ, s̈) of a sampled time law at time t (clamped to its span): s̈ constant between samples.
+
+    Args:
+        law: the SampledTimeLaw.
+        t: s, the time.
+
+    Returns:
+        tuple[float, float, float]: s, ṡ (1/s) and s̈ (1/s²) at t (s̈ of the interval starting at t
+        at a sample).
+    """
+    ts = law.t
+    t = min(max(float(t), ts[0]), ts[-1])
+    k = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
+    tau = t - ts[k]
+    acc = (law.rate[k + 1] - law.rate[k]) / (ts[k + 1] - ts[k])
+    return law.s[k] + law.rate[k] * tau + 0.5 * acc * tau * tau, law.rate[k] + acc * tau, acc
+
+
 def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None = None):
     """Object state at time t (clamped to the waypoint span): p_C, R_o, twist [v_C; ω] and acceleration [a_C; ω̇].
 
     On segment [t_a, t_b], u = (t − t_a)/T, T = t_b − t_a: p = p_a + s(u)(p_b − p_a), R = R_a Exp(s(u) φ)
     with φ = log(R_aᵀ R_b) (one fixed axis), so v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ,
-    a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ (ṡ = ds/du, s̈ = d²s/du², `time_law`). With `origin`, p_C is
+    a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ (ṡ = ds/du, s̈ = d²s/du², `time_law`). A sampled time law
+    gives the whole path's parameter σ(t) (`sampled_time_law_at`, waypoint i at σ = i/(w − 1)): then
+    s = (w − 1)σ − i, ṡ/T = (w − 1)σ̇ and s̈/T² = (w − 1)σ̈. With `origin`, p_C is
     (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded. A motion with a B-spline `path`
     follows it instead, the time law once over the whole span (`coopsim.inverse.spline_path.spline_state`).
 
@@ -197,7 +218,12 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
     t = min(max(float(t), ts[0]), ts[-1])
     i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
     T = ts[i + 1] - ts[i]
-    s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
+    if motion.time_law == "sampled":
+        sigma, rate, accel = sampled_time_law_at(motion.samples, t)
+        w1 = len(ts) - 1
+        s, ds, dds = w1 * sigma - i, w1 * rate * T, w1 * accel * T**2
+    else:
+        s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
     if motion.path is not None:
         return spline_state(motion, s, ds / T, dds / T**2, origin)
     dp = motion.positions[i + 1] - motion.positions[i]

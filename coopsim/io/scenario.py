@@ -29,7 +29,7 @@ from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
 from coopsim.core.model import (COMPENSATIONS, FALLBACKS, JOINT_TYPES, LAWS, PRISMATIC, REFERENCES, REVOLUTE, ArmModel,
                                 ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
-                                ObjectModel, ObjectMotion, PathSpline, OptimizeSettings, TorqueTable,
+                                ObjectModel, ObjectMotion, OptimizeSettings, PathSpline, SampledTimeLaw, TorqueTable,
                                 ValidationThresholds)
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
@@ -445,6 +445,37 @@ def _validation(sec: Section | None) -> ValidationThresholds:
     return s
 
 
+SAMPLED_LAW_RTOL = 1e-9     # s_{k+1} − s_k against (ṡ_k + ṡ_{k+1})(t_{k+1} − t_k)/2, relative to the path (1)
+
+
+def _sampled_law(om: Section, times: np.ndarray) -> SampledTimeLaw:
+    """The `time_law_samples` {t, s, rate} of a sampled time law (SampledTimeLaw), checked: t strictly
+    increasing from the first waypoint's time to the last's, s non-decreasing from 0 to 1, rate ≥ 0 and 0
+    at every waypoint (waypoint k of w at s = k/(w − 1), at its time), consecutive samples consistent with a
+    constant s̈ between them."""
+    sec = om.section("time_law_samples")
+    t, s, rate = (sec.array(k, (None,), nonneg=(k != "t")) for k in ("t", "s", "rate"))
+    if not len(t) == len(s) == len(rate) or len(t) < 2:
+        sec.fail("t", f"t, s and rate need one length of at least 2, got {len(t)}, {len(s)}, {len(rate)}")
+    if np.any(np.diff(t) <= 0) or t[0] != times[0] or t[-1] != times[-1]:
+        sec.fail("t", f"must increase strictly from the first waypoint's time {times[0]:g} s to the last's "
+                      f"{times[-1]:g} s")
+    if np.any(np.diff(s) < 0) or s[0] != 0.0 or s[-1] != 1.0:
+        sec.fail("s", "must not decrease, from 0 to 1")
+    err = np.abs(np.diff(s) - 0.5 * (rate[1:] + rate[:-1]) * np.diff(t))
+    if np.any(err > SAMPLED_LAW_RTOL):
+        k = int(np.argmax(err))
+        sec.fail("rate", f"samples {k} and {k + 1} do not meet a constant acceleration between them "
+                         f"(s differs by {err[k]:.3g})")
+    for k, tw in enumerate(times):
+        hit = np.flatnonzero(t == tw)
+        if not len(hit) or rate[hit[0]] != 0.0 or abs(s[hit[0]] - k / (len(times) - 1)) > SAMPLED_LAW_RTOL:
+            sec.fail("t", f"waypoint {k} (time {tw:g} s) needs a sample at its time with s = {k}/{len(times) - 1} "
+                          f"and rate 0")
+    sec.done()
+    return SampledTimeLaw(t, s, rate)
+
+
 def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
     """The optional `inverse` section: trajectory to invert, object motion, non-squeezing virtual
     masses, payload position and internal-wrench bounds (see InverseSettings, ObjectMotion); `joints`
@@ -455,7 +486,7 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
     om = sec.section("object_motion", default=None)
     motion = None
     if om is not None:
-        law = om.string("time_law", ("quintic", "cubic"), "quintic")
+        law = om.string("time_law", ("quintic", "cubic", "sampled"), "quintic")
         dt = om.number("output_dt", 1e-2, positive=True)
         guess, rest = (_joint_values(om, key, *joints) if om.has(key) or om.has(f"{key}_deg") else None
                        for key in ("initial_guess", "rest_posture"))
@@ -468,9 +499,11 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
             wp.done()
         if np.any(np.diff(times) <= 0):
             om.fail("waypoints", f"times must be strictly increasing, got {times}")
+        samples = _sampled_law(om, np.array(times)) if law == "sampled" else None
         path = _object_path(om.section("path", default=None), len(times), om)
         om.done()
-        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain, path)
+        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain, samples,
+                              path)
     if trajectory == "object_motion" and motion is None:
         sec.fail("object_motion", "trajectory: object_motion needs an object_motion section")
     masses = sec.array("nonsqueezing_masses", (r,), positive=True) if sec.has("nonsqueezing_masses") else None
