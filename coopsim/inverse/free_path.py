@@ -249,7 +249,8 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
 
     Args:
         model: the Model.
-        motion: the ObjectMotion (two waypoints and a B-spline path; its initial guess, rest posture and gain).
+        motion: the ObjectMotion (two waypoints and a B-spline path; its initial guess, rest posture and
+            gain, the gain per unit s being rest_gain × the span, as the time law's s runs over it).
         s: (N,) the path points, increasing.
         piece: (N,) int, zeros.
 
@@ -259,8 +260,9 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
     Raises:
         TrajectoryError: the inverse kinematics refuses the path.
     """
-    return joint_path(model, SplineGeometry(motion), s, piece, motion.initial_guess, motion.rest_posture,
-                      motion.rest_gain)
+    guess = model.q0 if motion.initial_guess is None else motion.initial_guess
+    span = float(motion.times[-1] - motion.times[0])
+    return joint_path(model, SplineGeometry(motion), s, piece, guess, motion.rest_posture, motion.rest_gain * span)
 
 
 def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resolution, mode: str) -> PathEvaluation:
@@ -643,7 +645,8 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
         x_new, run = _solve_start(fixed, x, len(runs), problem.model.inverse.optimize.max_iterations)
         runs.append(run)
         rounds[-1]["run"] = run
-        if np.isfinite(run.capacity_kg) and run.capacity_kg > mass:
-            x = x_new
         _tell(progress, (total - RETIME_ROUNDS + rnd + 1) / total)
+        if not (np.isfinite(run.capacity_kg) and run.capacity_kg > mass * (1 + 1e-9)):
+            break                                        # no gain with the law held: the last retiming stands
+        x = x_new
     return x, rounds, runs
