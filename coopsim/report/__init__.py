@@ -4,4 +4,5 @@ and capacity study's summary, series and checks.
     summary.py         a run's summary (agreement, warnings, settings)
     inverse_report.py  the inverse-dynamics and capacity study: what `coopsim inverse` and
                        `coopsim capacity` report and log
+    path_report.py     the free-path study: what `coopsim optimize --path` reports and logs
 """
