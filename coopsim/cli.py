@@ -11,7 +11,7 @@ import warnings
 
 from coopsim import __version__
 from coopsim.core.errors import CoopsimError
-from coopsim.inverse.resolutions import METHODS, methods_help
+from coopsim.inverse.resolutions import LINEAR_METHODS as LINEAR_METHODS_CLI, METHODS, methods_help
 
 
 def _cmd_simulate(args) -> int:
@@ -337,6 +337,64 @@ def _cmd_capacity(args) -> int:
     return 0 if ok else 1
 
 
+def _cmd_optimize(args) -> int:
+    from pathlib import Path
+
+    from coopsim.apps.progress import ProgressBar
+    from coopsim.io.atomic import write_text_atomic
+    from coopsim.io.log import file_sha256, run_metadata
+    from coopsim.io.overrides import apply_overrides
+    from coopsim.io.scenario import load_scenario, require_motor_limits, scenario_text
+    from coopsim.io.yaml_rules import load_yaml
+    from coopsim.plots.optimize import optimize_plots
+    from coopsim.plots.render import FigureWorkers
+    from coopsim.report.inverse_report import json_safe
+    from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
+                                                retime_series, retime_study, retime_summary)
+
+    if not args.retime:
+        raise CoopsimError("optimize: give --retime (the fixed path's time law)")
+    for name in ("duration", "payload"):
+        value = getattr(args, name)
+        if value is not None and not (value > 0 if name == "duration" else value >= 0):
+            raise CoopsimError(f"--{name}: must be {'positive' if name == 'duration' else 'non-negative'}, "
+                               f"got {value:g}")
+    if args.intervals < 2:
+        raise CoopsimError(f"--intervals: at least 2, got {args.intervals}")
+    model = load_scenario(args.scenario, overrides=_overrides(args))
+    require_motor_limits(model, args.scenario)
+    if model.inverse.object_motion is None:
+        raise CoopsimError(f"{args.scenario}: inverse.object_motion: --retime needs an object motion to retime")
+    out = Path(args.out or Path("out") / model.name / "optimize")
+    _check_out(out)
+    with FigureWorkers() as workers:
+        bar = ProgressBar(enabled=not args.json)
+        study = retime_study(model, duration=args.duration, payload=args.payload, method=args.method,
+                             intervals=args.intervals, progress=bar)
+        bar.close()
+        summary = retime_summary(study)
+        data = load_yaml(Path(args.scenario))
+        if args.set:
+            data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
+        name = f"{model.name}_retimed.yaml"
+        text = scenario_text(optimised_scenario(data, study.motion),
+                             f"{_display_path(args.scenario)} retimed by coopsim optimize --retime "
+                             f"(the {args.method} time law)")
+        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
+        streams, meta = retime_series(study), run_metadata(model, None, meta | retime_metadata(summary))
+
+        def summarize(log_path, plots):
+            summary["optimised_scenario"] = str(out / name)
+            return _summary_text(summary, log_path, plots, out / "optimize.json")
+
+        log_path, plots = _write_set(out, "optimize.json", "optimize.mcap", streams, meta, optimize_plots, workers,
+                                     summarize, also=lambda stage, log: write_text_atomic(stage / name, text))
+    print(json.dumps(json_safe(summary), indent=2) if args.json else
+          format_retime_summary(summary)
+          + f"\nwrote {out / name}, {log_path}, {out / 'optimize.json'} and {len(plots)} plots in {out}")
+    return 0
+
+
 def _cmd_sweep(args) -> int:
     from pathlib import Path
 
@@ -509,7 +567,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The `coopsim` argument parser: one subcommand per command, each with its options and help.
 
-    The commands are simulate, run, export-ros2, plot, validate, mjcf, urdf, inverse, capacity, sweep,
+    The commands are simulate, run, export-ros2, plot, validate, mjcf, urdf, inverse, capacity, optimize, sweep,
     bench, animate and view; each sets `func` (its handler, called with the parsed arguments) and, when it
     runs the native model, `native` (then `main` announces a first run's compilation). Usage errors print
     one line and exit 2.
@@ -630,6 +688,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)
     p.set_defaults(func=_cmd_capacity, native=True)
+
+    p = sub.add_parser("optimize", help="payload-optimal motion: retime the scenario's object path (--retime)",
+                       description=("Keep SCENARIO's object path (inverse.object_motion's waypoints) and free its time "
+                                    "law, rest to rest: for each linear resolution and the LP bound the heaviest "
+                                    "load carried within T_MAX (default: the scenario's duration) by the motor lines "
+                                    "of eq. 36, the minimum time of the bare object (or of --payload), the "
+                                    "payload-time curve. Writes DIR/NAME_retimed.yaml (the scenario with a sampled "
+                                    "time law, for run/inverse/capacity), optimize.mcap, plots and optimize.json."))
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--retime", action="store_true", help="fixed path, free timing")
+    p.add_argument("--payload", type=float, default=None, metavar="KG",
+                   help="also the minimum time of this carried mass (kg; the payload's, or the object's without "
+                        "inverse.payload)")
+    p.add_argument("--duration", type=float, default=None, metavar="T_MAX",
+                   help="the duration bound (s; default: the object motion's)")
+    p.add_argument("--method", choices=LINEAR_METHODS_CLI + ("lp",), default="min_energy",
+                   help="the resolution whose time law the optimised scenario carries (default min_energy)")
+    p.add_argument("--intervals", type=int, default=50, help="grid intervals per waypoint segment (default 50)")
+    p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary")
+    _add_set(p)
+    p.set_defaults(func=_cmd_optimize, native=True)
 
     p = sub.add_parser("sweep", help="parameter sweep of one study over a grid or a quasi-random design (Dask)",
                        description=("Run SWEEP (YAML: a base scenario, axes of --set paths, a study: simulate, "

@@ -308,8 +308,9 @@ def _vertices(G, H, E, tol):
         a = (E[:, r1] * H[:, r2] - E[:, r2] * H[:, r1]) / det
         b = (G[:, r1] * E[:, r2] - G[:, r2] * E[:, r1]) / det
     ok = np.abs(det) > 1e-300
-    lhs = G[:, None, :] * a[:, :, None] + H[:, None, :] * b[:, :, None]
-    ok &= np.all(lhs <= E[:, None, :] + tol[:, None, None], axis=2)
+    with np.errstate(invalid="ignore"):
+        lhs = G[:, None, :] * a[:, :, None] + H[:, None, :] * b[:, :, None]
+        ok &= np.all(lhs <= E[:, None, :] + tol[:, None, None], axis=2)
     return np.where(ok, a, np.nan), np.where(ok, b, np.nan)
 
 
@@ -620,21 +621,24 @@ def _static_problem(dyn: PathDynamics):
                           np.eye(3), np.zeros(3), np.zeros((r, 3)))
 
 
-def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10):
+def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10,
+                field: str = "--duration", names: list[str] | None = None):
     """The heaviest carried mass whose minimum time is within `duration`, and its Retiming.
 
-    The minimum time grows with μ; Brent's method on T(μ) − duration between the nominal mass (which
-    must be carried within `duration`) and the static capacity, each T(μ) linearised from the last
-    solution.
+    The minimum time grows with μ; the bracket [nominal mass, μ_hi] is grown (×4 from twice the nominal
+    mass or 1 kg, never past the static capacity) until T(μ_hi) > duration, then Brent's method on
+    T(μ) − duration (an infeasible μ counts as infinitely slow). The heaviest μ found feasible is kept.
 
     Args:
         dyn: the PathDynamics.
         duration: s, T_max.
         solver: as `retime`.
         rtol: the relative tolerance on μ.
+        field: the input that set the duration, for the message when even the nominal load is too slow.
+        names: (n,) the joints' labels, for the message when the motors cannot hold the nominal load.
 
     Returns:
-        tuple: (mass kg, Retiming at it, evaluations).
+        tuple: (mass kg, Retiming at it, the minimum-time solves made).
 
     Raises:
         RetimeError: the motors cannot hold the nominal load at rest, or no motion carries it within
@@ -643,28 +647,50 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
     lo = dyn.nominal_mass
     top = static_capacity(dyn)
     if not top > lo:
-        raise RetimeError("motors: the motors cannot hold the bare object at rest along the path "
-                          f"(static capacity {top:.6g} kg)")
+        raise RetimeError(hold_failure(dyn, names))
     first = retime(dyn, lo, solver)
     if not first.feasible or first.duration > duration:
-        raise RetimeError(f"--duration: no motion carries the bare object within {duration:g} s "
+        raise RetimeError(f"{field}: no motion carries the bare object along the path within {duration:g} s "
                           f"(its minimum time is {first.duration:.6g} s)")
-    hi = top if np.isfinite(top) else lo + 1e6
     best = {"r": first}
     count = [1]
 
     def excess(mu):
         count[0] += 1
-        r = retime(dyn, mu, solver)
-        if r.feasible and r.duration <= duration and (mu >= best["r"].mass):
+        r = retime(dyn, mu, solver, start=best["r"].law.b)
+        if r.feasible and r.duration <= duration and mu >= best["r"].mass:
             best["r"] = r
-        return (r.duration if r.feasible else 1e30) - duration
+        return (r.duration if r.feasible else np.inf) - duration
 
-    hi_ok = excess(hi * (1 - 1e-12))
-    if hi_ok <= 0:
-        return best["r"].mass, best["r"], count[0]
-    brentq(excess, lo, hi * (1 - 1e-12), xtol=rtol * max(abs(hi), 1e-12), rtol=4 * np.finfo(float).eps)
+    cap_top = top * (1 - 1e-12) if np.isfinite(top) else np.inf
+    hi = min(max(2 * lo, 1.0), cap_top)
+    while excess(hi) <= 0:
+        if hi >= cap_top:
+            return best["r"].mass, best["r"], count[0]
+        hi = min(4 * hi, cap_top)
+    brentq(lambda mu: min(excess(mu), 1e300), best["r"].mass, hi, xtol=rtol * hi, rtol=4 * np.finfo(float).eps)
     return best["r"].mass, best["r"], count[0]
+
+
+def hold_failure(dyn: PathDynamics, names: list[str] | None = None) -> str:
+    """The one-line reason the motors cannot hold the nominal load at rest, naming the motor and where.
+
+    Args:
+        dyn: the PathDynamics.
+        names: (n,) the joints' labels; None: stacked indices.
+
+    Returns:
+        str: 'motors.stall_torque: arm 1 joint 2 cannot hold the bare object at rest at s=0.3 (…)'.
+    """
+    head = "motors.stall_torque: the motors cannot hold the bare object at rest along the path"
+    if dyn.method == LP_BOUND:
+        return head + " with any distribution of the grasp wrenches"
+    tau = (dyn.tau[0, 0] + dyn.nominal_mass * dyn.tau[1, 0])
+    ratio = np.where(dyn.active, np.abs(tau) / dyn.stall, 0.0)
+    i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    who = names[j] if names is not None else f"joint {j}"
+    return (f"motors.stall_torque: {who} cannot hold the bare object at rest at s={dyn.path.s[i]:.4g} "
+            f"({dyn.method}: {abs(tau[i, j]):.4g} of its stall torque {dyn.stall[j]:.4g})")
 
 
 # ------------------------------------------------------------------------------------------------

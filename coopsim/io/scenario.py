@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+import yaml
 
 from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
@@ -823,3 +824,17 @@ def model_from_dict(data, where: str = "<scenario>", base_dir: Path = Path("."),
     return Model(name, tuple(arms), obj, gravity, planar_basis, row_selector(planar_basis), q0, qd0, duration,
                  tuple(torques), motors, integrator, mujoco_settings, validation, inverse=inverse,
                  joint_range=np.concatenate(ranges), control=control)
+
+
+def scenario_text(data: dict, comment: str = "") -> str:
+    """A scenario's data as YAML text that `load_scenario` reads back to the same values (floats exact).
+
+    Args:
+        data: the scenario's data (plain dicts, lists, numbers, strings), e.g. a file's data changed.
+        comment: a first comment line (none: "").
+
+    Returns:
+        str: the YAML text, keys in the data's order.
+    """
+    head = "".join(f"# {line}\n" for line in comment.splitlines())
+    return head + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=120, default_flow_style=None)

@@ -138,7 +138,8 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
     out = {}
     for i, k in enumerate(methods):
         _report(progress, "retime", i / len(methods))
-        out[k] = _method_retime(model, jp, fine, k, mode, T_max, payload)
+        out[k] = _method_retime(model, jp, fine, k, mode, T_max, payload,
+                                "--duration" if duration is not None else "inverse.object_motion.waypoints")
     _report(progress, "retime", 1.0)
     _report(progress, "check", 0.0)
     before = capacity_study(model, optimise=False)
@@ -155,12 +156,12 @@ def _path_gain(motion: ObjectMotion) -> float:
     return motion.rest_gain * float(motion.times[-1] - motion.times[0])
 
 
-def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float, payload: float | None):
+def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float, payload: float | None, field: str):
     dyn = rt.path_dynamics(model, jp, method, mode)
     t0 = time.perf_counter()
     bare = rt.retime(dyn, dyn.nominal_mass)
     t1 = time.perf_counter()
-    mass, best, evals = rt.max_payload(dyn, T_max)
+    mass, best, evals = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model))
     t2 = time.perf_counter()
     chosen = None
     if payload is not None:

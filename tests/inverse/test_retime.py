@@ -1,0 +1,168 @@
+"""Fixed path, free timing (`coopsim.inverse.path`, `coopsim.inverse.retime`) on the paper carry, against
+references that cannot share the retiming's mistakes: finite differences of the joint path, the inverse
+dynamics rerun from scratch on a model carrying the mass, the forward dynamics replaying the torques, a
+brute-force sweep of the scenario's own time law over its duration, and two solvers of the discrete
+problem written independently (vertex enumeration against HiGHS)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coopsim.core.model import torque_limits
+from coopsim.inverse import capacity as cap
+from coopsim.inverse import retime as rt
+from coopsim.inverse.path import WaypointPath, joint_path, path_grid
+from coopsim.inverse.problem import inverse_problem
+from coopsim.inverse.replay import replay
+from coopsim.inverse.solve import resolution_for, resolve
+from coopsim.inverse.trajectory import object_motion_trajectory
+from coopsim.io.scenario import load_scenario
+from coopsim.report.inverse_report import capacity_study
+from coopsim.report.optimize_report import fine_check
+from helpers import SCENARIOS
+
+INTERVALS = 20
+
+
+@pytest.fixture(scope="module")
+def carry():
+    model = load_scenario(SCENARIOS / "paper_planar_2x3_carry.yaml")
+    path = WaypointPath.of(model.inverse.object_motion)
+    s, piece = path_grid(path.knots, INTERVALS)
+    return model, path, joint_path(model, path, s, piece, model.inverse.object_motion.initial_guess)
+
+
+def test_the_joint_path_derivatives_are_those_of_finite_differences(carry):
+    """θ′ and θ″ at interior points against central differences of θ and θ′ (h = 1e-6: truncation ~1e-12,
+    rounding ~1e-10 relative to θ ~ 1 rad), within 1e-8."""
+    model, path, jp = carry
+    h = 1e-6
+    for i in (5, 30, 50):
+        s, k = jp.s[i:i + 1], jp.points.piece[i:i + 1]
+        plus, minus = (joint_path(model, path, s + d, k, jp.q[i]) for d in (h, -h))
+        assert np.max(np.abs((plus.q - minus.q)[0] / (2 * h) - jp.d1[i])) < 1e-8
+        assert np.max(np.abs((plus.d1 - minus.d1)[0] / (2 * h) - jp.d2[i])) < 1e-8
+
+
+@pytest.mark.parametrize("method", ["paper", "nonsqueezing", "min_energy"])
+def test_torques_are_affine_in_a_b_and_mass_as_the_inverse_dynamics_rerun(carry, method):
+    """τ(a, b, μ) of path_dynamics equals the inverse dynamics rerun from scratch on a model carrying the
+    payload μ at the joint motion θ̇ = θ′√b, θ̈ = θ′a + θ″b (random a, b, μ), to 1e-10 relative."""
+    model, _, jp = carry
+    dyn = rt.path_dynamics(model, jp, method, "payload")
+    rng = np.random.default_rng(4)
+    for _ in range(2):
+        a, b, mu = rng.normal(0, 0.05, len(jp.s)), rng.uniform(0, 0.04, len(jp.s)), rng.uniform(1, 50)
+        heavy = cap.payload_model(model, model.inverse.payload_position, mu)
+        ref = resolve(inverse_problem(heavy, jp.states(a, b)), resolution_for(model, method)).tau
+        assert np.max(np.abs(dyn.torques(mu, a, b) - ref)) <= 1e-10 * np.max(np.abs(ref))
+
+
+def test_reachability_and_the_grid_lp_find_the_same_law(carry):
+    """The two solvers of the discrete problem (TOPP-RA by vertex enumeration, one HiGHS LP over the grid)
+    agree on the minimum time to 1e-9 and on ṡ² to 1e-7 of its peak, for each linear resolution."""
+    model, _, jp = carry
+    for method in ("paper", "min_energy"):
+        dyn = rt.path_dynamics(model, jp, method, "payload")
+        r1, r2 = rt.retime(dyn, 20.0, "reachability"), rt.retime(dyn, 20.0, "grid_lp")
+        assert r1.converged and r2.converged
+        assert r1.duration == pytest.approx(r2.duration, rel=1e-9)
+        assert np.max(np.abs(r1.law.b - r2.law.b)) <= 1e-7 * np.max(r1.law.b)
+
+
+@pytest.mark.parametrize("method", ["paper", "min_energy", "lp"])
+def test_the_heaviest_load_meets_eq_36_exactly_and_a_motor_sits_on_its_line(carry, method):
+    """At the heaviest payload within the scenario's 13 s: within 1e-9 of T_max; every torque within its
+    line (θ̇ = θ′√b exactly, both sides of every grid point) to 1e-9 of τ_s; the critical point has a
+    motor on its line (optimality evidence; it is named); heavier than the scenario's own quintic law."""
+    model, _, jp = carry
+    dyn = rt.path_dynamics(model, jp, method, "payload")
+    mass, r, _ = rt.max_payload(dyn, 13.0)
+    assert r.duration <= 13.0 and r.duration == pytest.approx(13.0, rel=1e-8)
+    assert rt.check_time_law(dyn, r)["max_excess"] <= 1e-9
+    sat = rt.saturating(dyn, r)
+    assert sat["excess"][sat["critical"]["index"]] >= -1e-7
+    quintic = capacity_study(model, optimise=False)
+    before = quintic.lp["payload"] if method == "lp" else quintic.caps[method, "payload"]
+    assert mass > before.mass
+    # a little heavier is slower than T_max (the bound is tight)
+    assert rt.retime(dyn, mass * (1 + 1e-6)).duration > 13.0
+
+
+def test_the_optimum_beats_every_duration_of_the_scenario_law(carry):
+    """Brute force: the scenario's quintic law with every waypoint time scaled to total durations of 6 to
+    13 s (capacity_study at each, the model's own trajectory code); none carries more within 13 s than
+    the retimed path (min energy, payload)."""
+    model, _, jp = carry
+    dyn = rt.path_dynamics(model, jp, "min_energy", "payload")
+    best, _, _ = rt.max_payload(dyn, 13.0)
+    om = model.inverse.object_motion
+    sweep = []
+    for T in np.linspace(6.0, 13.0, 8):
+        m2 = replace(model, inverse=replace(model.inverse, object_motion=replace(om, times=om.times * T / 13.0)))
+        sweep.append(capacity_study(m2, optimise=False, with_lp=False).caps["min_energy", "payload"].mass)
+    assert max(sweep) <= best
+    assert sweep[-1] == max(sweep)           # the family's best is its longest duration
+
+
+def test_the_retimed_scenario_replays_and_follows_the_joint_path(carry):
+    """The optimum as a sampled time law: the trajectory code's joint motion at the law's grid times is the
+    joint path's (θ to 1e-10 rad, θ̇ = θ′√b to 1e-9); the minimum-energy torques replayed open loop through
+    the forward dynamics follow it within 1e-8 rad; the replayed torques stay within their lines up to the
+    law's excess between grid points (reported by the study, here ≤ 1e-3 τ_s)."""
+    model, _, jp = carry
+    dyn = rt.path_dynamics(model, jp, "min_energy", "payload")
+    mass, r, _ = rt.max_payload(dyn, 13.0)
+    motion = rt.retimed_motion(model.inverse.object_motion, r.law, output_dt=0.02)
+    m2 = replace(model, inverse=replace(model.inverse, object_motion=motion))
+    on = np.flatnonzero(np.concatenate([[True], np.diff(r.law.t) > 0]))
+    traj = object_motion_trajectory(m2, motion)
+    t_grid = r.law.t[on]
+    idx = np.flatnonzero(np.isin(np.round(traj.t, 9), np.round(t_grid, 9)))
+    assert len(idx) >= 2
+    for i in idx:
+        g = on[int(np.argmin(np.abs(t_grid - traj.t[i])))]
+        assert np.max(np.abs(traj.q[i] - jp.q[g])) < 1e-10
+        assert np.max(np.abs(traj.qd[i] - jp.d1[g] * np.sqrt(r.law.b[g]))) < 1e-9
+    heavy = cap.payload_model(m2, model.inverse.payload_position, mass)
+    rep = replay(heavy, traj, resolution_for(heavy, "min_energy"))
+    assert rep.max_angle_error <= 1e-8
+    res = resolution_for(m2, "min_energy")
+    prob = inverse_problem(m2, traj, model.inverse.payload_position)
+    a, b = cap.affine_torques(prob, res, "payload")
+    lo, hi = torque_limits(m2.motors, traj.qd)
+    excess = np.max(np.maximum(a + mass * b - hi, lo - a - mass * b) / m2.motors.stall_torque)
+    assert excess <= 1e-3
+
+
+def test_between_grid_points_only_the_rest_intervals_exceed_their_lines(carry):
+    """On a 10x finer grid between the grid points (10 and 20 intervals a segment): the paper W⁺ law stays
+    within its lines (1e-9 of τ_s); the minimum-energy law exceeds them by at most 1e-3 τ_s, and only in an
+    interval touching a waypoint, where ṡ = √b rises from 0 faster than linearly (√b is concave in s; the
+    grid bounds the velocity term at the interval's ends only)."""
+    model, path, _ = carry
+    for n in (10, 20):
+        s, piece = path_grid(path.knots, n)
+        g = joint_path(model, path, s, piece, model.inverse.object_motion.initial_guess)
+        fs, fp = path_grid(path.knots, 10 * n)
+        fg = joint_path(model, path, fs, fp, model.inverse.object_motion.initial_guess)
+        for method, bound in (("paper", 1e-9), ("min_energy", 1e-3)):
+            _, r, _ = rt.max_payload(rt.path_dynamics(model, g, method, "payload"), 13.0)
+            fc = fine_check(rt.path_dynamics(model, fg, method, "payload"), r)
+            assert fc["max_excess"] <= bound
+            if fc["max_excess"] > 1e-9:
+                assert np.min(np.abs(fc["s"] - path.knots)) <= 1.0 / (len(path.knots) - 1) / n
+
+
+def test_motors_that_cannot_hold_the_object_and_a_too_short_duration_are_named(carry):
+    """A stall torque below the static torque: one line naming motors.stall_torque and the motor; a bound
+    below the bare object's minimum time: one line naming the duration's field."""
+    model, _, jp = carry
+    dyn = rt.path_dynamics(model, jp, "min_energy", "payload")
+    with pytest.raises(rt.RetimeError, match=r"^--duration: no motion carries the bare object"):
+        rt.max_payload(dyn, 1.0)
+    weak = replace(dyn, tau=dyn.tau.copy())
+    weak.tau[0, 0] += 10.0                     # a constant 10 N·m load on every motor at rest
+    with pytest.raises(rt.RetimeError, match=r"^motors.stall_torque: joint \d cannot hold the bare object"):
+        rt.max_payload(weak, 13.0)
