@@ -18,8 +18,8 @@ with the closed-chain inverse kinematics of the path (`object_motion_trajectory`
 an infeasible point (every constraint −1). SciPy's SLSQP (sequential quadratic programming on dense
 Jacobians: the problem has tens of unknowns and thousands of rows) solves it from the straight path and
 from random starts (fixed seed); the constraint Jacobian in δ is by forward differences of the whole
-chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the one whose
-capacity, recomputed in closed form at its end point (`method_capacity`), is largest.
+chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the converged one whose
+capacity, recomputed in closed form at its end point (`affine_capacity`), is largest.
 
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
 paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
@@ -118,7 +118,8 @@ class PathOptimum:
         straight: the Capacity of the straight path on that grid (the first start).
         resolution: the Resolution optimised for (its weights optimised with `weights`).
         mode: 'scaled' or 'payload'.
-        success: the best start of the first stage converged.
+        best: the StartResult of the first stage's best run (its success, status and message say whether
+            the optimiser converged).
         starts: one StartResult per optimiser run (first stage: each start, with `weights` each round;
             then one per retimed round).
         eval_s: s, the wall time of one path evaluation (IK, inverse dynamics, distribution).
@@ -136,7 +137,7 @@ class PathOptimum:
     straight: Capacity
     resolution: Resolution
     mode: str
-    success: bool
+    best: StartResult
     starts: tuple
     eval_s: float
     jacobian_s: float
@@ -590,7 +591,7 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
     straight = problem.capacity(np.zeros(problem.size))
     eval_s, jacobian_s = _timings(problem)
     total = (WEIGHT_ROUNDS if weights else 1) + (RETIME_ROUNDS if retime else 0)
-    runs, (mass, x, problem, success) = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
+    runs, (mass, x, problem, best) = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
         RETIME_ROUNDS if retime else 0)) / total))
     quintic = (problem.motion_of(x, om.output_dt), problem.capacity(x))
     rounds = []
@@ -598,7 +599,7 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
         T = float(om.times[-1] - om.times[0]) if duration is None else float(duration)
         intervals = max(1, int(round((om.times[-1] - om.times[0]) / opt.sample_dt)))
         x, rounds, runs = _retime_stage(problem, x, T, intervals, runs, progress, total)
-    return PathOptimum(quintic[0], quintic[1], straight, problem.res, mode, success, tuple(runs), eval_s,
+    return PathOptimum(quintic[0], quintic[1], straight, problem.res, mode, best, tuple(runs), eval_s,
                        jacobian_s, problem.size, problem.motion_of(x, om.output_dt) if retime else None,
                        rounds[-1]["retiming"] if rounds else None, tuple(rounds), time.perf_counter() - t0)
 
@@ -610,7 +611,7 @@ def _tell(progress, fraction: float) -> None:
 
 def _law_stage(problem: FreePathProblem, weights: bool, progress):
     """The path under the scenario's time law from every start (and the weights in turn): (runs, best),
-    best = (mass kg, x, problem, converged)."""
+    best = (mass kg, x, problem, its StartResult): the heaviest converged run, else the heaviest."""
     opt, runs, best = problem.model.inverse.optimize, [], None
     rounds = WEIGHT_ROUNDS if weights else 1
     for rnd in range(rounds):
@@ -618,8 +619,9 @@ def _law_stage(problem: FreePathProblem, weights: bool, progress):
         for i, x0 in enumerate(starts):
             x, run = _solve_start(problem, x0, len(runs), opt.max_iterations)
             runs.append(run)
-            if np.isfinite(run.capacity_kg) and (best is None or run.capacity_kg > best[0]):
-                best = (run.capacity_kg, x, problem, run.success)
+            if np.isfinite(run.capacity_kg) and (best is None or (run.success, run.capacity_kg) > (best[3].success,
+                                                                                                  best[0])):
+                best = (run.capacity_kg, x, problem, run)          # a converged run before any other
             progress((rnd + (i + 1) / len(starts)) / rounds)
         if best is None:
             raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")

@@ -25,7 +25,6 @@ from coopsim.inverse.free_path import PathOptimum, end_poses, optimize_path, spl
 from coopsim.inverse.path import WaypointPath, joint_path, path_grid
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.replay import replay
-from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.spline_path import straight_control_points
 from coopsim.inverse.trajectory import object_motion_trajectory
 from coopsim.io.mcap_codec import Series
@@ -95,7 +94,7 @@ def path_study(model: Model, method: str = "min_energy", weights: bool = False, 
                                               model.inverse.payload_position), res, model.motors, opt.mode)
     own_retimed = own_path_retimed(model, res, opt.mode, T) if retime else None
     motion = opt.motion if opt.retimed is None else rt.retimed_motion(opt.retimed_motion, opt.retimed.law)
-    checks = path_checks(model, opt, replay_check)
+    checks = path_checks(model, opt, motion, replay_check)
     _report(progress, "check", 1.0)
     return PathStudy(model, method, opt, own, own_retimed, T, checks, motion)
 
@@ -129,14 +128,15 @@ def own_path_retimed(model: Model, res, mode: str, duration: float) -> float:
     return rt.max_payload(rt.path_dynamics(m, jp, res.method, mode), duration)[0]
 
 
-def path_checks(model: Model, opt: PathOptimum, replay_check: bool = True) -> dict:
+def path_checks(model: Model, opt: PathOptimum, motion: ObjectMotion, replay_check: bool = True) -> dict:
     """Checks of the optimum that do not share the optimiser's grid or its closed form.
 
     * the first stage's path under the scenario's time law: its capacity recomputed on the scenario's
       output_dt grid and on one FINER times finer, and the inverse dynamics rerun with the payload (or
       object) at (1 ∓ 1e-6) × the scenario-grid capacity (`coopsim.inverse.capacity.brute_force_check`);
     * the retimed law: eq. 36 exactly at every grid point on both sides (`check_time_law`) and on a grid
-      FINE_LAW times finer between them (`coopsim.report.optimize_report.fine_check`);
+      FINE_LAW times finer between them (`coopsim.report.optimize_report.fine_check`), and the capacity of
+      the optimised scenario's motion (the sampled law) at its output_dt samples;
     * with `replay_check`, the first stage's torques at the scenario-grid capacity replayed open loop
       through the forward dynamics (`coopsim.inverse.replay.replay`): the largest joint-angle error and
       the largest excess of a torque over its line at the samples.
@@ -144,12 +144,14 @@ def path_checks(model: Model, opt: PathOptimum, replay_check: bool = True) -> di
     Args:
         model: the Model.
         opt: the PathOptimum.
+        motion: the optimised scenario's ObjectMotion.
         replay_check: also the replay.
 
     Returns:
-        dict: scenario_grid_kg, finer_grid_kg, finer_dt_s, brute_force (dict), and with the retimed stage
-        retimed_grid_excess, retimed_fine_excess (relative to τ_s), and with the replay replay_max_angle_error_rad,
-        replay_max_line_excess (relative to τ_s).
+        dict: scenario_grid_kg, finer_grid_kg, finer_dt_s, saturating_motor and saturating_time_s,
+        brute_force (dict), and with the retimed stage retimed_grid_excess, retimed_fine_excess (relative to
+        τ_s) and retimed_scenario_kg, and with the replay replay_max_angle_error_rad, replay_max_line_excess
+        (relative to τ_s).
     """
     m, res, mode = model, opt.resolution, opt.mode
     pos = model.inverse.payload_position
@@ -169,6 +171,8 @@ def path_checks(model: Model, opt: PathOptimum, replay_check: bool = True) -> di
         fs, fp = path_grid(np.array([0.0, 1.0]), FINE_LAW * (len(r.law.s) - 1))
         fdyn = rt.path_dynamics(mw, spline_joint_path(mw, opt.retimed_motion, fs, fp), res.method, mode)
         out["retimed_fine_excess"] = fine_check(fdyn, r)["max_excess"]
+        out["retimed_scenario_kg"] = cap.method_capacity(inverse_problem(m, object_motion_trajectory(m, motion), pos),
+                                                         res, m.motors, mode).mass
     if replay_check:
         out |= _replay(m, traj, res, mode, c.mass)
     return out
@@ -178,7 +182,7 @@ def _replay(model: Model, traj, res, mode: str, mass: float) -> dict:
     """The torques of `res` with the load at `mass` replayed open loop along traj: angle error, line excess."""
     loaded = (cap.scaled_model(model, mass) if mode == "scaled"
               else cap.payload_model(model, model.inverse.payload_position, mass))
-    rep = replay(loaded, traj, replace(resolution_for(loaded, res.method), weights=res.weights))
+    rep = replay(loaded, traj, res)          # the distribution's virtual bodies as in the capacity (nominal)
     tau = rep.sim.tau if rep.sim is not None else np.full_like(traj.q, np.nan)
     lo, hi = torque_limits(model.motors, traj.qd)
     act = ~res.passive & np.isfinite(model.motors.stall_torque)
@@ -194,12 +198,13 @@ def path_summary(study: PathStudy) -> dict:
 
     Returns:
         dict: method, mode, duration bound, control points and unknowns, the payloads (the scenario's own
-        path and law, own path retimed, straight path, free path under the scenario's law, free path
-        retimed) and the gains, the solver (SLSQP) statistics per run, the gradient cost, the checks, wall
-        time.
+        path and law and the free path under it on the scenario's output_dt grid; the straight path and the
+        free path on the optimiser's grid; the own path and the free path retimed on their retiming grids)
+        and the gains of the free path retimed, the grids, the solver (SLSQP) statistics per run, the
+        gradient cost, the checks, wall time.
     """
     o = study.optimum
-    own, free = study.own.mass, o.capacity.mass
+    own, free = study.own.mass, study.checks["scenario_grid_kg"]
     retimed = None if o.retimed is None else o.retimed.mass
     best = retimed if retimed is not None else free
 
@@ -211,9 +216,13 @@ def path_summary(study: PathStudy) -> dict:
         "control_points": len(o.motion.path.positions), "unknowns": o.unknowns,
         "weights": [float(w) for w in o.resolution.weights],
         "payload_kg": {"own_path": own, "own_path_retimed": study.own_retimed_kg, "straight_path": o.straight.mass,
-                       "free_path_scenario_law": free, "free_path_retimed": retimed},
+                       "free_path_scenario_law": free, "free_path_scenario_law_optimiser_grid": o.capacity.mass,
+                       "free_path_retimed": retimed},
+        "grids": {"scenario_law_s": study.model.inverse.object_motion.output_dt,
+                  "optimiser_s": study.model.inverse.optimize.sample_dt,
+                  "retimed_intervals": None if o.retimed is None else len(o.retimed.law.s) - 1},
         "gain": {"over_own_path": gain(own), "over_own_path_retimed": gain(study.own_retimed_kg)},
-        "success": bool(o.success),
+        "success": bool(o.best.success),
         "solver": {"name": "scipy SLSQP", "runs": [vars(r) | {"kind": "fixed_law" if i >= _first_stage(o) else "start"}
                                                    for i, r in enumerate(o.starts)],
                    "starts": study.model.inverse.optimize.starts, "seed": study.model.inverse.optimize.seed,
@@ -250,11 +259,13 @@ def format_path_summary(s: dict) -> str:
              f"{s['wall_s']:.1f} s",
              f"  own path {kg(p['own_path'])}, retimed {kg(p['own_path_retimed'])}; straight {kg(p['straight_path'])}; "
              f"free path {kg(p['free_path_scenario_law'])} (scenario's law), {kg(p['free_path_retimed'])} (retimed)",
-             f"  check: scenario grid {kg(c['scenario_grid_kg'])}, {c['finer_dt_s']:g} s grid {kg(c['finer_grid_kg'])}, "
+             f"  check: optimiser grid {kg(p['free_path_scenario_law_optimiser_grid'])}, {c['finer_dt_s']:g} s grid "
+             f"{kg(c['finer_grid_kg'])}, "
              f"brute force {'ok' if c['brute_force']['ok'] else 'FAILED'}"]
     if "retimed_grid_excess" in c:
         lines.append(f"  retimed law: eq. 36 excess {c['retimed_grid_excess']:.2e} (grid), "
-                     f"{c['retimed_fine_excess']:.2e} (10x finer)")
+                     f"{c['retimed_fine_excess']:.2e} (10x finer); the written scenario carries "
+                     f"{kg(c['retimed_scenario_kg'])} at its samples")
     if "replay_max_angle_error_rad" in c:
         lines.append(f"  replay: {c['replay_max_angle_error_rad']:.2e} rad, line excess "
                      f"{c['replay_max_line_excess']:.2e}")
@@ -318,3 +329,16 @@ def path_scenario(data: dict, motion: ObjectMotion) -> dict:
         om["time_law_samples"] = {"t": [float(x) for x in motion.samples.t], "s": [float(x) for x in motion.samples.s],
                                   "rate": [float(x) for x in motion.samples.rate]}
     return out
+
+
+def path_metadata(summary: dict) -> dict:
+    """MCAP metadata record "optimize.path" of a free-path study: the payloads and the solver's outcome.
+
+    Args:
+        summary: the free-path summary (`path_summary`).
+
+    Returns:
+        dict: record name → a dict of the summary.
+    """
+    return {"optimize.path": {"method": summary["method"], "mode": summary["mode"], **summary["payload_kg"],
+                              "success": summary["success"], "wall_s": summary["wall_s"]}}
