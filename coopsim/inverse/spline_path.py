@@ -142,8 +142,8 @@ class BSplinePath:
         self.R0, self.origin = motion.rotations[0], motion.positions[0]
         rel = np.vstack([np.zeros(3), path.positions - self.origin, motion.positions[-1] - self.origin])
         phi = np.vstack([np.zeros(3), path.rotation_vectors, end_rotation_vector(motion)])
-        self._p = [BSpline(t, rel, d).derivative(k) if k else BSpline(t, rel, d) for k in range(3)]
-        self._phi = [BSpline(t, phi, d).derivative(k) if k else BSpline(t, phi, d) for k in range(3)]
+        both = BSpline(t, np.hstack([rel, phi]), d)                 # [p − p₀, φ]: one evaluation for both
+        self._splines = [both] + [both.derivative(k) for k in (1, 2)]
 
     def at(self, s, origin: np.ndarray | None = None) -> PathPoint:
         """The path and its s-derivatives at s.
@@ -156,8 +156,7 @@ class BSplinePath:
             PathPoint: p (M, 3) m relative to `origin`, R (M, 3, 3), p′, ω′, p″, ω″ (M, 3), world axes.
         """
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        rel, dp, ddp = (f(s) for f in self._p)
-        phi, dphi, ddphi = (f(s) for f in self._phi)
+        (rel, phi), (dp, dphi), (ddp, ddphi) = ((v[:, :3], v[:, 3:]) for v in (f(s) for f in self._splines))
         base = self.origin if origin is None else self.origin - origin
         R = np.array([_exp(f) @ self.R0 for f in phi])
         dw, ddw = left_jacobian_rates(phi, dphi, ddphi)
