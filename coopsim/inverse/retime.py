@@ -26,7 +26,11 @@ time law are within the lines at every grid point exactly, not only approximatel
 Two solvers of the same discrete problem: `reachability` (TOPP-RA: a backward pass of controllable
 sets and a greedy forward pass, each stage a two-variable LP solved exactly in NumPy by its vertices)
 for the linear resolutions, and `grid_lp` (one sparse LP over the whole grid, maximising Σ b, HiGHS)
-for any of them and for the LP bound. The time is Σ 2Δ_i/(√b_i + √b_{i+1}).
+for any of them and for the LP bound (the default: about twice as fast here). The time is
+Σ 2Δ_i/(√b_i + √b_{i+1}). Where the feasible profiles have a pointwise largest one the two give it (the
+paper carry: to 1e-9); with this discretisation they need not, and then the greedy forward pass can be
+slower than the grid LP's law (both within the lines, as `check_time_law` shows). Neither minimises the
+time itself, a convex function of b over the linearised constraints.
 """
 
 from __future__ import annotations
@@ -42,10 +46,12 @@ from coopsim.core.model import Model, Motors, ObjectMotion, SampledTimeLaw
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.path import JointPath
 from coopsim.inverse.problem import InverseProblem, inverse_problem
+from coopsim.inverse.qp import solve_lps
 from coopsim.inverse.solve import resolution_for
 
 LP_BOUND = "lp"                 # the method name of the best distribution (grasp wrenches free per point)
 B_FLOOR = 1e-14                 # relative floor of b̄ in the tangent (b̄ = 0 at a piece's ends)
+SHRINKS = 30                    # the most times b̄ is quartered when the rows linearised at it have no solution
 MAX_LINEARISATIONS = 60         # the most linearisations of the motor lines per minimum-time solve
 BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's LP bounded
 
@@ -524,26 +530,29 @@ class Retiming:
         return self.law.duration if self.feasible else np.inf
 
 
-def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-12, max_iter: int = MAX_LINEARISATIONS,
+def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-7, max_iter: int | None = None,
            start: np.ndarray | None = None) -> Retiming:
     """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module).
 
-    The rows are linearised at b̄ (first without the velocity term, or at `start`), solved, and
-    linearised again at the solution until max |b − b̄| ≤ tol·max b.
+    The rows are linearised at b̄ (first without the velocity term, or at `start`; where the rows
+    linearised there have no solution, at b̄/4, up to SHRINKS times), solved, and
+    linearised again at the solution until max |b − b̄| ≤ tol·max b; `check_time_law` then measures
+    the exact lines.
 
     Args:
         dyn: the PathDynamics.
         mass: kg, μ.
-        solver: 'reachability' (linear resolutions) or 'grid_lp'; None: reachability for a resolution,
-            grid_lp for the LP bound.
-        tol: the relative change of b that ends the loop.
-        max_iter: the most linearisations.
+        solver: 'reachability' (linear resolutions) or 'grid_lp' (any; None: grid_lp, the faster here).
+        tol: the relative change of b that ends the loop (the tangent's error at the solution is of its
+            square: 1e-7 leaves ~1e-15 of the velocity term).
+        max_iter: the most linearisations; None: MAX_LINEARISATIONS.
         start: (N,) 1/s², b̄ to linearise at first; None: the law without velocity terms.
 
     Returns:
         Retiming (infeasible when no motion carries μ).
     """
-    solver = solver or ("grid_lp" if dyn.method == LP_BOUND else "reachability")
+    solver = solver or "grid_lp"
+    max_iter = MAX_LINEARISATIONS if max_iter is None else max_iter
     N = len(dyn.path.s)
 
     def solve(lam):
@@ -559,8 +568,12 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     else:
         b, stats = start, {}
     scale = max(float(np.max(b)), 1e-300)
+    shrunk = 0
     for it in range(1, max_iter + 1):
         new, stats = solve(_tangent(b, scale))
+        if new is None and shrunk < SHRINKS and np.any(b > 0):
+            b, shrunk = b / 4.0, shrunk + 1        # a tangent far above the feasible ṡ² overestimates θ̇ at rest
+            continue
         if new is None:
             return Retiming(mass, None, False, True, it, solver, stats=stats)
         change = float(np.max(np.abs(new - b)))
@@ -569,7 +582,7 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
             return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, True, it, solver,
                             stats.pop("f", None), stats)
     return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, False, max_iter, solver,
-                    stats.pop("f", None), stats)
+                    stats.pop("f", None), stats | {"relative_change": change / scale})
 
 
 def static_capacity(dyn: PathDynamics) -> float:
@@ -716,6 +729,47 @@ def line_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray, f:
     drop = dyn.slope[j] * qd
     hi, lo = dyn.stall[j] - drop, -dyn.stall[j] - drop
     return np.maximum(tau - hi, lo - tau) / dyn.stall[j], j
+
+
+def best_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The LP bound's excess at points with (a, b): per point the least max relative excess over any
+    grasp wrenches f with A f = y(a, b, μ) (passive torques 0), one small LP per point.
+
+    Args:
+        dyn: the PathDynamics of 'lp' (N points).
+        mass: kg, μ.
+        a: (N,) 1/s², s̈.
+        b: (N,) 1/s², ṡ².
+
+    Returns:
+        tuple: (N,) the least excess relative to τ_s (≤ 0: some distribution keeps every line), and (N, rk)
+        the grasp wrenches reaching it.
+
+    Raises:
+        RetimeError: HiGHS fails on a point.
+    """
+    j = np.flatnonzero(dyn.active & np.isfinite(dyn.stall))
+    N, rk = len(dyn.path.s), dyn.JT.shape[2]
+    ta = dyn.torques(mass, a, b)
+    qd = dyn.path.d1[:, j] * np.sqrt(np.maximum(b, 0.0))[:, None]
+    drop = dyn.slope[j] * qd
+    JT = dyn.JT[:, j, :]
+    ts = np.broadcast_to(dyn.stall[j], (N, len(j)))[:, :, None]
+    A_ub = np.concatenate([np.concatenate([JT, -ts], 2), np.concatenate([-JT, -ts], 2)], 1)
+    b_ub = np.concatenate([dyn.stall[j] - drop - ta[:, j], ta[:, j] + dyn.stall[j] + drop], 1)
+    Y = dyn.y[0] + mass * dyn.y[1]
+    y = Y[0] + a[:, None] * Y[1] + b[:, None] * Y[2]
+    pas = ~dyn.active
+    A_eq = np.concatenate([np.concatenate([dyn.A, np.zeros((N, dyn.A.shape[1], 1))], 2),
+                           np.concatenate([dyn.JT[:, pas, :], np.zeros((N, int(pas.sum()), 1))], 2)], 1)
+    b_eq = np.concatenate([y, -ta[:, pas]], 1)
+    c = np.zeros(rk + 1)
+    c[-1] = 1.0
+    lp = solve_lps(c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (rk + 1))
+    if np.any(lp.status != 0):
+        i = int(np.flatnonzero(lp.status != 0)[0])
+        raise RetimeError(f"lp: HiGHS failed at s={dyn.path.s[i]:.6g}: {lp.messages[i]}")
+    return lp.x[:, -1], lp.x[:, :rk]
 
 
 def check_time_law(dyn: PathDynamics, r: Retiming) -> dict:

@@ -4,5 +4,7 @@ and capacity study's summary, series and checks.
     summary.py         a run's summary (agreement, warnings, settings)
     inverse_report.py  the inverse-dynamics and capacity study: what `coopsim inverse` and
                        `coopsim capacity` report and log
+    optimize_report.py the retiming study of `coopsim optimize --retime`: the fixed path's time law
+                       freed, summary, series and the optimised scenario
     path_report.py     the free-path study: what `coopsim optimize --path` reports and logs
 """

@@ -169,9 +169,11 @@ def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float,
         if not chosen.feasible:
             raise rt.RetimeError(f"--payload: no motion carries {payload:g} kg along the path "
                                  f"(static capacity {rt.static_capacity(dyn):.6g} kg)")
-    if not (bare.converged and best.converged and (chosen is None or chosen.converged)):
-        raise rt.RetimeError(f"{method}: the linearisation of the motor lines did not converge "
-                             f"in {rt.MAX_LINEARISATIONS} linearisations")
+    for r in (bare, best, chosen):
+        if r is not None and not r.converged:
+            raise rt.RetimeError(f"{method}: the linearisation of the motor lines did not converge at {r.mass:.6g} kg "
+                                 f"(status: not converged after {r.iterations} linearisations, last relative change "
+                                 f"of ṡ² {r.stats.get('relative_change', float('nan')):.3g}); nothing written")
     curve = [(float(dyn.nominal_mass), bare.duration)]
     for mu in np.linspace(dyn.nominal_mass, mass, CURVE_POINTS)[1:-1]:
         r = rt.retime(dyn, float(mu), start=bare.law.b)
@@ -191,30 +193,19 @@ def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
         r: the Retiming (its TimeLaw: a constant on each interval, b linear).
 
     Returns:
-        dict: max_excess (relative to τ_s), s and joint of the worst point (the LP bound: the grasp wrenches
-        interpolated linearly between the interval's ends).
+        dict: max_excess (relative to τ_s), s and joint of the worst point (the LP bound: with the best
+        grasp wrenches at each point, `coopsim.inverse.retime.best_excess`).
     """
     a, b = r.law.at(fine.path.s, fine.path.points.piece)
     f = None
-    if r.f is not None:
-        f = _wrenches_between(r, fine.path.s, fine.path.points.piece)
+    if fine.method == rt.LP_BOUND:                 # the best distribution at each point, its own LP
+        best, f = rt.best_excess(fine, r.mass, a, b)
+        i = int(np.argmax(best))
+        ex, j = rt.line_excess(fine, r.mass, a[i:i + 1], b[i:i + 1], f[i:i + 1])
+        return {"max_excess": float(best[i]), "s": float(fine.path.s[i]), "joint": int(j[int(np.argmax(ex[0]))])}
     ex, j = rt.line_excess(fine, r.mass, a, b, f)
     i, jj = np.unravel_index(int(np.argmax(ex)), ex.shape)
     return {"max_excess": float(ex[i, jj]), "s": float(fine.path.s[i]), "joint": int(j[jj])}
-
-
-def _wrenches_between(r: rt.Retiming, s: np.ndarray, piece: np.ndarray) -> np.ndarray:
-    """The LP bound's grasp wrenches at points s, linear between each interval's two ends."""
-    law = r.law
-    st = np.flatnonzero(law.piece[1:] == law.piece[:-1])
-    out = np.zeros((len(s), r.f.shape[2]))
-    for n, (x, k) in enumerate(zip(s, piece)):
-        cand = st[(law.piece[st] == k) & (law.s[st] <= x)]
-        i = cand[-1] if len(cand) else st[law.piece[st] == k][0]
-        u = np.clip((x - law.s[i]) / (law.s[i + 1] - law.s[i]), 0.0, 1.0)
-        m = int(np.flatnonzero(st == i)[0])
-        out[n] = (1 - u) * r.f[m, 0] + u * r.f[m, 1]
-    return out
 
 
 def max_velocity_curve(dyn: rt.PathDynamics, r: rt.Retiming) -> np.ndarray:

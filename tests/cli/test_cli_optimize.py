@@ -1,0 +1,77 @@
+"""End-to-end: `coopsim optimize --retime` in a temporary folder — the output set, the optimised scenario
+accepted as it is by `coopsim capacity`, and bad input as one line naming the field with exit 2 and
+nothing written."""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from coopsim.inverse import retime as rt
+from coopsim.io.mcap_codec import read_mcap
+from helpers import run_cli
+
+CARRY = "scenarios/paper_planar_2x3_carry.yaml"
+
+
+def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
+    """A coarse grid (6 intervals a segment): every method heavier after than before, the exact check at the
+    grid within 1e-9 of τ_s, the set (scenario, optimize.json, optimize.mcap, 3 figures) complete; the
+    optimised scenario loads in `coopsim capacity`, whose min-energy payload capacity along the sampled
+    law is the optimum up to the law's excess between grid points (within 2 %)."""
+    out = run_cli("optimize", CARRY, "--retime", "--intervals", "6", "--json", "--out", "res", cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    for k, e in s["methods"].items():
+        assert e["after"]["mass_kg"] > e["before"]["mass_kg"], k
+        assert e["after"]["duration_s"] <= 13.0
+        assert e["check_grid"]["max_excess"] <= 1e-9
+        assert len(e["saturating_motor_per_point"]) == s["grid"]["points"]
+    names = sorted(p.name for p in (workdir / "res").iterdir())
+    assert names == sorted(["optimize.json", "optimize.mcap", "optimize_motors.png", "optimize_payload_time.png",
+                            "optimize_phase_plane.png", "paper_planar_2x3_carry_retimed.yaml"])
+    log = read_mcap(workdir / "res" / "optimize.mcap")
+    assert {"/optimize/min_energy/law", "/optimize/min_energy/torque", "/optimize/lp/law"} <= set(log.topics)
+    data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
+    assert data["inverse"]["object_motion"]["time_law"] == "sampled"
+    cap = run_cli("capacity", "res/paper_planar_2x3_carry_retimed.yaml", "--no-optimise", "--json", "--out", "cap",
+                  cwd=workdir)
+    assert cap.returncode == 0, cap.stderr
+    c = json.loads(cap.stdout)["capacity"]["payload"]["min_energy"]["mass_kg"]
+    assert c == pytest.approx(s["methods"]["min_energy"]["after"]["mass_kg"], rel=0.02)
+
+
+@pytest.mark.parametrize("args, edit, line", [
+    (["--duration", "0.5"], None, "coopsim: error: --duration: no motion carries the bare object along the path "
+                                  "within 0.5 s"),
+    ([], ("waypoints", [1.4, 1.0, 0.0]), "coopsim: error: inverse.object_motion: the path leaves the workspace of "
+                                         "arm 'arm1' at s="),
+    ([], ("gravity", [0.0, -9.81, 0.0]), "coopsim: error: motors.stall_torque: arm "),
+])
+def test_bad_input_is_one_line_naming_the_field_and_writes_nothing(workdir, args, edit, line):
+    """A duration bound below the bare object's minimum time, a waypoint out of reach, motors too weak to
+    hold the bar against gravity in the plane (stall torques 0.55–0.96 N·m, the bar ~ 9.4 kg): exit 2, one
+    line, no output folder."""
+    path = workdir / CARRY
+    if edit is not None:
+        data = yaml.safe_load(path.read_text())
+        if edit[0] == "waypoints":
+            data["inverse"]["object_motion"]["waypoints"][1]["position"] = edit[1]
+        else:
+            data["gravity"] = edit[1]
+        path.write_text(yaml.safe_dump(data))
+    out = run_cli("optimize", CARRY, "--retime", "--intervals", "4", "--out", "res", *args, cwd=workdir)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and out.stderr.startswith(line), out.stderr
+    assert not (workdir / "res").exists()
+
+
+def test_a_linearisation_that_does_not_converge_says_so_and_writes_nothing(workdir, monkeypatch):
+    """One linearisation allowed: the command names the method, the status and the last change, exit 2."""
+    monkeypatch.setattr(rt, "MAX_LINEARISATIONS", 1)
+    out = run_cli("optimize", CARRY, "--retime", "--intervals", "4", "--out", "res", cwd=workdir)
+    assert out.returncode == 2
+    assert "the linearisation of the motor lines did not converge" in out.stderr
+    assert "status: not converged after 1 linearisations" in out.stderr
+    assert not (workdir / "res").exists()
