@@ -332,7 +332,8 @@ def path_scenario(data: dict, motion: ObjectMotion) -> dict:
 
 
 def path_metadata(summary: dict) -> dict:
-    """MCAP metadata record "optimize.path" of a free-path study: the payloads and the solver's outcome.
+    """MCAP metadata record "optimize_path" of a free-path study (not "optimize.path": the optimize.<method>
+    records are the retiming's): the payloads and the solver's outcome.
 
     Args:
         summary: the free-path summary (`path_summary`).
@@ -340,5 +341,5 @@ def path_metadata(summary: dict) -> dict:
     Returns:
         dict: record name → a dict of the summary.
     """
-    return {"optimize.path": {"method": summary["method"], "mode": summary["mode"], **summary["payload_kg"],
+    return {"optimize_path": {"method": summary["method"], "mode": summary["mode"], **summary["payload_kg"],
                               "success": summary["success"], "wall_s": summary["wall_s"]}}

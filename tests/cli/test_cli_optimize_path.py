@@ -22,20 +22,23 @@ def _scenario(workdir, **optimize):
 
 
 def test_optimize_path_writes_one_set(workdir):
-    """optimize.json's path entry holds the payloads, the gain over the scenario's own path (its quintic law)
+    """With --retime beside it: optimize.json's path entry holds the payloads, the gain over the scenario's own path (its quintic law)
     and over the own path retimed, the solver's runs and the checks; the written scenario loads as any
     scenario (its capacity: tests/report/test_path_report.py)."""
-    out = run_cli("optimize", _scenario(workdir), "--path", "--method", "paper", "--json", "--out", "res",
-                  cwd=workdir)
+    out = run_cli("optimize", _scenario(workdir), "--retime", "--intervals", "10", "--path", "--method", "paper",
+                  "--json", "--out", "res", cwd=workdir)
     assert out.returncode == 0, out.stderr
-    p = json.loads(out.stdout)["path"]
+    summary = json.loads(out.stdout)
+    p = summary["path"]
+    assert summary["methods"]["paper"]["after"]["mass_kg"] > 0           # the retiming beside it
     kg = p["payload_kg"]
     assert p["success"] and p["solver"]["runs"][0]["status"] == 0
     assert kg["free_path_retimed"] > kg["own_path_retimed"] > kg["own_path"]
     assert p["gain"]["over_own_path"] == pytest.approx(kg["free_path_retimed"] / kg["own_path"])
     assert p["checks"]["brute_force"]["ok"]
     files = {f.name for f in (workdir / "res").iterdir()}
-    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "paper_planar_2x3_carry_path.yaml"} <= files
+    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "optimize_payload_time.png",
+            "paper_planar_2x3_carry_path.yaml", "paper_planar_2x3_carry_retimed.yaml"} <= files
     m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
     assert m.inverse.object_motion.path is not None and m.inverse.object_motion.time_law == "sampled"
 
