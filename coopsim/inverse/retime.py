@@ -196,6 +196,18 @@ class TimeLaw:
         a = self.a[i]
         return a, np.maximum(self.b[i] + 2.0 * a * (s - self.s[i]), 0.0)
 
+    def point_accel(self) -> np.ndarray:
+        """s̈ (N,) 1/s² at the points: each interval's a at its start, at a piece's last point that of the
+        interval ending there (so every point's torque is one the law drives).
+
+        Returns:
+            np.ndarray: (N,) 1/s².
+        """
+        a = self.a.copy()
+        last = np.append(np.flatnonzero(np.diff(self.piece)), len(self.s) - 1)
+        a[last] = self.a[last - 1]
+        return a
+
     def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(t, s, ṡ) at the grid points, each knot once: the sampled time law of a scenario.
 
@@ -259,6 +271,24 @@ def _tangent(b_ref: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     r = np.sqrt(np.maximum(b_ref, B_FLOOR * scale))
     small = b_ref <= B_FLOOR * scale
     return np.where(small, 0.0, 0.5 * r), np.where(small, 0.0, 0.5 / r)
+
+
+def speed_bound(dyn: PathDynamics) -> np.ndarray:
+    """The largest ṡ² (N,) 1/s² at each point keeping every joint within its no-load speed, |θ′|√b ≤ ω_s.
+
+    The motor lines of eq. 36 hold for |θ̇| ≤ ω_s (a robot file's velocity limits are its ω_s); linear in b,
+    so exact.
+
+    Args:
+        dyn: the PathDynamics.
+
+    Returns:
+        np.ndarray: (N,) 1/s² (inf: no joint moves, or no finite no-load speed).
+    """
+    with np.errstate(divide="ignore"):
+        omega = np.where(dyn.slope > 0, dyn.stall / np.where(dyn.slope > 0, dyn.slope, 1.0), np.inf)
+        lim = (omega[None, :] / np.abs(dyn.path.d1)) ** 2
+    return np.min(np.where(dyn.active[None, :], lim, np.inf), axis=1)
 
 
 def motor_rows(dyn: PathDynamics, mass: float, lam: tuple[np.ndarray, np.ndarray]):
@@ -360,8 +390,12 @@ def reachability(dyn: PathDynamics, mass: float, lam) -> np.ndarray | None:
     s, piece = dyn.path.s, dyn.path.points.piece
     G, H, E, _ = motor_rows(dyn, mass, lam)
     st = _stages(s, piece)
+    scale = np.maximum(np.max(np.abs(np.concatenate([E[st], E[st + 1]], 1)), axis=1), 1e-300)
+    cap_b = BIG / max(float(np.min(np.diff(s)[st])), 1e-300) ** 2
+    top = np.minimum(speed_bound(dyn), cap_b)
+    G, H, E = (np.concatenate([x, y[:, None]], 1) for x, y in ((G, np.zeros(len(s))), (H, np.ones(len(s))),
+                                                                 (E, top)))
     Gs, Hs, Es, d = _stage_rows(G, H, E, s, st)
-    scale = np.maximum(np.max(np.abs(Es), axis=1), 1e-300)
     Gs, Hs, Es = _boxed(Gs, Hs, Es, 1.0 / max(np.min(d), 1e-300), 1.0 / max(np.min(d), 1e-300) ** 2)
     tol = 1e-12 * scale
     va, vb = _vertices(Gs, Hs, Es, tol)
@@ -456,6 +490,7 @@ def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dic
     bounds = np.zeros((nv, 2))
     bounds[:, 1] = np.inf
     bounds[N:, 0] = -np.inf
+    bounds[:N, 1] = speed_bound(dyn)
     for k in np.unique(piece):
         bounds[np.flatnonzero(piece == k)[[0, -1]], 1] = 0.0
     c = np.zeros(nv)
@@ -466,7 +501,30 @@ def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dic
         return None, stats
     if lp:
         stats["f"] = r.x[N:].reshape(K, 2, rk)
+    stats["certificate"] = _certificate(r, b_ub[keep], b_eq, bounds, np.flatnonzero(keep), K, G.shape[1], st, j)
     return np.maximum(r.x[:N], 0.0), stats
+
+
+def _certificate(r, b_ub, b_eq, bounds, rows, K, m, st, joints) -> dict:
+    """The grid LP's dual certificate: the dual objective (equal to the primal's at an optimum, its duals of
+    the right sign), their gap, how many motor-line rows bind (nonzero dual) and the one of largest dual
+    (its grid point, stacked joint, side of the interval and line)."""
+    y_ub = r.ineqlin.marginals
+    dual = float(b_ub @ y_ub + (0.0 if b_eq is None else b_eq @ r.eqlin.marginals)
+                 + np.where(np.isfinite(bounds[:, 1]), bounds[:, 1], 0.0) @ r.upper.marginals
+                 + np.where(np.isfinite(bounds[:, 0]), bounds[:, 0], 0.0) @ r.lower.marginals)
+    big = np.abs(y_ub) > 1e-9 * max(float(np.max(np.abs(y_ub), initial=0.0)), 1e-300)
+    out = {"primal": float(r.fun), "dual": dual, "gap": abs(float(r.fun) - dual), "sign_ok": bool(np.all(y_ub <= 0)),
+           "binding_rows": int(big.sum())}
+    if np.any(big):
+        k = int(rows[int(np.argmax(np.abs(y_ub)))])
+        side, rest = divmod(k, K * m)
+        stage, col = divmod(rest, m)
+        n_a = len(joints)
+        out["largest"] = {"point": int(st[stage] + side), "joint": int(joints[col % n_a]),
+                          "interval_side": "start" if side == 0 else "end",
+                          "line": "tau_max" if col < n_a else "tau_min", "dual": float(y_ub[int(np.argmax(np.abs(y_ub)))])}
+    return out
 
 
 def _lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv):
@@ -780,7 +838,8 @@ def check_time_law(dyn: PathDynamics, r: Retiming) -> dict:
         r: the Retiming (feasible).
 
     Returns:
-        dict: max_excess (relative to τ_s; ≤ 0 within), and the worst point's index, s and joint.
+        dict: max_excess (relative to τ_s; ≤ 0 within), the worst point's index, s and joint, and
+        max_speed_excess (`speed_excess`).
     """
     law = r.law
     st = _stages(law.s, law.piece)
@@ -798,11 +857,49 @@ def check_time_law(dyn: PathDynamics, r: Retiming) -> dict:
             i, jj = np.unravel_index(int(np.argmax(ex)), ex.shape)
             worst = float(ex[i, jj]), int(pt[i]), int(j[jj])
     return {"max_excess": worst[0], "index": worst[1], "s": None if worst[1] is None else float(law.s[worst[1]]),
-            "joint": worst[2]}
+            "joint": worst[2], "max_speed_excess": speed_excess(dyn, law.b)}
+
+
+def speed_excess(dyn: PathDynamics, b: np.ndarray) -> float:
+    """max |θ̇|/ω_s − 1 over the points and the joints with a finite no-load speed (≤ 0: within; −1: none).
+
+    Args:
+        dyn: the PathDynamics (N points).
+        b: (N,) 1/s², ṡ².
+
+    Returns:
+        float: the largest relative excess of a joint's speed over its no-load speed.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        omega = np.where(dyn.slope > 0, dyn.stall / np.where(dyn.slope > 0, dyn.slope, 1.0), np.inf)
+        ratio = np.abs(dyn.path.d1) * np.sqrt(np.maximum(b, 0.0))[:, None] / omega
+    return float(np.max(np.where(dyn.active & np.isfinite(omega), ratio, 0.0), initial=0.0)) - 1.0
+
+
+def point_wrenches(r: Retiming) -> np.ndarray | None:
+    """The LP bound's grasp wrenches (N, rk) at the grid points, as `TimeLaw.point_accel` takes s̈: each
+    interval's start wrenches at its start, at a piece's last point those of the interval ending there.
+
+    Args:
+        r: the Retiming (its f; None: not the LP bound).
+
+    Returns:
+        np.ndarray | None: (N, rk) [N; N·m], or None.
+    """
+    if r.f is None:
+        return None
+    law = r.law
+    st = _stages(law.s, law.piece)
+    f = np.zeros((len(law.s), r.f.shape[2]))
+    f[st] = r.f[:, 0]
+    ends = np.flatnonzero(~np.isin(st + 1, st))                   # intervals ending a piece
+    f[st[ends] + 1] = r.f[ends, 1]
+    return f
 
 
 def saturating(dyn: PathDynamics, r: Retiming, tol: float = 1e-7) -> dict:
-    """The motor closest to its line at each grid point (right side), and the critical point of the law.
+    """The motor closest to its line at each grid point (`TimeLaw.point_accel`), and the critical point of
+    the law.
 
     Args:
         dyn: the PathDynamics.
@@ -814,13 +911,7 @@ def saturating(dyn: PathDynamics, r: Retiming, tol: float = 1e-7) -> dict:
         on_line (N,) bool, and critical: the point of largest excess (index, s, joint).
     """
     law = r.law
-    f = None
-    if r.f is not None:
-        st = _stages(law.s, law.piece)
-        f = np.zeros((len(law.s), r.f.shape[2]))
-        f[st] = r.f[:, 0]
-        f[st[-1] + 1] = r.f[-1, 1]
-    ex, j = line_excess(dyn, r.mass, law.a, law.b, f)
+    ex, j = line_excess(dyn, r.mass, law.point_accel(), law.b, point_wrenches(r))
     k = np.argmax(ex, axis=1)
     e = ex[np.arange(len(ex)), k]
     i = int(np.argmax(e))

@@ -194,7 +194,7 @@ def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
 
     Returns:
         dict: max_excess (relative to τ_s), s and joint of the worst point (the LP bound: with the best
-        grasp wrenches at each point, `coopsim.inverse.retime.best_excess`).
+        grasp wrenches at each point, `coopsim.inverse.retime.best_excess`), and max_speed_excess.
     """
     a, b = r.law.at(fine.path.s, fine.path.points.piece)
     f = None
@@ -202,10 +202,12 @@ def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
         best, f = rt.best_excess(fine, r.mass, a, b)
         i = int(np.argmax(best))
         ex, j = rt.line_excess(fine, r.mass, a[i:i + 1], b[i:i + 1], f[i:i + 1])
-        return {"max_excess": float(best[i]), "s": float(fine.path.s[i]), "joint": int(j[int(np.argmax(ex[0]))])}
+        return {"max_excess": float(best[i]), "s": float(fine.path.s[i]), "joint": int(j[int(np.argmax(ex[0]))]),
+                "max_speed_excess": rt.speed_excess(fine, b)}
     ex, j = rt.line_excess(fine, r.mass, a, b, f)
     i, jj = np.unravel_index(int(np.argmax(ex)), ex.shape)
-    return {"max_excess": float(ex[i, jj]), "s": float(fine.path.s[i]), "joint": int(j[jj])}
+    return {"max_excess": float(ex[i, jj]), "s": float(fine.path.s[i]), "joint": int(j[jj]),
+            "max_speed_excess": rt.speed_excess(fine, b)}
 
 
 def max_velocity_curve(dyn: rt.PathDynamics, r: rt.Retiming) -> np.ndarray:
@@ -242,6 +244,19 @@ def _retiming_entry(model: Model, r: rt.Retiming | None) -> dict | None:
             "linearisations": r.iterations, "solver": r.solver}
 
 
+def _certificate_entry(r: rt.Retiming, names: list[str]) -> dict | None:
+    """The grid LP's dual certificate with its largest dual's point as s and its joint by name."""
+    c = (r.stats or {}).get("certificate")
+    if c is None:
+        return None
+    c = dict(c)
+    if "largest" in c:
+        big = dict(c["largest"])
+        big["s"], big["motor"] = float(r.law.s[big.pop("point")]), names[big.pop("joint")]
+        c["largest"] = big
+    return c
+
+
 def retime_summary(study: RetimeStudy) -> dict:
     """JSON-ready summary of a retiming study (SI units).
 
@@ -253,7 +268,8 @@ def retime_summary(study: RetimeStudy) -> dict:
         method: before (the scenario's own time law: capacity kg, saturating motor), after (heaviest load
         within T_max, its duration, the critical point and motor), bare-object minimum time, asked payload,
         payload–time curve, the exact check on the grid and the finer grid, the saturating motor at each
-        grid point, solver statistics and wall times.
+        grid point, the grid LP's dual certificate (primal and dual objectives, their gap, the binding motor
+        line of largest dual), solver statistics and wall times.
     """
     m = study.model
     names = joint_labels(m)
@@ -275,15 +291,19 @@ def retime_summary(study: RetimeStudy) -> dict:
             "payload": _retiming_entry(m, mr.chosen),
             "payload_time_curve": [{"mass_kg": a, "duration_s": t} for a, t in mr.curve],
             "check_grid": {"max_excess": mr.grid_check["max_excess"], "s": mr.grid_check["s"],
+                           "max_speed_excess": mr.grid_check["max_speed_excess"],
                            "motor": None if mr.grid_check["joint"] is None else names[mr.grid_check["joint"]],
                            "law": "payload" if mr.chosen is not None else "after"},
             "check_fine_grid": {"max_excess": mr.fine_check["max_excess"], "s": mr.fine_check["s"],
+                                "max_speed_excess": mr.fine_check["max_speed_excess"],
                                 "motor": names[mr.fine_check["joint"]], "points_per_interval": FINE},
             "saturating_motor_per_point": [names[j] for j in sat["joint"]],
             "on_line_per_point": [bool(x) for x in sat["on_line"]],
             "solver": {"name": use.solver, "heaviest_load_evaluations": mr.evaluations,
                        "heaviest_load_wall_s": mr.wall_s, "bare_object_retime_wall_s": mr.retime_s,
-                       **({} if not use.stats else {kk: v for kk, v in use.stats.items() if kk != "f"})},
+                       **({} if not use.stats else {kk: v for kk, v in use.stats.items()
+                                                    if kk not in ("f", "certificate")})},
+            "dual_certificate": _certificate_entry(use, names),
         }
     return {
         "scenario": m.name, "mode": study.mode,
@@ -341,12 +361,7 @@ def retime_series(study: RetimeStudy) -> list:
         r = mr.law_of
         law = r.law
         keep = np.concatenate([np.diff(law.t) > 0, [True]])       # one sample per time (knots once)
-        f = None
-        if r.f is not None:
-            st = np.flatnonzero(law.piece[1:] == law.piece[:-1])
-            f = np.zeros((len(law.s), r.f.shape[2]))
-            f[st], f[st[-1] + 1] = r.f[:, 0], r.f[-1, 1]
-        tau = mr.dyn.torques(r.mass, law.a, law.b, f)
+        tau = mr.dyn.torques(r.mass, law.point_accel(), law.b, rt.point_wrenches(r))
         qd = mr.dyn.path.d1 * np.sqrt(law.b)[:, None]
         drop = mr.dyn.slope * qd
         out.append(Series(f"/optimize/{k}/law", "coopsim.optimize.Law", law.t[keep],

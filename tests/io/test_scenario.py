@@ -154,3 +154,24 @@ def test_bad_path_or_optimize_names_the_field(data, message):
     with pytest.raises(ScenarioError, match=message) as info:
         model_from_dict(data, where="s.yaml")
     assert "\n" not in str(info.value)
+
+
+def test_a_sampled_time_law_is_read_and_checked():
+    """time_law: sampled reads its samples (t, s, rate); samples that do not meet a constant s̈ between them,
+    or miss a waypoint, are one line naming time_law_samples' field."""
+    data = yaml.safe_load((SCENARIOS / "paper_planar_2x3_carry.yaml").read_text())
+    om = data["inverse"]["object_motion"]
+    om["waypoints"] = om["waypoints"][:2]
+    om["time_law"] = "sampled"
+    # rest to rest in 5 s over s ∈ [0, 1]: ṡ = 0, 0.4, 0 at t = 0, 2.5, 5 (s = 0, 0.5, 1)
+    om["time_law_samples"] = {"t": [0.0, 2.5, 5.0], "s": [0.0, 0.5, 1.0], "rate": [0.0, 0.4, 0.0]}
+    law = model_from_dict(data, where="s.yaml").inverse.object_motion.samples
+    assert law.t.tolist() == [0.0, 2.5, 5.0] and law.rate.tolist() == [0.0, 0.4, 0.0]
+    bad = mutated(data, ["inverse", "object_motion", "time_law_samples", "rate"], [0.0, 0.3, 0.0])
+    with pytest.raises(ScenarioError, match=r"^s\.yaml: inverse\.object_motion\.time_law_samples\.rate: samples 0 "
+                                            r"and 1 do not meet a constant acceleration"):
+        model_from_dict(bad, where="s.yaml")
+    bad = mutated(data, ["inverse", "object_motion", "time_law_samples", "t"], [0.0, 2.5, 4.0])
+    with pytest.raises(ScenarioError, match=r"time_law_samples\.t: must increase strictly from the first "
+                                            r"waypoint's time 0 s to the last's 5 s"):
+        model_from_dict(bad, where="s.yaml")
