@@ -19,7 +19,7 @@ an infeasible point (every constraint −1). SciPy's SLSQP (sequential quadratic
 Jacobians: the problem has tens of unknowns and thousands of rows) solves it from the straight path and
 from random starts (fixed seed); the constraint Jacobian in δ is by forward differences of the whole
 chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the converged one whose
-capacity, recomputed in closed form at its end point (`affine_capacity`), is largest.
+capacity, recomputed in closed form at its end point on the object motion's output_dt grid, is largest.
 
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
 paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
@@ -94,6 +94,8 @@ class StartResult:
         iterations: its iterations.
         evaluations: path evaluations (IK + inverse dynamics), finite differences included.
         wall_s: s, its wall time.
+        scenario_grid_kg: kg, the capacity at its end point on the object motion's output_dt grid (the
+            scenario's time law; nan: not evaluated, or refused by the IK).
     """
 
     start: int
@@ -105,6 +107,7 @@ class StartResult:
     iterations: int
     evaluations: int
     wall_s: float
+    scenario_grid_kg: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)
@@ -438,6 +441,23 @@ class FreePathProblem:
         e = self.evaluate(x)
         return None if e is None else affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~self.res.passive)
 
+    def scenario_grid_capacity(self, x: np.ndarray) -> float:
+        """kg, the closed-form capacity of the path of x under the scenario's time law on its output_dt grid
+        (nan where the IK refuses it; not cached).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            float: kg.
+        """
+        try:
+            e = evaluate_motion(self.model, self.motion_of(x, self.model.inverse.object_motion.output_dt), self.res,
+                                self.mode)
+        except CoopsimError:
+            return float("nan")
+        return affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~self.res.passive).mass
+
     def _rows(self, e: PathEvaluation) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(T, U, B, W): (τ_max − a)/τ_s, (a − τ_min)/τ_s, b/τ_s over the active motors, flattened, and
         the manipulability rows w/w₀ − margin."""
@@ -611,17 +631,19 @@ def _tell(progress, fraction: float) -> None:
 
 def _law_stage(problem: FreePathProblem, weights: bool, progress):
     """The path under the scenario's time law from every start (and the weights in turn): (runs, best),
-    best = (mass kg, x, problem, its StartResult): the heaviest converged run, else the heaviest."""
+    best = (mass kg, x, problem, its StartResult): the converged run heaviest on the scenario's output_dt grid
+    (the optimiser's coarser grid can favour a path whose peak falls between its samples), else the heaviest."""
     opt, runs, best = problem.model.inverse.optimize, [], None
     rounds = WEIGHT_ROUNDS if weights else 1
     for rnd in range(rounds):
         starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
         for i, x0 in enumerate(starts):
             x, run = _solve_start(problem, x0, len(runs), opt.max_iterations)
+            run = replace(run, scenario_grid_kg=problem.scenario_grid_capacity(x))
             runs.append(run)
-            if np.isfinite(run.capacity_kg) and (best is None or (run.success, run.capacity_kg) > (best[3].success,
-                                                                                                  best[0])):
-                best = (run.capacity_kg, x, problem, run)          # a converged run before any other
+            if np.isfinite(run.scenario_grid_kg) and (best is None or (run.success, run.scenario_grid_kg) > (
+                    best[3].success, best[0])):
+                best = (run.scenario_grid_kg, x, problem, run)     # a converged run before any other
             progress((rnd + (i + 1) / len(starts)) / rounds)
         if best is None:
             raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")
