@@ -346,14 +346,22 @@ def _cmd_optimize(args) -> int:
     from coopsim.io.overrides import apply_overrides
     from coopsim.io.scenario import load_scenario, require_motor_limits, scenario_text
     from coopsim.io.yaml_rules import load_yaml
-    from coopsim.plots.optimize import optimize_plots
-    from coopsim.plots.render import FigureWorkers
+    from coopsim.inverse.free_path import PathOptimizationError
+    from coopsim.plots.free_path import path_jobs
+    from coopsim.plots.optimize import optimize_jobs
+    from coopsim.plots.render import FigureWorkers, render_figures
+    from coopsim.report.path_report import (format_path_summary, path_metadata, path_scenario, path_series,
+                                            path_study, path_summary)
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
                                                 retime_series, retime_study, retime_summary)
 
-    if not args.retime:
-        raise CoopsimError("optimize: give --retime (the fixed path's time law)")
+    if not (args.retime or args.path):
+        raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
+    if args.path and args.method == "lp":
+        raise CoopsimError("--method lp: --path optimises a resolution's path (paper, nonsqueezing, min_energy)")
+    if args.weights and not (args.path and args.method == "min_energy"):
+        raise CoopsimError("--weights: the energy weights are optimised with --path and --method min_energy")
     for name in ("duration", "payload"):
         value = getattr(args, name)
         if value is not None and not (value > 0 if name == "duration" else value >= 0):
@@ -364,34 +372,62 @@ def _cmd_optimize(args) -> int:
     model = load_scenario(args.scenario, overrides=_overrides(args))
     require_motor_limits(model, args.scenario)
     if model.inverse.object_motion is None:
-        raise CoopsimError(f"{args.scenario}: inverse.object_motion: --retime needs an object motion to retime")
+        raise CoopsimError(f"{args.scenario}: inverse.object_motion: optimize needs an object motion (its waypoints)")
     out = Path(args.out or Path("out") / model.name / "optimize")
     _check_out(out)
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
-        study = retime_study(model, duration=args.duration, payload=args.payload, method=args.method,
-                             intervals=args.intervals, progress=bar)
+        study = None if not args.retime else retime_study(model, duration=args.duration, payload=args.payload,
+                                                           method=args.method, intervals=args.intervals, progress=bar)
+        free = None if not args.path else path_study(model, args.method, weights=args.weights,
+                                                     duration=args.duration, progress=bar)
         bar.close()
-        summary = retime_summary(study)
+        if free is not None and not free.optimum.best.success:
+            best = free.optimum.best
+            raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
+                                        f"{best.message}); nothing written")
+        summary = retime_summary(study) if study is not None else {"scenario": model.name}
+        if free is not None:
+            summary["path"] = path_summary(free)
         data = load_yaml(Path(args.scenario))
         if args.set:
             data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
-        name = f"{model.name}_retimed.yaml"
-        text = scenario_text(optimised_scenario(data, study.motion),
-                             f"{_display_path(args.scenario)} retimed by coopsim optimize --retime "
-                             f"(the {args.method} time law)")
+        texts = {}
+        if study is not None:
+            texts[f"{model.name}_retimed.yaml"] = scenario_text(
+                optimised_scenario(data, study.motion), f"{_display_path(args.scenario)} retimed by coopsim "
+                                                        f"optimize --retime (the {args.method} time law)")
+        if free is not None:
+            texts[f"{model.name}_path.yaml"] = scenario_text(
+                path_scenario(data, free.motion), f"{_display_path(args.scenario)} with the free path of coopsim "
+                                                  f"optimize --path (the {args.method} resolution)")
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
-        streams, meta = retime_series(study), run_metadata(model, None, meta | retime_metadata(summary))
+        meta |= retime_metadata(summary) if study is not None else {}
+        meta |= path_metadata(summary["path"]) if free is not None else {}
+        streams = (retime_series(study) if study is not None else []) + (path_series(free) if free is not None else [])
+        meta = run_metadata(model, None, meta)
+
+        def draw(log, folder, workers=None):
+            jobs = (optimize_jobs(log, folder) if study is not None else []) + path_jobs(log, folder)
+            return render_figures(jobs, workers)
 
         def summarize(log_path, plots):
-            summary["optimised_scenario"] = str(out / name)
+            summary["optimised_scenarios"] = [str(out / n) for n in texts]
+            if study is not None:
+                summary["optimised_scenario"] = str(out / f"{model.name}_retimed.yaml")
             return _summary_text(summary, log_path, plots, out / "optimize.json")
 
-        log_path, plots = _write_set(out, "optimize.json", "optimize.mcap", streams, meta, optimize_plots, workers,
-                                     summarize, also=lambda stage, log: write_text_atomic(stage / name, text))
+        def also(stage, log):
+            for n, text in texts.items():
+                write_text_atomic(stage / n, text)
+
+        log_path, plots = _write_set(out, "optimize.json", "optimize.mcap", streams, meta, draw, workers,
+                                     summarize, also=also)
+    text = "\n".join(([format_retime_summary(summary)] if study is not None else [])
+                     + ([format_path_summary(summary["path"])] if free is not None else []))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
-          format_retime_summary(summary)
-          + f"\nwrote {out / name}, {log_path}, {out / 'optimize.json'} and {len(plots)} plots in {out}")
+          text + f"\nwrote {', '.join(str(out / n) for n in texts)}, {log_path}, {out / 'optimize.json'} and "
+                 f"{len(plots)} plots in {out}")
     return 0
 
 
@@ -689,22 +725,34 @@ def build_parser() -> argparse.ArgumentParser:
     _add_set(p)
     p.set_defaults(func=_cmd_capacity, native=True)
 
-    p = sub.add_parser("optimize", help="payload-optimal motion: retime the scenario's object path (--retime)",
+    p = sub.add_parser("optimize", help="payload-optimal motion: retime the scenario's object path (--retime), "
+                                        "free the path (--path)",
                        description=("Keep SCENARIO's object path (inverse.object_motion's waypoints) and free its time "
                                     "law, rest to rest: for each linear resolution and the LP bound the heaviest "
                                     "load carried within T_MAX (default: the scenario's duration) by the motor lines "
                                     "of eq. 36, the minimum time of the bare object (or of --payload), the "
                                     "payload-time curve. Writes DIR/NAME_retimed.yaml (the scenario with a sampled "
-                                    "time law, for run/inverse/capacity), optimize.mcap, plots and optimize.json."))
+                                    "time law, for run/inverse/capacity), optimize.mcap, plots and optimize.json. "
+                                    "With --path the object path itself is free: a B-spline between the first and "
+                                    "last waypoint poses (inverse.optimize: control_points, starts, seed, "
+                                    "manipulability_margin, sample_dt) optimised for --method under the scenario's "
+                                    "time law, then with its time law free within T_MAX; writes DIR/NAME_path.yaml "
+                                    "(two waypoints, the path, the sampled law)."))
     p.add_argument("scenario", help="scenario YAML file")
     p.add_argument("--retime", action="store_true", help="fixed path, free timing")
+    p.add_argument("--path", action="store_true",
+                   help="free path: a B-spline between the first and last waypoint poses (inverse.optimize), "
+                        "optimised with its time law for --method; writes DIR/NAME_path.yaml")
+    p.add_argument("--weights", action="store_true",
+                   help="with --path and --method min_energy: optimise the energy weights with the path")
     p.add_argument("--payload", type=float, default=None, metavar="KG",
                    help="also the minimum time of this carried mass (kg; the payload's, or the object's without "
                         "inverse.payload)")
     p.add_argument("--duration", type=float, default=None, metavar="T_MAX",
                    help="the duration bound (s; default: the object motion's)")
     p.add_argument("--method", choices=LINEAR_METHODS_CLI + ("lp",), default="min_energy",
-                   help="the resolution whose time law the optimised scenario carries (default min_energy)")
+                   help="the resolution whose time law the optimised scenario carries, and whose path --path "
+                        "optimises (default min_energy)")
     p.add_argument("--intervals", type=int, default=50, help="grid intervals per waypoint segment (default 50)")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")

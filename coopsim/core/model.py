@@ -502,6 +502,28 @@ class SampledTimeLaw:
 
 
 @dataclass(frozen=True, eq=False)
+class PathSpline:
+    """A free-form object path between an object motion's two waypoints (scenario
+    `inverse.object_motion.path`).
+
+    The centre of mass follows a clamped B-spline p(s), s ∈ [0, 1], through the control points
+    [p_first; positions; p_last]; the orientation is R(s) = Exp(φ(s)) R_first, φ(s) the clamped B-spline
+    of rotation vectors [0; rotation_vectors; log(R_last R_firstᵀ)] (world axes); degree
+    min(3, K + 1) with K interior control points, uniform knots (`coopsim.inverse.spline_path`).
+
+    Attributes:
+        kind: 'bspline' (the only kind).
+        positions: (K, 3) m, the interior control points of the centre of mass, world axes.
+        rotation_vectors: (K, 3) rad, the interior control points of φ, world axes, relative to the
+            first waypoint's orientation.
+    """
+
+    kind: str
+    positions: np.ndarray
+    rotation_vectors: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class ObjectMotion:
     """A prescribed object motion (scenario `inverse.object_motion`) through w waypoints.
 
@@ -523,6 +545,8 @@ class ObjectMotion:
             angles).
         rest_gain: 1/s, the gain of the null-space pull toward rest_posture.
         samples: the SampledTimeLaw of time_law 'sampled' (None otherwise).
+        path: the free-form path between the two waypoints (then there are exactly two, and the time law
+            runs once over their span); None: straight segments between the waypoints.
     """
 
     times: np.ndarray
@@ -534,6 +558,30 @@ class ObjectMotion:
     rest_posture: np.ndarray | None = None
     rest_gain: float = 1.0
     samples: SampledTimeLaw | None = None
+    path: PathSpline | None = None
+
+
+@dataclass(frozen=True)
+class OptimizeSettings:
+    """Payload-optimal motion settings (scenario `inverse.optimize`, `coopsim optimize`).
+
+    Attributes:
+        control_points: K, the interior control points of the free path's B-spline.
+        starts: how many starts the free-path optimiser runs (the straight path, then random ones).
+        seed: the seed of the random starts.
+        manipulability_margin: each arm's manipulability along a free path must stay at least this
+            fraction of its manipulability at the first waypoint (0: only no singularity crossed).
+        sample_dt: s, the sample interval of the free-path optimiser's grid (the result is checked on
+            the object motion's output_dt).
+        max_iterations: the most iterations of each optimiser run.
+    """
+
+    control_points: int = 4
+    starts: int = 3
+    seed: int = 0
+    manipulability_margin: float = 0.5
+    sample_dt: float = 0.1
+    max_iterations: int = 100
 
 
 @dataclass(frozen=True, eq=False)
@@ -552,6 +600,7 @@ class InverseSettings:
         internal_force_bound: N, bound on every internal-force component (grasp-line frame) of the
             bounded minimum-energy resolution (None: half the minimum-energy distribution's peak).
         internal_moment_bound: N·m, bound on every internal-moment component, likewise.
+        optimize: the payload-optimal motion settings.
     """
 
     trajectory: str = "forward"
@@ -560,6 +609,7 @@ class InverseSettings:
     payload_position: np.ndarray | None = None
     internal_force_bound: float | None = None
     internal_moment_bound: float | None = None
+    optimize: OptimizeSettings = OptimizeSettings()
 
 
 @dataclass(frozen=True, eq=False)

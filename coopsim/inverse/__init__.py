@@ -15,4 +15,6 @@ the internal wrench and object stress, and the dynamic load carrying capacity.
     qp.py             the small QPs and LPs (bounded resolution, the LP bound)
     stress.py         section loads and stress in the object
     capacity.py       the DLCC (eq. 36 motor lines), closed form per linear resolution and the LP bound
+    spline_path.py    a free-form object path: B-splines in position and rotation vector between two poses
+    free_path.py      the B-spline path between two poses that carries the most (an NLP, SLSQP)
 """

@@ -32,6 +32,7 @@ from coopsim.dynamics.closed_chain import arm_poses, carrier_object
 from coopsim.dynamics.kinematics import (REACH_SLACK, arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate,
                                          reach_bound, reach_check)
 from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
+from coopsim.inverse.spline_path import spline_state
 
 
 class TrajectoryError(CoopsimError):
@@ -202,7 +203,8 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
     a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ (ṡ = ds/du, s̈ = d²s/du², `time_law`). A sampled time law
     gives the whole path's parameter σ(t) (`sampled_time_law_at`, waypoint i at σ = i/(w − 1)): then
     s = (w − 1)σ − i, ṡ/T = (w − 1)σ̇ and s̈/T² = (w − 1)σ̈. With `origin`, p_C is
-    (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded.
+    (p_a − origin) + s(u)(p_b − p_a), so no world position is rounded. A motion with a B-spline `path`
+    follows it instead, the time law once over the whole span (`coopsim.inverse.spline_path.spline_state`).
 
     Args:
         motion: the ObjectMotion (waypoints, world axes, and time law).
@@ -223,6 +225,8 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
         s, ds, dds = w1 * sigma - i, w1 * rate * T, w1 * accel * T**2
     else:
         s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
+    if motion.path is not None:
+        return spline_state(motion, s, ds / T, dds / T**2, origin)
     dp = motion.positions[i + 1] - motion.positions[i]
     Ra = motion.rotations[i]
     phi = rot_log(Ra.T @ motion.rotations[i + 1])

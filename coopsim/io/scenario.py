@@ -30,7 +30,8 @@ from coopsim.core.errors import ScenarioError
 from coopsim.core.joints import COORDINATE, joint_units
 from coopsim.core.model import (COMPENSATIONS, FALLBACKS, JOINT_TYPES, LAWS, PRISMATIC, REFERENCES, REVOLUTE, ArmModel,
                                 ControlSettings, IntegratorSettings, InverseSettings, Model, Motors, MujocoSettings,
-                                ObjectModel, ObjectMotion, SampledTimeLaw, TorqueTable, ValidationThresholds)
+                                ObjectModel, ObjectMotion, OptimizeSettings, PathSpline, SampledTimeLaw, TorqueTable,
+                                ValidationThresholds)
 from coopsim.core.spatial import box_inertia, quat_to_rot, rpy_to_rot
 from coopsim.dynamics.scene import grasp_poses, plane_of_motion, row_selector
 from coopsim.inverse.resolutions import METHODS
@@ -48,6 +49,12 @@ MAX_ITERATIONS = 10_000         # mujoco.iterations
 
 
 MAX_NAME = 100                  # characters of `name`
+
+
+MAX_CONTROL_POINTS = 50         # inverse.optimize.control_points
+
+
+MAX_STARTS = 100                # inverse.optimize.starts
 
 
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
@@ -494,8 +501,10 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
         if np.any(np.diff(times) <= 0):
             om.fail("waypoints", f"times must be strictly increasing, got {times}")
         samples = _sampled_law(om, np.array(times)) if law == "sampled" else None
+        path = _object_path(om.section("path", default=None), len(times), om)
         om.done()
-        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain, samples)
+        motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain, samples,
+                              path)
     if trajectory == "object_motion" and motion is None:
         sec.fail("object_motion", "trajectory: object_motion needs an object_motion section")
     masses = sec.array("nonsqueezing_masses", (r,), positive=True) if sec.has("nonsqueezing_masses") else None
@@ -510,8 +519,49 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
         force = bound.number("force", None, nonneg=True) if bound.has("force") else None
         moment = bound.number("moment", None, nonneg=True) if bound.has("moment") else None
         bound.done()
+    optimize = _optimize(sec.section("optimize", default=None))
     sec.done()
-    return InverseSettings(trajectory, motion, masses, payload_pos, force, moment)
+    return InverseSettings(trajectory, motion, masses, payload_pos, force, moment, optimize)
+
+
+def _object_path(sec: Section | None, waypoints: int, om: Section) -> PathSpline | None:
+    """The optional `inverse.object_motion.path` (see PathSpline): a B-spline between exactly two waypoints,
+    its interior control points each a `position` (m, world) and a `rotation_vector` (rad, world axes,
+    relative to the first waypoint's orientation; default zero)."""
+    if sec is None:
+        return None
+    sec.string("kind", ("bspline",))
+    if waypoints != 2:
+        om.fail("waypoints", f"a path runs between two waypoints (its ends), got {waypoints}")
+    pos, rot = [], []
+    for cp in sec.items("control_points", min_len=1):
+        pos.append(cp.array("position", (3,)))
+        phi = cp.array("rotation_vector", (3,), default=[0.0, 0.0, 0.0])
+        if np.linalg.norm(phi) >= np.pi:
+            cp.fail("rotation_vector", f"must be shorter than pi rad, got {np.linalg.norm(phi):.6g}")
+        rot.append(phi)
+        cp.done()
+    sec.done()
+    return PathSpline("bspline", np.array(pos), np.array(rot))
+
+
+def _optimize(sec: Section | None) -> OptimizeSettings:
+    """The optional `inverse.optimize` section (see OptimizeSettings)."""
+    d = OptimizeSettings()
+    if sec is None:
+        return d
+    out = OptimizeSettings(
+        control_points=sec.whole("control_points", d.control_points, positive=True, maximum=MAX_CONTROL_POINTS),
+        starts=sec.whole("starts", d.starts, positive=True, maximum=MAX_STARTS),
+        seed=sec.whole("seed", d.seed, nonneg=True),
+        manipulability_margin=sec.number("manipulability_margin", d.manipulability_margin, nonneg=True),
+        sample_dt=sec.number("sample_dt", d.sample_dt, positive=True),
+        max_iterations=sec.whole("max_iterations", d.max_iterations, positive=True, maximum=MAX_ITERATIONS))
+    if out.manipulability_margin >= 1:
+        sec.fail("manipulability_margin", f"must be below 1 (a fraction of the first pose's), got "
+                                          f"{out.manipulability_margin:g}")
+    sec.done()
+    return out
 
 
 def _gains(sec: Section, key: str, n: int) -> np.ndarray:
@@ -561,6 +611,9 @@ def _control(sec: Section | None, joints: "_Joints", inverse: InverseSettings,
     if reference == "object_motion" and inverse.object_motion is None:
         sec.fail("reference" if law == "joint_pd" else "law",
                  "tracking an object motion needs the inverse.object_motion section")
+    if reference == "object_motion" and inverse.object_motion.path is not None:
+        sec.fail("reference" if law == "joint_pd" else "law",
+                 "tracking an object motion with a path (inverse.object_motion.path) is not supported")
     sec.done()
     return ControlSettings(law, kp, kd, saturate=saturate, **opts)
 

@@ -6,4 +6,5 @@ and capacity study's summary, series and checks.
                        `coopsim capacity` report and log
     optimize_report.py the retiming study of `coopsim optimize --retime`: the fixed path's time law
                        freed, summary, series and the optimised scenario
+    path_report.py     the free-path study: what `coopsim optimize --path` reports and logs
 """

@@ -106,6 +106,56 @@ def test_derived_grasps_close_the_loop_exactly(spatial):
     assert initial_state(spatial).residual_before <= 1e-14
 
 
+CARRY = yaml.safe_load((SCENARIOS / "paper_planar_2x3_carry.yaml").read_text())
+ENDS = [CARRY["inverse"]["object_motion"]["waypoints"][i] for i in (0, -1)]
+PATH = {"kind": "bspline", "control_points": [{"position": [0.76, 0.92, 0.0], "rotation_vector": [0, 0, 0.05]},
+                                              {"position": [0.74, 0.91, 0.0]}]}
+SPLINE = mutated(mutated(CARRY, ["inverse", "object_motion", "waypoints"], ENDS), ["inverse", "object_motion", "path"],
+                 PATH)
+
+
+def test_object_path_and_optimize_settings():
+    """A B-spline path between two waypoints (rotation vectors default to zero) and inverse.optimize."""
+    data = mutated(SPLINE, ["inverse", "optimize"], {"control_points": 6, "starts": 2, "seed": 7,
+                                                      "manipulability_margin": 0.25, "sample_dt": 0.2})
+    inv = model_from_dict(data, where="s.yaml").inverse
+    path = inv.object_motion.path
+    assert path.kind == "bspline"
+    assert path.positions.tolist() == [[0.76, 0.92, 0.0], [0.74, 0.91, 0.0]]
+    assert path.rotation_vectors.tolist() == [[0, 0, 0.05], [0, 0, 0]]
+    opt = inv.optimize
+    assert (opt.control_points, opt.starts, opt.seed, opt.manipulability_margin, opt.sample_dt) == (6, 2, 7, 0.25, 0.2)
+    assert model_from_dict(CARRY, where="s.yaml").inverse.object_motion.path is None
+
+
+OM = ["inverse", "object_motion"]
+PATH_CASES = [
+    (mutated(SPLINE, OM + ["waypoints"], CARRY["inverse"]["object_motion"]["waypoints"]),
+     r"inverse\.object_motion\.waypoints: a path runs between two waypoints \(its ends\), got 4"),
+    (mutated(SPLINE, OM + ["path", "kind"], "bezier"), r"inverse\.object_motion\.path\.kind: must be one of bspline"),
+    (mutated(SPLINE, OM + ["path", "control_points"], []),
+     r"inverse\.object_motion\.path\.control_points: expected a list of at least 1"),
+    (mutated(SPLINE, OM + ["path", "control_points", 1, "rotation_vector"], [0, 0, 3.2]),
+     r"inverse\.object_motion\.path\.control_points\[1\]\.rotation_vector: must be shorter than pi rad"),
+    (mutated(SPLINE, OM + ["path", "control_points", 0, "rpy"], [0, 0, 1]),
+     r"inverse\.object_motion\.path\.control_points\[0\]\.rpy: unknown field"),
+    (mutated(CARRY, ["inverse", "optimize"], {"control_points": 0}),
+     r"inverse\.optimize\.control_points: must be positive"),
+    (mutated(CARRY, ["inverse", "optimize"], {"control_points": 2.5}),
+     r"inverse\.optimize\.control_points: must be a whole number"),
+    (mutated(CARRY, ["inverse", "optimize"], {"manipulability_margin": 1.0}),
+     r"inverse\.optimize\.manipulability_margin: must be below 1"),
+    (mutated(CARRY, ["inverse", "optimize"], {"grid": 3}), r"inverse\.optimize\.grid: unknown field"),
+]
+
+
+@pytest.mark.parametrize("data,message", PATH_CASES, ids=[m.split(":")[0].replace("\\", "") for _, m in PATH_CASES])
+def test_bad_path_or_optimize_names_the_field(data, message):
+    with pytest.raises(ScenarioError, match=message) as info:
+        model_from_dict(data, where="s.yaml")
+    assert "\n" not in str(info.value)
+
+
 def test_a_sampled_time_law_is_read_and_checked():
     """time_law: sampled reads its samples (t, s, rate); samples that do not meet a constant s̈ between them,
     or miss a waypoint, are one line naming time_law_samples' field."""

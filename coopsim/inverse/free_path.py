@@ -1,0 +1,676 @@
+"""The free path that carries the most: B-spline object paths optimised for the dynamic load carrying capacity.
+
+Between the first and last waypoint poses of `inverse.object_motion` the object follows a B-spline path
+(`coopsim.inverse.spline_path`, K interior control points) with the scenario's time law over its span.
+The unknowns are the control points' offsets from the straight path in the scene's free directions
+(x = Sᵀδ per control point: in-plane position and the rotation about the plane normal on a planar
+scene, all six on a spatial one), scaled by the arms' mean reach (m) and 1 rad.
+
+The capacity is a minimum over samples and motors, so the problem is written in epigraph form (smooth):
+
+    maximise μ  over (δ, μ)  subject to, at every sample of the grid and every active motor,
+        τ_min(θ̇) <= a(δ) + μ b(δ) <= τ_max(θ̇)   and   τ_min(θ̇) <= a(δ) <= τ_max(θ̇)   (eq. 36 at μ and 0),
+        w_m(δ) >= margin · w_m(start pose)        (each arm's manipulability, `diagnostics.manipulability`),
+
+with τ(μ) = a + μ b the resolution's torques (`coopsim.inverse.capacity.affine_torques`), every row
+divided by the motor's stall torque. Loop closure, reach, joint ranges and singularity crossings come
+with the closed-chain inverse kinematics of the path (`object_motion_trajectory`): a path it refuses is
+an infeasible point (every constraint −1). SciPy's SLSQP (sequential quadratic programming on dense
+Jacobians: the problem has tens of unknowns and thousands of rows) solves it from the straight path and
+from random starts (fixed seed); the constraint Jacobian in δ is by forward differences of the whole
+chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the converged one whose
+capacity, recomputed in closed form at its end point on the object motion's output_dt grid, is largest.
+
+With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
+paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
+the optimum's trajectory), each round started from the last, so the capacity never drops.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from coopsim.core.errors import CoopsimError
+from coopsim.core.model import Model, ObjectMotion, PathSpline, torque_limits
+from coopsim.forward.diagnostics import manipulability
+from coopsim.inverse.capacity import Capacity, affine_capacity, affine_torques, optimise_weights
+from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
+from coopsim.inverse.solve import resolution_for
+from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
+from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
+from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
+from coopsim.inverse.trajectory import object_motion_trajectory
+
+FD_STEP = 1e-7            # forward-difference step in the scaled unknowns (× reach m, × 1 rad)
+START_SPREAD = 0.01       # random starts: standard deviation of the scaled offsets
+OFFSET_BOUND = 0.5        # |offset| <= this × the arms' mean reach (m) or this × π/2 rad
+WEIGHT_ROUNDS = 2         # path / weights rounds with `weights`
+RETIME_ROUNDS = 2         # retimed payloads (path / time law in turn): retime, optimise the path, retime
+INFEASIBLE = -1.0         # every constraint's value where the inverse kinematics refuses the path
+
+
+class PathOptimizationError(CoopsimError):
+    """The free path cannot be optimised as asked (no feasible start, or the ends out of reach)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PathEvaluation:
+    """One free path on the optimiser's grid (N samples, n joints, r arms).
+
+    Attributes:
+        t: (M,) s, the time of each row (a grid point of a retimed law appears twice: with the interval
+            before it and the one after it).
+        prob: the InverseProblem along the path's trajectory (the scenario's time law only; else None).
+        a: (M, n) N·m (N on a prismatic joint), the torques at μ = 0.
+        b: (M, n) N·m per kg, their rate with the carried mass.
+        lo: (M, n) N·m, τ_min of eq. 36 along the path.
+        hi: (M, n) N·m, τ_max.
+        manip: (N, r) each arm's manipulability at the N path points (`coopsim.forward.diagnostics.manipulability`).
+    """
+
+    t: np.ndarray
+    prob: InverseProblem | None
+    a: np.ndarray
+    b: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    manip: np.ndarray
+
+
+@dataclass(frozen=True)
+class StartResult:
+    """One run of the optimiser.
+
+    Attributes:
+        start: the start's index (0: the straight path).
+        capacity_kg: kg, the closed-form capacity at its end point on the optimiser's grid (nan: IK refused).
+        start_capacity_kg: kg, the capacity at its start point.
+        success: SLSQP reports convergence.
+        status: SLSQP's exit status (0: converged).
+        message: SLSQP's message.
+        iterations: its iterations.
+        evaluations: path evaluations (IK + inverse dynamics), finite differences included.
+        wall_s: s, its wall time.
+        scenario_grid_kg: kg, the capacity at its end point on the object motion's output_dt grid (the
+            scenario's time law; nan: not evaluated, or refused by the IK).
+    """
+
+    start: int
+    capacity_kg: float
+    start_capacity_kg: float
+    success: bool
+    status: int
+    message: str
+    iterations: int
+    evaluations: int
+    wall_s: float
+    scenario_grid_kg: float = float("nan")
+
+
+@dataclass(frozen=True, eq=False)
+class PathOptimum:
+    """The optimised free path and how it was found.
+
+    Attributes:
+        motion: the ObjectMotion of the optimum under the scenario's time law (two waypoints and its
+            B-spline path, the scenario's time law and output_dt).
+        capacity: the Capacity of `motion` on the optimiser's grid.
+        straight: the Capacity of the straight path on that grid (the first start).
+        resolution: the Resolution optimised for (its weights optimised with `weights`).
+        mode: 'scaled' or 'payload'.
+        best: the StartResult of the first stage's best run (its success, status and message say whether
+            the optimiser converged).
+        starts: one StartResult per optimiser run (first stage: each start, with `weights` each round;
+            then one per retimed round).
+        eval_s: s, the wall time of one path evaluation (IK, inverse dynamics, distribution).
+        jacobian_s: s, the wall time of one constraint Jacobian (forward differences).
+        unknowns: the number of path unknowns (K × k).
+        retimed_motion: the ObjectMotion of the retimed stage's path (the scenario's time law; the law that
+            carries `retimed.mass` is `retimed`), or None without that stage.
+        retimed: the Retiming of the heaviest payload along retimed_motion's path within the duration, or None.
+        retime_rounds: per round {mass_kg, retiming, run} (`_retime_stage`).
+        wall_s: s, the whole optimisation's wall time.
+    """
+
+    motion: ObjectMotion
+    capacity: Capacity
+    straight: Capacity
+    resolution: Resolution
+    mode: str
+    best: StartResult
+    starts: tuple
+    eval_s: float
+    jacobian_s: float
+    unknowns: int
+    retimed_motion: ObjectMotion | None
+    retimed: Retiming | None
+    retime_rounds: tuple
+    wall_s: float
+
+
+def capacity_mode(model: Model) -> str:
+    """The capacity the free path maximises: 'payload' when the scenario places a payload, else 'scaled'.
+
+    Args:
+        model: the Model (its inverse.payload_position).
+
+    Returns:
+        str: 'payload' or 'scaled'.
+    """
+    return "scaled" if model.inverse.payload_position is None else "payload"
+
+
+def end_poses(motion: ObjectMotion, output_dt: float | None = None) -> ObjectMotion:
+    """The motion reduced to its first and last waypoints (no path yet), optionally resampled.
+
+    Args:
+        motion: the ObjectMotion (w >= 2 waypoints).
+        output_dt: s, the sample interval in place of the motion's; None: the motion's.
+
+    Returns:
+        ObjectMotion: two waypoints, the same time law, no path.
+    """
+    ends = [0, -1]
+    return replace(motion, times=motion.times[ends], positions=motion.positions[ends],
+                   rotations=motion.rotations[ends], path=None,
+                   output_dt=motion.output_dt if output_dt is None else float(output_dt))
+
+
+def evaluate_motion(model: Model, motion: ObjectMotion, res: Resolution, mode: str) -> PathEvaluation:
+    """A motion's IK, inverse problem, affine torques, motor lines and manipulability.
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion.
+        res: the Resolution (linear in the net object wrench).
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        PathEvaluation.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the motion.
+    """
+    from coopsim.compiled import api
+
+    traj = object_motion_trajectory(model, motion)
+    terms = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
+    prob = inverse_problem(model, traj, model.inverse.payload_position, terms=terms)
+    a, b = affine_torques(prob, res, mode)
+    lo, hi = torque_limits(model.motors, traj.qd)
+    return PathEvaluation(traj.t, prob, a, b, lo, hi, manipulability(model, terms.J))
+
+
+class SplineGeometry:
+    """A B-spline path as a `coopsim.inverse.path.ObjectPath` (one smooth piece, knots [0, 1]).
+
+    Args:
+        motion: the ObjectMotion (two waypoints and a B-spline `path`).
+
+    Attributes:
+        knots: (2,) [0, 1].
+        spline: the BSplinePath.
+    """
+
+    def __init__(self, motion: ObjectMotion):
+        self.knots = np.array([0.0, 1.0])
+        self.spline = BSplinePath(motion)
+
+    def at(self, s: np.ndarray, piece: np.ndarray) -> PathPoints:
+        """The path at points s (see `coopsim.inverse.path.ObjectPath.at`).
+
+        Args:
+            s: (M,) the path parameter in [0, 1].
+            piece: (M,) int, all 0 (one piece).
+
+        Returns:
+            PathPoints: relative to the first waypoint's position.
+        """
+        pt = self.spline.at(s, self.spline.origin)
+        return PathPoints(np.asarray(s, dtype=float), np.asarray(piece, dtype=int), pt.p, pt.R,
+                          np.concatenate([pt.dp, pt.dw], axis=1), np.concatenate([pt.ddp, pt.ddw], axis=1),
+                          self.spline.origin)
+
+
+def weighted(model: Model, res: Resolution) -> Model:
+    """The model whose energy weights are the resolution's (what `path_dynamics` and `max_payload` read).
+
+    Args:
+        model: the Model.
+        res: the Resolution (its weights).
+
+    Returns:
+        Model: a copy with motors.energy_weight = res.weights.
+    """
+    return replace(model, motors=replace(model.motors, energy_weight=np.asarray(res.weights, dtype=float)))
+
+
+def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: np.ndarray) -> JointPath:
+    """`coopsim.inverse.path.joint_path` of a B-spline motion at the points s.
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path; its initial guess, rest posture and
+            gain, the gain per unit s being rest_gain × the span, as the time law's s runs over it).
+        s: (N,) the path points, increasing.
+        piece: (N,) int, zeros.
+
+    Returns:
+        JointPath.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+    """
+    guess = model.q0 if motion.initial_guess is None else motion.initial_guess
+    span = float(motion.times[-1] - motion.times[0])
+    return joint_path(model, SplineGeometry(motion), s, piece, guess, motion.rest_posture, motion.rest_gain * span)
+
+
+def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resolution, mode: str) -> PathEvaluation:
+    """A B-spline motion under a retimed law (held fixed as s(t)): rows at both sides of every grid point.
+
+    With the law's b = ṡ² at the points and a = s̈ constant on each interval, each point is checked with
+    the interval before it and the one after it (as `coopsim.inverse.retime.check_time_law`); the torques
+    are those of `coopsim.inverse.retime.path_dynamics`, the lines eq. 36 at θ̇ = θ′√b.
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path).
+        law: the TimeLaw (one piece, its grid s).
+        res: the Resolution (its method and weights).
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        PathEvaluation: 2N rows (before, then after), prob None.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+    """
+    from coopsim.compiled import api
+
+    m = weighted(model, res)
+    jp = spline_joint_path(m, motion, law.s, law.piece)
+    dyn = path_dynamics(m, jp, res.method, mode)
+    b = law.b[:, None]
+    qd = jp.d1 * np.sqrt(np.maximum(b, 0.0))
+    lo, hi = torque_limits(model.motors, qd)
+    sides = [np.append(0.0, law.a[:-1])[:, None], law.a[:, None]]
+    a0, b0 = ([dyn.tau[k, 0] + a * dyn.tau[k, 1] + b * dyn.tau[k, 2] for a in sides] for k in (0, 1))
+    zero = np.zeros_like(jp.q)
+    J = api.inverse_terms(model, jp.q, zero, zero).J
+    return PathEvaluation(np.tile(law.t, 2), None, np.vstack(a0), np.vstack(b0), np.vstack([lo, lo]),
+                          np.vstack([hi, hi]), manipulability(model, J))
+
+
+def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: str, duration: float,
+                     intervals: int) -> tuple[float, Retiming]:
+    """The heaviest payload the B-spline motion's path carries within `duration`, the time law free
+    (`coopsim.inverse.retime.max_payload` on `intervals` equal intervals of s).
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (two waypoints and a B-spline path).
+        res: the Resolution (its method and weights).
+        mode: 'scaled' or 'payload'.
+        duration: s, T_max.
+        intervals: the grid's intervals.
+
+    Returns:
+        tuple[float, Retiming]: the mass kg and its Retiming.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+        RetimeError: as `max_payload`.
+    """
+    m = weighted(model, res)
+    s, piece = path_grid(np.array([0.0, 1.0]), intervals)
+    mass, r, _ = max_payload(path_dynamics(m, spline_joint_path(m, motion, s, piece), res.method, mode), duration)
+    return mass, r
+
+
+class FreePathProblem:
+    """The epigraph NLP of one scenario, resolution and mode (see the module docstring).
+
+    Args:
+        model: the Model (its inverse.object_motion's first and last waypoints, inverse.optimize).
+        res: the Resolution (linear in the net object wrench).
+        mode: 'scaled' or 'payload'.
+        law: a retimed TimeLaw held fixed (s(t) as it is, `evaluate_law`); None: the scenario's time law
+            on the grid of inverse.optimize.sample_dt (`evaluate_motion`).
+
+    Attributes:
+        model: the Model.
+        res: the Resolution.
+        mode: the capacity mode.
+        law: the TimeLaw held fixed, or None.
+        ends: the two-waypoint ObjectMotion on the optimiser's grid (inverse.optimize.sample_dt).
+        straight: the PathSpline of the straight path (offsets are from it).
+        scale: (K·k,) the unknowns' units: the arms' mean reach (m) on position rows, 1 rad on rotation rows.
+        bounds: (K·k,) the bound on each scaled offset's magnitude.
+        evaluations: path evaluations so far.
+    """
+
+    def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None):
+        opt = model.inverse.optimize
+        self.model, self.res, self.mode, self.law = model, res, mode, law
+        self.ends = end_poses(model.inverse.object_motion, opt.sample_dt)
+        self.straight = straight_control_points(self.ends, opt.control_points)
+        S = model.rows
+        reach = float(np.mean([np.sum(np.linalg.norm(a.joint_pos[1:], axis=1)) + np.linalg.norm(a.ee_pos)
+                               for a in model.arms]))
+        self._basis = S.T                                           # (6, k): offsets [dp; dφ] = Sᵀ δ
+        self._row_scale = np.where(np.any(S[:, :3] != 0, axis=1), reach, 1.0)
+        self.scale = np.tile(self._row_scale, opt.control_points)
+        position = np.tile(np.any(S[:, :3] != 0, axis=1), opt.control_points)
+        self.bounds = np.where(position, OFFSET_BOUND, OFFSET_BOUND * np.pi / 2)
+        self._act = ~res.passive & np.isfinite(model.motors.stall_torque)
+        self._ts = model.motors.stall_torque[self._act]
+        self._cache: dict[bytes, PathEvaluation | None] = {}
+        self.evaluations = 0
+        first = self.evaluate(np.zeros(len(self.scale)))
+        if first is None:
+            raise PathOptimizationError("inverse.object_motion: the straight path between the first and last "
+                                        "waypoints is refused by the inverse kinematics")
+        self._manip0 = first.manip[0]
+
+    @property
+    def size(self) -> int:
+        """The number of path unknowns K·k."""
+        return len(self.scale)
+
+    def path_of(self, x: np.ndarray) -> PathSpline:
+        """The PathSpline of scaled offsets x (K·k,).
+
+        Args:
+            x: (K·k,) the scaled offsets from the straight path, control point after control point.
+
+        Returns:
+            PathSpline: its interior control points, world axes.
+        """
+        d = (np.asarray(x, dtype=float) * self.scale).reshape(-1, len(self._row_scale)) @ self._basis.T
+        return PathSpline(KIND, self.straight.positions + d[:, :3], self.straight.rotation_vectors + d[:, 3:])
+
+    def motion_of(self, x: np.ndarray, output_dt: float | None = None) -> ObjectMotion:
+        """The ObjectMotion of scaled offsets x.
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            output_dt: s, the sample interval; None: the optimiser's grid.
+
+        Returns:
+            ObjectMotion: two waypoints and the path.
+        """
+        m = replace(self.ends, path=self.path_of(x))
+        return m if output_dt is None else replace(m, output_dt=float(output_dt))
+
+    def evaluate(self, x: np.ndarray) -> PathEvaluation | None:
+        """The path of x on the optimiser's grid, or None where the inverse kinematics refuses it (cached).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            PathEvaluation | None.
+        """
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in self._cache:
+            if len(self._cache) > 4 * self.size + 8:
+                self._cache.clear()
+            self.evaluations += 1
+            try:
+                if self.law is None:
+                    self._cache[key] = evaluate_motion(self.model, self.motion_of(x), self.res, self.mode)
+                else:
+                    self._cache[key] = evaluate_law(self.model, self.motion_of(x), self.law, self.res, self.mode)
+            except CoopsimError:
+                self._cache[key] = None
+        return self._cache[key]
+
+    def capacity(self, x: np.ndarray) -> Capacity | None:
+        """The closed-form capacity of the path of x on the optimiser's grid (None: refused by the IK).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            Capacity | None.
+        """
+        e = self.evaluate(x)
+        return None if e is None else affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~self.res.passive)
+
+    def scenario_grid_capacity(self, x: np.ndarray) -> float:
+        """kg, the closed-form capacity of the path of x under the scenario's time law on its output_dt grid
+        (nan where the IK refuses it; not cached).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            float: kg.
+        """
+        try:
+            e = evaluate_motion(self.model, self.motion_of(x, self.model.inverse.object_motion.output_dt), self.res,
+                                self.mode)
+        except CoopsimError:
+            return float("nan")
+        return affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~self.res.passive).mass
+
+    def _rows(self, e: PathEvaluation) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(T, U, B, W): (τ_max − a)/τ_s, (a − τ_min)/τ_s, b/τ_s over the active motors, flattened, and
+        the manipulability rows w/w₀ − margin."""
+        act, ts = self._act, self._ts
+        T = ((e.hi - e.a)[:, act] / ts).ravel()
+        U = ((e.a - e.lo)[:, act] / ts).ravel()
+        B = (e.b[:, act] / ts).ravel()
+        W = (e.manip / self._manip0 - self.model.inverse.optimize.manipulability_margin).ravel()
+        return T, U, B, W
+
+    def constraints(self, x: np.ndarray, mu: float) -> np.ndarray:
+        """The NLP's inequality rows (>= 0 feasible) at (x, μ).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            mu: kg, the carried mass.
+
+        Returns:
+            np.ndarray: [T − μB; U + μB; T; U; W] (see `_rows`); INFEASIBLE everywhere where the IK refuses.
+        """
+        e = self.evaluate(x)
+        if e is None:
+            return np.full(self._count(), INFEASIBLE)
+        T, U, B, W = self._rows(e)
+        return np.concatenate([T - mu * B, U + mu * B, T, U, W])
+
+    def _count(self) -> int:
+        T, _, _, W = self._rows(self.evaluate(np.zeros(self.size)))
+        return 4 * len(T) + len(W)
+
+    def jacobian(self, x: np.ndarray, mu: float) -> np.ndarray:
+        """d(constraints)/d(x, μ) (rows, K·k + 1): forward differences in x (backward where the forward
+        point is refused), exact in μ.
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            mu: kg, the carried mass.
+
+        Returns:
+            np.ndarray: the Jacobian; zero rows in x where the IK refuses x itself.
+        """
+        x = np.asarray(x, dtype=float)
+        c0 = self.constraints(x, mu)
+        J = np.zeros((len(c0), self.size + 1))
+        e = self.evaluate(x)
+        if e is None:
+            return J
+        for i in range(self.size):
+            for h in (FD_STEP, -FD_STEP):
+                xi = x.copy()
+                xi[i] += h
+                if self.evaluate(xi) is not None:
+                    J[:, i] = (self.constraints(xi, mu) - c0) / h
+                    break
+        B = self._rows(e)[2]
+        J[:, -1] = np.concatenate([-B, B, np.zeros(len(c0) - 2 * len(B))])
+        return J
+
+
+def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter: int):
+    """One SLSQP run from x0: (x, StartResult)."""
+    from scipy.optimize import minimize
+
+    t0, n0 = time.perf_counter(), problem.evaluations
+    start = problem.capacity(x0)
+    mu0 = max(0.0, start.mass) if start is not None and np.isfinite(start.mass) else 0.0
+    ref = max(mu0, 1.0)                                  # μ in units of the start's capacity
+
+    def split(z):
+        return z[:-1], z[-1] * ref
+
+    def jac(z):
+        J = problem.jacobian(*split(z))
+        J[:, -1] *= ref
+        return J
+
+    bound = [(-b, b) for b in problem.bounds] + [(0.0, None)]
+    opt = minimize(lambda z: -z[-1], np.append(x0, mu0 / ref), jac=lambda z: np.append(np.zeros(len(z) - 1), -1.0),
+                   method="SLSQP", bounds=bound,
+                   constraints=[{"type": "ineq", "fun": lambda z: problem.constraints(*split(z)), "jac": jac}],
+                   options={"maxiter": max_iter, "ftol": 1e-9})
+    x = opt.x[:-1]
+    cap = problem.capacity(x)
+    mass = cap.mass if cap is not None else float("nan")
+    return x, StartResult(index, float(mass), float(mu0 if start is not None else np.nan), bool(opt.success),
+                          int(opt.status), str(opt.message), int(opt.nit), problem.evaluations - n0,
+                          time.perf_counter() - t0)
+
+
+def _starts(problem: FreePathProblem, count: int, seed: int) -> list[np.ndarray]:
+    """The straight path, then count − 1 random offsets (normal, START_SPREAD, seeded), each halved until
+    the inverse kinematics accepts it (at most 8 times; then the straight path)."""
+    rng = np.random.default_rng(seed)
+    out = [np.zeros(problem.size)]
+    for _ in range(count - 1):
+        x = rng.normal(0.0, START_SPREAD, problem.size)
+        for _ in range(8):
+            if problem.evaluate(x) is not None:
+                break
+            x = 0.5 * x
+        else:
+            x = np.zeros(problem.size)
+        out.append(x)
+    return out
+
+
+def _timings(problem: FreePathProblem) -> tuple[float, float]:
+    """(one evaluation, one Jacobian) wall time s at the straight path, uncached."""
+    problem._cache.clear()
+    t0 = time.perf_counter()
+    problem.evaluate(np.zeros(problem.size))
+    t1 = time.perf_counter()
+    problem.jacobian(np.zeros(problem.size), 0.0)
+    return t1 - t0, time.perf_counter() - t1
+
+
+def optimize_path(model: Model, method: str, mode: str | None = None, weights: bool = False,
+                  duration: float | None = None, retime: bool = True, progress=None) -> PathOptimum:
+    """The free path between the first and last waypoint poses that carries the most (module docstring).
+
+    First the path under the scenario's time law (several starts; with `weights` the minimum-energy
+    weights in turn); then, with `retime`, path and time law in turn: the heaviest payload the path
+    carries within `duration` with its time law free (`retimed_capacity`), the path optimised again with
+    that law held fixed as s(t) (`evaluate_law`), RETIME_ROUNDS times; each step keeps the last one's
+    payload feasible, so the payload never drops.
+
+    Args:
+        model: the Model (inverse.object_motion with at least two waypoints; inverse.optimize).
+        method: a linear resolution ('paper', 'nonsqueezing', 'min_energy').
+        mode: 'scaled' or 'payload'; None: `capacity_mode`.
+        weights: with 'min_energy', optimise its energy weights with the path.
+        duration: s, T_max of the retimed stage; None: the waypoints' span.
+        retime: also the retimed stage.
+        progress: called with the fraction done (0 to 1) after each run; None: silent.
+
+    Returns:
+        PathOptimum: the best paths and payloads, every run's statistics, the gradients' cost.
+
+    Raises:
+        PathOptimizationError: the straight path is refused by the inverse kinematics, or every start ends
+            on a path it refuses.
+        RetimeError: the retimed stage has no motion carrying the bare object within `duration`.
+        ValueError: `weights` with another method than 'min_energy'.
+    """
+    if weights and method != "min_energy":
+        raise ValueError("optimize_path: weights are optimised with the minimum-energy resolution only")
+    t0 = time.perf_counter()
+    opt, mode = model.inverse.optimize, mode or capacity_mode(model)
+    om = model.inverse.object_motion
+    problem = FreePathProblem(model, resolution_for(model, method), mode)
+    straight = problem.capacity(np.zeros(problem.size))
+    eval_s, jacobian_s = _timings(problem)
+    total = (WEIGHT_ROUNDS if weights else 1) + (RETIME_ROUNDS if retime else 0)
+    runs, (mass, x, problem, best) = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
+        RETIME_ROUNDS if retime else 0)) / total))
+    quintic = (problem.motion_of(x, om.output_dt), problem.capacity(x))
+    rounds = []
+    if retime:
+        T = float(om.times[-1] - om.times[0]) if duration is None else float(duration)
+        intervals = max(1, int(round((om.times[-1] - om.times[0]) / opt.sample_dt)))
+        x, rounds, runs = _retime_stage(problem, x, T, intervals, runs, progress, total)
+    return PathOptimum(quintic[0], quintic[1], straight, problem.res, mode, best, tuple(runs), eval_s,
+                       jacobian_s, problem.size, problem.motion_of(x, om.output_dt) if retime else None,
+                       rounds[-1]["retiming"] if rounds else None, tuple(rounds), time.perf_counter() - t0)
+
+
+def _tell(progress, fraction: float) -> None:
+    if progress is not None:
+        progress(fraction)
+
+
+def _law_stage(problem: FreePathProblem, weights: bool, progress):
+    """The path under the scenario's time law from every start (and the weights in turn): (runs, best),
+    best = (mass kg, x, problem, its StartResult): the converged run heaviest on the scenario's output_dt grid
+    (the optimiser's coarser grid can favour a path whose peak falls between its samples), else the heaviest."""
+    opt, runs, best = problem.model.inverse.optimize, [], None
+    rounds = WEIGHT_ROUNDS if weights else 1
+    for rnd in range(rounds):
+        starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
+        for i, x0 in enumerate(starts):
+            x, run = _solve_start(problem, x0, len(runs), opt.max_iterations)
+            run = replace(run, scenario_grid_kg=problem.scenario_grid_capacity(x))
+            runs.append(run)
+            if np.isfinite(run.scenario_grid_kg) and (best is None or (run.success, run.scenario_grid_kg) > (
+                    best[3].success, best[0])):
+                best = (run.scenario_grid_kg, x, problem, run)     # a converged run before any other
+            progress((rnd + (i + 1) / len(starts)) / rounds)
+        if best is None:
+            raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")
+        if weights and rnd < rounds - 1:
+            w, _ = optimise_weights(best[2].evaluate(best[1]).prob, best[2].res, problem.model.motors, problem.mode)
+            problem = FreePathProblem(problem.model, replace(problem.res, weights=w), problem.mode)
+    return runs, best
+
+
+def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, intervals: int, runs: list,
+                  progress, total: int):
+    """Path and retimed law in turn from x: (x, rounds, runs); each round a dict of the retimed payload
+    (mass_kg, retiming) at the round's path and the fixed-law run that followed (its StartResult or None)."""
+    model, res, mode = problem.model, problem.res, problem.mode
+    rounds = []
+    for rnd in range(RETIME_ROUNDS):
+        mass, r = retimed_capacity(model, problem.motion_of(x), res, mode, duration, intervals)
+        rounds.append({"mass_kg": mass, "retiming": r, "run": None})
+        _tell(progress, (total - RETIME_ROUNDS + rnd + 0.5) / total)
+        if rnd == RETIME_ROUNDS - 1:
+            break
+        fixed = FreePathProblem(model, res, mode, law=r.law)
+        x_new, run = _solve_start(fixed, x, len(runs), problem.model.inverse.optimize.max_iterations)
+        runs.append(run)
+        rounds[-1]["run"] = run
+        _tell(progress, (total - RETIME_ROUNDS + rnd + 1) / total)
+        if not (np.isfinite(run.capacity_kg) and run.capacity_kg > mass * (1 + 1e-9)):
+            break                                        # no gain with the law held: the last retiming stands
+        x = x_new
+    return x, rounds, runs

@@ -1,0 +1,56 @@
+"""End-to-end: `coopsim optimize --path` in a temporary folder on the paper carry with one via point: the set
+it writes, the optimised scenario loading as it is, bad input and a non-converging
+optimiser (one line, nothing written)."""
+
+import json
+
+import pytest
+import yaml
+
+from coopsim.io.scenario import load_scenario
+from helpers import run_cli
+
+SMALL = {"control_points": 1, "sample_dt": 0.5, "starts": 1}
+
+
+def _scenario(workdir, **optimize):
+    path = workdir / "scenarios" / "paper_planar_2x3_carry.yaml"
+    data = yaml.safe_load(path.read_text())
+    data["inverse"]["optimize"] = SMALL | optimize
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_optimize_path_writes_one_set(workdir):
+    """With --retime beside it: optimize.json's path entry holds the payloads, the gain over the scenario's own path (its quintic law)
+    and over the own path retimed, the solver's runs and the checks; the written scenario loads as any
+    scenario (its capacity: tests/report/test_path_report.py)."""
+    out = run_cli("optimize", _scenario(workdir), "--retime", "--intervals", "10", "--path", "--method", "paper",
+                  "--json", "--out", "res", cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    p = summary["path"]
+    assert summary["methods"]["paper"]["after"]["mass_kg"] > 0           # the retiming beside it
+    kg = p["payload_kg"]
+    assert p["success"] and p["solver"]["runs"][0]["status"] == 0
+    assert kg["free_path_retimed"] > kg["own_path_retimed"] > kg["own_path"]
+    assert p["gain"]["over_own_path"] == pytest.approx(kg["free_path_retimed"] / kg["own_path"])
+    assert p["checks"]["brute_force"]["ok"]
+    files = {f.name for f in (workdir / "res").iterdir()}
+    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "optimize_payload_time.png",
+            "paper_planar_2x3_carry_path.yaml", "paper_planar_2x3_carry_retimed.yaml"} <= files
+    m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
+    assert m.inverse.object_motion.path is not None and m.inverse.object_motion.time_law == "sampled"
+
+
+@pytest.mark.parametrize("args,optimize,message", [
+    (["--path", "--method", "lp"], {}, "coopsim: error: --method lp: --path optimises a resolution's path"),
+    (["--retime", "--weights"], {}, "coopsim: error: --weights: the energy weights are optimised with --path"),
+    (["--path", "--method", "paper"], {"max_iterations": 1},
+     "coopsim: error: optimize --path: the optimiser did not converge (SLSQP status 9: Iteration limit reached)"),
+])
+def test_bad_input_or_no_convergence_is_one_line_and_writes_nothing(workdir, args, optimize, message):
+    out = run_cli("optimize", _scenario(workdir, **optimize), *args, "--out", "res", cwd=workdir)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and out.stderr.startswith(message)
+    assert not (workdir / "res").exists()
