@@ -385,7 +385,8 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch chosen at the start is kept;
     the redundant arms as `redundant_motion`. engine 'compiled' runs every sample in one compiled pass
     (`coopsim.compiled.object_motion`), 'reference' the readable NumPy/SciPy path (`redundant_motion` and
-    one compiled Newton solve per sample and arm); both give the same error texts.
+    one compiled Newton solve per sample and arm); both give the same error texts. A motion along a
+    B-spline `path` always takes the reference path (the compiled pass follows waypoint paths only).
 
     Args:
         model: the Model whose arms carry the object.
@@ -408,7 +409,7 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     redundant = _check_joint_counts(model, S)
     t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
-    if engine == "reference":
+    if engine == "reference" or motion.path is not None:     # the compiled pass knows waypoint paths only
         q, qd, qdd = _reference_motion(model, motion, t_out, guess, redundant, plane_tol)
     else:
         q, qd, qdd = _compiled_motion(model, motion, t_out, guess, redundant, plane_tol)
