@@ -12,11 +12,13 @@ There are k(r − 1) more unknowns than equations: each choice of f is a redunda
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass, fields, replace
 from typing import NamedTuple
 
 import numpy as np
 
+from coopsim.core.digest import content_digest
 from coopsim.dynamics.grasp import grasp_matrix
 from coopsim.core.model import Model
 from coopsim.core.errors import ConstraintRankWarning, CoopsimError
@@ -255,6 +257,43 @@ def inverse_problem(model: Model, traj: JointTrajectory, payload_position: np.nd
                           W, T.p_C, T.R_o, T.twist, T.acc, -T.s, S,
                           None if model.plane is None else model.plane[2], g, obj.mass, obj.inertia, obj.box,
                           obj.grasp_pos, model.integrator.rank_tol)
+
+
+TERMS_INDEPENDENT = frozenset({"name", "duration", "torques", "motors", "mujoco", "validation", "control",
+                               "inverse"})   # Model fields the per-sample terms do not read
+SHARED_TERMS = 8                  # the most per-sample terms a process keeps for sharing
+_shared_terms: OrderedDict[tuple[str, str], object] = OrderedDict()
+
+
+def shared_inverse_problem(model: Model, traj: JointTrajectory,
+                           payload_position: np.ndarray | None = None) -> InverseProblem:
+    """`inverse_problem` with the compiled per-sample terms computed once per content of what determines
+    them (the model less TERMS_INDEPENDENT, and the trajectory) and shared: the points of a sweep over the
+    payload's position, the motors or the distributions' settings evaluate the kinematics and arm dynamics
+    once. Each problem gets its own copy of the terms' arrays.
+
+    Args:
+        model: the Model.
+        traj: the JointTrajectory (N samples).
+        payload_position: (3,) m, object frame: a point payload's position; None: none.
+
+    Returns:
+        InverseProblem: as `inverse_problem`, equal to it bit for bit.
+    """
+    from coopsim.compiled import api
+
+    key = (content_digest(model, TERMS_INDEPENDENT), content_digest(traj))
+    if None in key:
+        return inverse_problem(model, traj, payload_position)
+    if key in _shared_terms:
+        _shared_terms.move_to_end(key)
+    else:
+        _shared_terms[key] = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
+        while len(_shared_terms) > SHARED_TERMS:
+            _shared_terms.popitem(last=False)
+    kept = _shared_terms[key]
+    terms = kept._replace(**{k: v.copy() for k, v in kept._asdict().items() if isinstance(v, np.ndarray)})
+    return inverse_problem(model, traj, payload_position, terms)
 
 
 SAMPLED = ("t", "q", "qd", "qdd", "tau_arms", "JT", "A", "y", "y_unit", "y_payload", "W", "p_C", "R_o", "twist", "acc",

@@ -9,19 +9,21 @@ plain-data summaries for the text and JSON outputs, and the MCAP series (no I/O 
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
 from coopsim.control.controller import closed_loop
+from coopsim.core.digest import content_digest
 from coopsim.core.joints import type_names
 from coopsim.core.labels import joint_labels
 from coopsim.core.model import Model, torque_limits
 from coopsim.forward.simulate import simulate
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.distributions import distribution_of_torques, grasp_line_frames, virtual_masses
-from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem
+from coopsim.inverse.problem import InverseResult, failure_text, inverse_problem, shared_inverse_problem
 from coopsim.inverse.replay import replay
 from coopsim.inverse.resolutions import LINEAR_METHODS, METHODS
 from coopsim.inverse.solve import cost_of, default_bounds, energy, nan_peak, resolution_for, resolve, result_of
@@ -404,7 +406,7 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
     """
     traj, _ = trajectory_of(model, duration, progress)
     payload = payload_position if payload_position is not None else model.inverse.payload_position
-    prob = inverse_problem(model, traj, payload)
+    prob = shared_inverse_problem(model, traj, payload)
     modes = ("scaled",) if payload is None else cap.MODES
     _report(progress, "capacity", 0.0)
     caps, affine, energies = _linear_capacities(model, prob, methods, modes, engine)
@@ -419,7 +421,7 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
     lp = {}
     for i, mode in enumerate(modes if with_lp else ()):
         _report(progress, "lp", i / len(modes))
-        lp[mode] = cap.lp_capacity(prob, model.motors, model.motors.passive, mode, zero_feasible=zero_ok)
+        lp[mode] = _lp_capacity(model, traj, prob, mode, zero_ok)
     if with_lp:
         _report(progress, "lp", 1.0)
     optimised = None
@@ -432,6 +434,33 @@ def capacity_study(model: Model, duration: float | None = None, payload_position
         _report(progress, "weights", 1.0)
     return CapacityStudy(model, traj, prob, modes, caps, tau_at, lp, optimised, energies, checks,
                          torque_limits(model.motors, traj.qd), payload)
+
+
+SCALED_LP_INDEPENDENT = frozenset({"name", "torques", "mujoco", "validation", "control",
+                                   "inverse.payload_position"})   # what the 'scaled' LP bound does not read
+SHARED_LPS = 8                    # the most 'scaled' LP bounds a process keeps for sharing
+_shared_lps: OrderedDict[tuple, cap.Capacity] = OrderedDict()
+
+
+def _lp_capacity(model: Model, traj, prob, mode: str, zero_ok: bool) -> cap.Capacity:
+    """The LP bound of `mode` (`coopsim.inverse.capacity.lp_capacity`); the 'scaled' one, which the point
+    payload's position does not change, computed once per content of the model less SCALED_LP_INDEPENDENT,
+    the trajectory and zero_ok, and shared (each caller its own copy of per_sample): the points of a sweep
+    over the payload's position solve its LPs once."""
+    def solve() -> cap.Capacity:
+        return cap.lp_capacity(prob, model.motors, model.motors.passive, mode, zero_feasible=zero_ok)
+
+    key = (content_digest(model, SCALED_LP_INDEPENDENT), content_digest(traj), bool(zero_ok))
+    if mode != "scaled" or None in key:
+        return solve()
+    if key in _shared_lps:
+        _shared_lps.move_to_end(key)
+    else:
+        _shared_lps[key] = solve()
+        while len(_shared_lps) > SHARED_LPS:
+            _shared_lps.popitem(last=False)
+    kept = _shared_lps[key]
+    return replace(kept, per_sample=None if kept.per_sample is None else kept.per_sample.copy())
 
 
 def _linear_capacities(model: Model, prob, methods, modes, engine: str) -> tuple[dict, dict, dict]:

@@ -13,9 +13,11 @@ from coopsim.io.scenario import model_from_dict
 from coopsim.core.errors import ScenarioError
 from coopsim.forward.simulate import simulate
 from coopsim.core.spatial import rot_log, rpy_to_rot
+from coopsim.inverse import problem as problem_module
 from coopsim.inverse import trajectory as trajectory_module
 from coopsim.inverse.trajectory import (TrajectoryError, from_simulation, object_motion_at, object_motion_trajectory,
                                 object_pose_of, shared_object_motion_trajectory, time_law, trajectory_at)
+from coopsim.report import inverse_report
 from coopsim.report.inverse_report import capacity_study, capacity_summary
 from helpers import SCENARIOS, mutated
 from inverse_cases import model, run
@@ -175,18 +177,25 @@ def test_points_that_differ_only_in_the_payload_share_one_trajectory(monkeypatch
 
 
 def test_a_capacity_study_on_a_shared_trajectory_equals_one_computed_afresh(monkeypatch):
-    """The capacity of two payload positions, the second on the first's shared trajectory, equals the
-    same study with nothing shared (every number of the summary, to the last bit)."""
+    """The capacity of two payload positions, the second on the first's shared trajectory, per-sample
+    terms and 'scaled' LP bound, equals the same study with nothing shared (every number of the summary,
+    to the last bit); the second point computed none of the three again."""
     m = model(CARRY)
+    caches = [(trajectory_module, "_shared"), (problem_module, "_shared_terms"), (inverse_report, "_shared_lps")]
     summaries = {}
     for sharing in (True, False):
-        monkeypatch.setattr(trajectory_module, "_shared", type(trajectory_module._shared)())
+        for module, name in caches:
+            monkeypatch.setattr(module, name, type(getattr(module, name))())
         out = []
         for x in (0.1, -0.15):
             if not sharing:
-                trajectory_module._shared.clear()
+                for module, name in caches:
+                    getattr(module, name).clear()
             pm = replace(m, inverse=replace(m.inverse, payload_position=np.array([x, 0.0, 0.0])))
             out.append(capacity_summary(capacity_study(pm, payload_position=pm.inverse.payload_position,
-                                                       with_lp=False, optimise=False)))
+                                                       with_lp=True, optimise=False)))
+        if sharing:
+            assert [len(getattr(module, name)) for module, name in caches] == [1, 1, 1]
         summaries[sharing] = out
     assert summaries[True] == summaries[False]
+    assert out[0]["lp_bound"]["payload"] != out[1]["lp_bound"]["payload"]

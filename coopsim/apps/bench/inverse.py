@@ -31,9 +31,9 @@ def capacity_point(model: Model, repeats: int = 3) -> dict:
     """The cost of one capacity point of a scenario with an object motion, as a sweep computes it.
 
     The point is `capacity_study(model, with_lp=True, optimise=False)`: every linear resolution in each
-    capacity mode and the LP bound, on the object-motion trajectory shared between points (a sweep over
-    payload axes computes the trajectory once); the trajectory (closed-chain IK of every sample) is timed
-    on its own.
+    capacity mode and the LP bound, with what a sweep over payload axes shares between its points (the
+    object-motion trajectory, the per-sample terms, the 'scaled' LP bound) computed once before the
+    timing; the trajectory (closed-chain IK of every sample) is timed on its own.
 
     Args:
         model: a Model whose inverse.trajectory is 'object_motion'.

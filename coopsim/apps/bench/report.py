@@ -286,7 +286,8 @@ def inverse_lines(inv: dict | None) -> list[str]:
     p = inv["point"]
     lines = [f"A capacity point of `scenarios/sweeps/paper_capacity_map.yaml` (the paper carry, {p['samples']} "
              f"samples, every linear resolution and the LP bound in both capacity modes): {p['point_ms']:.1f} ms "
-             f"on the shared trajectory ({1e3 / p['point_ms']:.0f} points/s on one core); the trajectory's "
+             f"as a payload sweep's point (the trajectory, per-sample terms and scaled LP bound shared; "
+             f"{1e3 / p['point_ms']:.0f} points/s on one core); the trajectory's "
              f"closed-chain IK itself {p['trajectory_ms']:.1f} ms.", ""]
     sc, fits = inv["scaling"], inv["scaling"]["fits"]
     lines += ["| output dt s | samples | IK ms | capacity point ms |", "|---|---|---|---|"]
