@@ -285,6 +285,39 @@ def _dask_rows(sweep: Sweep, todo: list[int], scheduler: str | None, workers: in
         yield from _on_cluster(sweep, todo, None, workers)
 
 
+CHUNK_POINTS = 64          # points per Dask task at most
+CHUNKS_PER_WORKER = 8      # tasks per worker at least, where there are points enough (the load stays balanced)
+
+
+def chunks(todo: list[int], workers: int) -> list[list[int]]:
+    """The points `todo` cut into consecutive tasks of one size: at most CHUNK_POINTS each, and at least
+    CHUNKS_PER_WORKER tasks per worker where there are enough points, so a point of a few milliseconds
+    does not pay a task's scheduling each.
+
+    Args:
+        todo: the points' indices.
+        workers: the cluster's workers (one at least).
+
+    Returns:
+        list[list[int]]: the tasks' points, in order, covering `todo` once.
+    """
+    size = max(1, min(CHUNK_POINTS, len(todo) // (CHUNKS_PER_WORKER * max(1, workers))))
+    return [todo[i:i + size] for i in range(0, len(todo), size)]
+
+
+def evaluate_points(sweep: Sweep, indices: list[int]) -> list[dict[str, Any]]:
+    """The rows of several points (`evaluate_point` each): one Dask task.
+
+    Args:
+        sweep: the sweep.
+        indices: the points, 0-based.
+
+    Returns:
+        list[dict]: their rows, in the order of `indices`.
+    """
+    return [evaluate_point(sweep, i) for i in indices]
+
+
 def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: int | None) -> Iterator[dict]:
     """Rows of the points `todo` from the cluster at `scheduler`, or from a LocalCluster of `workers`
     processes × 1 thread started (and closed) here."""
@@ -306,15 +339,16 @@ def _on_cluster(sweep: Sweep, todo: list[int], scheduler: str | None, workers: i
         client = Client(cluster)
     try:
         shared = client.scatter(sweep, broadcast=True)
-        futures = {client.submit(evaluate_point, shared, i, pure=False, key=f"coopsim-sweep-{sweep.digest[:12]}-{i}"): i
-                   for i in todo}
+        futures = {client.submit(evaluate_points, shared, part, pure=False,
+                                 key=f"coopsim-sweep-{sweep.digest[:12]}-{part[0]}-{part[-1]}"): part
+                   for part in chunks(todo, workers or len(client.scheduler_info()["workers"]) or 1)}
         for fut in as_completed(futures):
             try:
-                yield fut.result()
+                yield from fut.result()
             except Exception as exc:     # noqa: BLE001 — the task itself failed (evaluate_point catches the point's)
-                yield {"point": futures[fut]} | {a.name: float(v) for a, v in
-                                                 zip(sweep.axes, sweep.points[futures[fut]])} \
-                    | {"error": f"Dask: {error_text(exc)}"}
+                for i in futures[fut]:
+                    yield {"point": i} | {a.name: float(v) for a, v in zip(sweep.axes, sweep.points[i])} \
+                        | {"error": f"Dask: {error_text(exc)}"}
     finally:
         client.close()
         if cluster is not None:

@@ -267,3 +267,14 @@ def test_resume_after_a_kill_gives_the_same_table_without_recomputing(tmp_path, 
     other = write_sweep(tmp_path, GRID, "other.yaml")
     refused = run_cli("sweep", other, "--serial", "--resume", "--out", tmp_path / "out", cwd=tmp_path)
     assert refused.returncode == 2 and "the checkpoint is another sweep's" in refused.stderr
+
+
+def test_dask_tasks_cover_every_point_once_in_balanced_chunks():
+    """5151 points on 2 workers: tasks of 64 (the cap), at least 8 per worker; 45 points: tasks of 2;
+    3 points on 4 workers: one each. Every point once, in order."""
+    from coopsim.apps.sweep_run import chunks
+
+    for n, workers, size in ((5151, 2, 64), (45, 2, 2), (3, 4, 1)):
+        parts = chunks(list(range(n)), workers)
+        assert sum(parts, []) == list(range(n)) and {len(p) for p in parts[:-1]} == {size}
+        assert len(parts) >= min(n, 8 * workers) or size == 64
