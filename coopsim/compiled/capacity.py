@@ -17,21 +17,8 @@ takes the NumPy path, which handles rank loss.
 
 import numpy as np
 
-from coopsim.compiled.toolchain.jit import entry, kernel
-
-
-@kernel
-def _trace_of_inverse(L, d, x):
-    """trace(H⁻¹) = ‖L⁻¹‖_F² for H = L Lᵀ (L: the lower triangle of the d × d array L; x (d,) work)."""
-    total = 0.0
-    for c in range(d):                           # column c of L⁻¹: L x = e_c (x_r = 0 for r < c)
-        for r in range(c, d):
-            acc = 1.0 if r == c else 0.0
-            for k in range(c, r):
-                acc -= L[r, k] * x[k]
-            x[r] = acc / L[r, r]
-            total += x[r] * x[r]
-    return total
+from coopsim.compiled.linalg import cholesky, cholesky_solve, trace_of_inverse
+from coopsim.compiled.toolchain.jit import entry
 
 
 @entry
@@ -81,28 +68,14 @@ def min_energy_mass_interval(D, u, Q, lo, hi, act, regular, rank_tol):
                 for j in range(n):
                     acc -= Q[j] * D[j, a, i] * u[j, s, i]
                 z[a, s] = acc
-        for c in range(d):                       # Cholesky, lower triangle in place
-            for r in range(c, d):
-                acc = H[r, c]
-                for k in range(c):
-                    acc -= H[r, k] * H[c, k]
-                if r == c:
-                    if not acc > 0.0:
-                        return mass, lower, False
-                    H[c, c] = np.sqrt(acc)
-                else:
-                    H[r, c] = acc / H[c, c]
-        if not rank_tol * trace * _trace_of_inverse(H, d, x) < 1.0:
+        if not (cholesky(H, d) and rank_tol * trace * trace_of_inverse(H, d, x) < 1.0):
             return mass, lower, False
         for s in range(2):                       # L Lᵀ z = −g
             for a in range(d):
-                for k in range(a):
-                    z[a, s] -= H[a, k] * z[k, s]
-                z[a, s] /= H[a, a]
-            for a in range(d - 1, -1, -1):
-                for k in range(a + 1, d):
-                    z[a, s] -= H[k, a] * z[k, s]
-                z[a, s] /= H[a, a]
+                x[a] = z[a, s]
+            cholesky_solve(H, d, x)
+            for a in range(d):
+                z[a, s] = x[a]
         for j in range(n):
             if not act[j]:
                 continue

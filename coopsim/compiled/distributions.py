@@ -23,40 +23,10 @@ whose K is not positive definite is flagged; the caller takes the NumPy path the
 
 import numpy as np
 
-from coopsim.compiled.capacity import _trace_of_inverse
+from coopsim.compiled.linalg import cholesky, cholesky_solve, trace_of_inverse
 from coopsim.compiled.toolchain.jit import entry, kernel
 
 PAPER, NONSQUEEZING, MIN_ENERGY = 0, 1, 2     # the methods' rows in the pass's outputs
-
-
-@kernel
-def _cholesky(H, d):
-    """H = L Lᵀ in place (lower triangle of the d × d array H); False when H is not positive definite."""
-    for c in range(d):
-        for r in range(c, d):
-            acc = H[r, c]
-            for q in range(c):
-                acc -= H[r, q] * H[c, q]
-            if r == c:
-                if not acc > 0.0:
-                    return False
-                H[c, c] = np.sqrt(acc)
-            else:
-                H[r, c] = acc / H[c, c]
-    return True
-
-
-@kernel
-def _cholesky_solve(L, d, x):
-    """x ← (L Lᵀ)⁻¹ x in place (L the lower triangle of a d × d array)."""
-    for a in range(d):
-        for q in range(a):
-            x[a] -= L[a, q] * x[q]
-        x[a] /= L[a, a]
-    for a in range(d - 1, -1, -1):
-        for q in range(a + 1, d):
-            x[a] -= L[q, a] * x[q]
-        x[a] /= L[a, a]
 
 
 @kernel
@@ -136,7 +106,7 @@ def _nonsqueezing_factor(A, R, S, vm, vJ, MAt, K, B, T):
             for p in range(m):
                 acc += A[i, p] * MAt[p, c]
             K[i, c] = acc
-    return _cholesky(K, k)
+    return cholesky(K, k)
 
 
 @kernel
@@ -145,7 +115,7 @@ def _nonsqueezing(MAt, K, y, f, x):
     m, k = MAt.shape
     for q in range(k):
         x[q] = y[q]
-    _cholesky_solve(K, k, x)
+    cholesky_solve(K, k, x)
     for a in range(m):
         acc = 0.0
         for q in range(k):
@@ -175,7 +145,7 @@ def _energy_factor(JT, Z, Q, rank_tol, D, H, x):
         trace += H[a, a]
     if d == 0:
         return True
-    return _cholesky(H, d) and rank_tol * trace * _trace_of_inverse(H, d, x) < 1.0
+    return cholesky(H, d) and rank_tol * trace * trace_of_inverse(H, d, x) < 1.0
 
 
 @kernel
@@ -239,7 +209,7 @@ def _constraint_basis(A, JT, pidx, rank_tol, X, V, Qm, L, Cp, Z, x):
             Cp[a, q] = acc / L[q, q]
         for q in range(m - c):
             Z[a, q] = Qm[a, c + q]
-    return rank_tol * trace * _trace_of_inverse(L, c, x) < 1.0
+    return rank_tol * trace * trace_of_inverse(L, c, x) < 1.0
 
 
 @kernel
@@ -263,7 +233,7 @@ def _min_energy(JT, ta, Cp, Z, D, H, pidx, Q, y, f, b, u, z):
         for j in range(n):
             acc -= D[j, a] * Q[j] * u[j]
         z[a] = acc
-    _cholesky_solve(H, d, z)
+    cholesky_solve(H, d, z)
     for a in range(m):
         acc = 0.0
         for q in range(d):
@@ -291,7 +261,7 @@ def _internal(W, S, MAt, K, f, Fp, Fn, g, x, v6, w6):
     for a in range(r):
         for i in range(6):
             Fp[a, i] -= w6[i]
-    _cholesky_solve(K, k, x)
+    cholesky_solve(K, k, x)
     for p in range(m):
         acc = 0.0
         for q in range(k):
@@ -387,7 +357,7 @@ def linear_pass(JT, A, ta, W, R_o, S, vm, vJ, pidx, Q, ys, which, wrench_of, lo,
             for every method when internal wrenches are asked; C Cᵀ or Dᵀ Q D for min_energy).
     """
     N, n, m = JT.shape
-    k, r, s = A.shape[1], W.shape[1], ys.shape[0]
+    k, s = A.shape[1], ys.shape[0]
     c = k + pidx.shape[0]
     d = max(m - c, 0)
     X, V, Qm, L = np.empty((m, c)), np.empty((m, c)), np.empty((m, m)), np.empty((c, c))

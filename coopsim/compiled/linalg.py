@@ -119,6 +119,73 @@ def inverse_factor_norm2(Lf, o, K):
 
 
 @kernel
+def cholesky(H, d):
+    """Cholesky factorisation H = L Lᵀ in place, unpivoted (the lower triangle of H becomes L).
+
+    Args:
+        H: (≥ d, ≥ d) the symmetric matrix, its lower triangle read and overwritten.
+        d: the size used.
+
+    Returns:
+        bool: False when a pivot is not positive (H not positive definite; H then partly overwritten).
+    """
+    for c in range(d):
+        for r in range(c, d):
+            acc = H[r, c]
+            for q in range(c):
+                acc -= H[r, q] * H[c, q]
+            if r == c:
+                if not acc > 0.0:
+                    return False
+                H[c, c] = np.sqrt(acc)
+            else:
+                H[r, c] = acc / H[c, c]
+    return True
+
+
+@kernel
+def cholesky_solve(L, d, x):
+    """x ← (L Lᵀ)⁻¹ x in place: the forward and back substitutions of a `cholesky` factor.
+
+    Args:
+        L: (≥ d, ≥ d) the factor, its lower triangle read.
+        d: the size used.
+        x: (≥ d,) the right-hand side, overwritten by the solution.
+    """
+    for a in range(d):
+        for q in range(a):
+            x[a] -= L[a, q] * x[q]
+        x[a] /= L[a, a]
+    for a in range(d - 1, -1, -1):
+        for q in range(a + 1, d):
+            x[a] -= L[q, a] * x[q]
+        x[a] /= L[a, a]
+
+
+@kernel
+def trace_of_inverse(L, d, x):
+    """trace(H⁻¹) = ‖L⁻¹‖_F² for H = L Lᵀ, column by column of L⁻¹.
+
+    Args:
+        L: (≥ d, ≥ d) a `cholesky` factor, its lower triangle read.
+        d: the size used.
+        x: (≥ d,) scratch.
+
+    Returns:
+        float: trace(H⁻¹).
+    """
+    total = 0.0
+    for c in range(d):                           # column c of L⁻¹: L x = e_c (x_r = 0 for r < c)
+        for r in range(c, d):
+            acc = 1.0 if r == c else 0.0
+            for k in range(c, r):
+                acc -= L[r, k] * x[k]
+            x[r] = acc / L[r, r]
+            total += x[r] * x[r]
+    return total
+
+
+@kernel
 def pivoted_solve(Lf, perm, K, b, y, x):
     """x ← A⁻¹ b with the factors of `pivoted_cholesky` (P A Pᵀ = L Lᵀ: L Lᵀ (P x) = P b).
 
