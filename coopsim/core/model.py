@@ -701,13 +701,24 @@ def torque_at(tables: "tuple[TorqueTable, ...] | TorqueFunction", t: float) -> n
         raise ValueError("torques fed back from the state need it: use applied_torque(torques, t, q, qd)")
     if isinstance(tables, TorqueFunction):
         return np.asarray(tables.fn(t), dtype=float)
-    parts = []
-    for tab in tables:
-        if len(tab.times) == 1:
-            parts.append(tab.values[0])
-        else:
-            parts.append(np.array([np.interp(t, tab.times, col) for col in tab.values.T]))
-    return np.concatenate(parts)
+    return np.concatenate([_table_at(tab, t) for tab in tables])
+
+
+def _table_at(tab: TorqueTable, t: float) -> np.ndarray:
+    """One table's row at t, all joints at once, as np.interp gives each column (the same arithmetic: one
+    binary search, slope·(t − t_j) + τ_j, the row itself on a knot, held outside; nan at a nan time)."""
+    times, values = tab.times, tab.values
+    if len(times) == 1 or t <= times[0]:
+        return np.array(values[0], dtype=float)
+    if t >= times[-1]:
+        return np.array(values[-1], dtype=float)
+    if t != t:
+        return np.full(values.shape[1], np.nan)
+    j = int(np.searchsorted(times, t, side="right")) - 1
+    if t == times[j]:
+        return np.array(values[j], dtype=float)
+    slope = (values[j + 1] - values[j]) / (times[j + 1] - times[j])
+    return slope * (t - times[j]) + values[j]
 
 
 def applied_torque(torques: "tuple[TorqueTable, ...] | TorqueFunction", t: float, q: np.ndarray,

@@ -24,7 +24,7 @@ from coopsim.inverse import retime as rt
 from coopsim.inverse.free_path import PathOptimum, end_poses, optimize_path, spline_joint_path, weighted
 from coopsim.inverse.path import WaypointPath, joint_path, path_grid
 from coopsim.inverse.problem import inverse_problem
-from coopsim.inverse.replay import replay
+from coopsim.inverse.replay import Replay, replay
 from coopsim.inverse.spline_path import straight_control_points
 from coopsim.inverse.trajectory import object_motion_trajectory
 from coopsim.io.mcap_codec import Series
@@ -180,14 +180,36 @@ def path_checks(model: Model, opt: PathOptimum, motion: ObjectMotion, replay_che
 
 def _replay(model: Model, traj, res, mode: str, mass: float) -> dict:
     """The torques of `res` with the load at `mass` replayed open loop along traj: angle error, line excess."""
+    rep, excess = carried_replay(model, traj, res, mode, mass)
+    return {"replay_max_angle_error_rad": float(rep.max_angle_error), "replay_max_line_excess": float(excess)}
+
+
+def carried_replay(model: Model, traj, res, mode: str, mass: float) -> tuple[Replay, float]:
+    """The torques of `res` with the load at `mass` replayed open loop along a trajectory, and their excess.
+
+    The forward model carries the load as one rigid body (`coopsim.inverse.capacity.scaled_model`, or
+    `payload_model` at the scenario's payload position), which the MuJoCo twin holds as well (explicit
+    inertia); the distribution's virtual bodies are the nominal object's, as in the capacity.
+
+    Args:
+        model: the Model (nominal object).
+        traj: the JointTrajectory, at evenly spaced times.
+        res: the Resolution (of the nominal model).
+        mode: 'scaled' (mass: the whole object's) or 'payload' (mass: the point payload's).
+        mass: kg.
+
+    Returns:
+        tuple[Replay, float]: the Replay (`coopsim.inverse.replay.replay`; its SimResult's model is the
+        loaded forward model) and the largest excess of a replayed torque over its motor line at the
+        samples, relative to τ_s (≤ 0: within; nan without a simulation).
+    """
     loaded = (cap.scaled_model(model, mass) if mode == "scaled"
               else cap.payload_model(model, model.inverse.payload_position, mass))
-    rep = replay(loaded, traj, res)          # the distribution's virtual bodies as in the capacity (nominal)
+    rep = replay(loaded, traj, res)
     tau = rep.sim.tau if rep.sim is not None else np.full_like(traj.q, np.nan)
     lo, hi = torque_limits(model.motors, traj.qd)
     act = ~res.passive & np.isfinite(model.motors.stall_torque)
-    excess = np.max((np.maximum(tau - hi, lo - tau) / model.motors.stall_torque)[:, act])
-    return {"replay_max_angle_error_rad": float(rep.max_angle_error), "replay_max_line_excess": float(excess)}
+    return rep, float(np.max((np.maximum(tau - hi, lo - tau) / model.motors.stall_torque)[:, act]))
 
 
 def path_summary(study: PathStudy) -> dict:

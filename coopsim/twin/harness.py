@@ -48,7 +48,8 @@ class CrossValidation:
 
 
 def cross_validate(model: Model, duration: float | None = None, twin_model: Model | None = None,
-                   progress: Callable[[str, float], None] | None = None) -> CrossValidation:
+                   progress: Callable[[str, float], None] | None = None,
+                   native: SimResult | None = None) -> CrossValidation:
     """Run the native model and its MuJoCo twin on the same torques and compare them.
 
     A `control:` section runs in the loop of each; the comparison is against the scenario's thresholds.
@@ -62,6 +63,9 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
         twin_model: the model the twin is built from in place of `model` (same joints), e.g. to prove
             the harness can fail.
         progress: called with (stage, fraction done), stage "native" or "mujoco".
+        native: the native run of `model` already made (e.g. a replay at fixed steps,
+            `coopsim.inverse.replay.replay`), which the twin then follows from its initial state on its
+            sample times; None: simulated here.
 
     Returns:
         CrossValidation: both runs on the native output grid, their Comparison (failures explained), the
@@ -71,7 +75,8 @@ def cross_validate(model: Model, duration: float | None = None, twin_model: Mode
     if duration is not None:
         model = replace(model, duration=duration)
 
-    native = simulate(closed_loop(model), progress=None if progress is None else lambda f: progress("native", f))
+    if native is None:
+        native = simulate(closed_loop(model), progress=None if progress is None else lambda f: progress("native", f))
     twin_model, step = twin_model or model, None
     if twin_model.mujoco.timestep is None:
         twin_model, step = twin_step(twin_model, native)

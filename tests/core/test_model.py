@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from coopsim.control.controller import Controller
-from coopsim.core.model import ControlSettings, LoopController, is_loop_controller
+from coopsim.core.model import ControlSettings, LoopController, TorqueTable, is_loop_controller, torque_at
 
 
 class _Complete:
@@ -54,3 +54,14 @@ def test_is_loop_controller_answers_as_the_protocol_check(controller):
         assert is_loop_controller(fn) == isinstance(fn, LoopController), fn
     assert is_loop_controller(controller) and is_loop_controller(_Complete())
     assert not is_loop_controller(_NoModel()) and not is_loop_controller(_NoRecord())
+
+
+def test_a_torque_table_is_read_as_np_interp_reads_each_column():
+    """All joints of a table at once (one binary search) give np.interp's value of each column to the bit,
+    on and between knots, before and after them."""
+    rng = np.random.default_rng(3)
+    times = np.unique(rng.uniform(0.0, 2.0, 40))
+    values = rng.normal(0.0, 5.0, (len(times), 3))
+    for t in [*rng.uniform(-0.5, 2.5, 200), *times]:
+        ref = np.array([np.interp(t, times, col) for col in values.T])
+        assert np.array_equal(torque_at((TorqueTable(times, values),), t), ref)

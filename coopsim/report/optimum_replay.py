@@ -1,0 +1,151 @@
+"""The optimum of `coopsim optimize --retime --replay` replayed through the forward dynamics, native and
+MuJoCo twin, open loop.
+
+    the optimised scenario's time law (the asked payload's, else the heaviest load's) and its load
+      → the joint path sampled evenly over the law's duration (the closed-chain IK of the retimed motion)
+      → the resolution's torques with the load carried as one rigid body, tabulated at the native
+        integrator's stage times (`coopsim.report.path_report.carried_replay`)
+      → the native run from the first sample (DOP853 at fixed steps of one sample interval)
+      → the twin from the same state on the same torques (`coopsim.twin.harness.cross_validate`)
+      → the agreement against the scenario's thresholds, and the run log `coopsim animate` draws
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from coopsim.core.model import Model, TorqueTable
+from coopsim.forward.simulate import SimResult
+from coopsim.inverse import retime as rt
+from coopsim.inverse.problem import Resolution
+from coopsim.inverse.replay import Replay, stage_torques
+from coopsim.inverse.solve import resolution_for
+from coopsim.inverse.trajectory import JointTrajectory, object_motion_trajectory
+from coopsim.io.log import run_log
+from coopsim.report.inverse_report import Progress, _report
+from coopsim.report.optimize_report import RetimeStudy, with_motion
+from coopsim.report.path_report import carried_replay
+from coopsim.twin.harness import CrossValidation, cross_validate
+from coopsim.twin.weld import twin_step
+
+RUN_LOG = "optimum_run.mcap"       # the replay's run log in the optimize output set
+
+
+@dataclass(frozen=True, eq=False)
+class OptimumReplay:
+    """The optimum replayed open loop: the native run against the optimised joint path, the twin against it.
+
+    Attributes:
+        method: the resolution whose torques are replayed (the optimised scenario's).
+        mode: 'payload' (mass: a point payload's) or 'scaled' (mass: the whole object's).
+        mass: kg, the load carried.
+        traj: the JointTrajectory of the optimised path under the time law, evenly sampled.
+        native: the native Replay (its SimResult's model: the loaded forward model with the torque tables).
+        line_excess: the largest excess of a replayed torque over its motor line at the samples, relative
+            to τ_s (≤ 0: within).
+        cross: the CrossValidation of the twin against the native replay (scenario thresholds).
+    """
+
+    method: str
+    mode: str
+    mass: float
+    traj: JointTrajectory
+    native: Replay
+    line_excess: float
+    cross: CrossValidation
+
+
+def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> OptimumReplay:
+    """Replay the study's optimum (the law the optimised scenario carries) native and in the MuJoCo twin.
+
+    The samples are spaced evenly at the motion's output_dt shortened so that a whole number of them spans
+    the law's duration (the twin's steps must divide every interval).
+
+    Args:
+        study: the RetimeStudy (method a linear resolution).
+        progress: hears the stages replay (the IK and native run) and mujoco.
+
+    Returns:
+        OptimumReplay.
+
+    Raises:
+        coopsim.inverse.retime.RetimeError: the method is the LP bound (no distribution between grid points)
+            or the resolution has no torques somewhere along the law.
+    """
+    if study.method == rt.LP_BOUND:
+        raise rt.RetimeError("--replay: the LP bound has no torque distribution between its grid points; "
+                             "give --method paper, nonsqueezing or min_energy")
+    r = study.methods[study.method].law_of
+    motion = study.motion
+    span = float(motion.times[-1] - motion.times[0])
+    dt = span / np.ceil(span / motion.output_dt - 1e-9)
+    model = with_motion(study.model, replace(motion, output_dt=dt))
+    _report(progress, "replay", 0.0)
+    traj = object_motion_trajectory(model, model.inverse.object_motion)
+    res = resolution_for(model, study.method)
+    rep, excess = carried_replay(model, traj, res, study.mode, r.mass)
+    if rep.sim is None:
+        raise rt.RetimeError(f"--replay: the {study.method} resolution has no torques at t = "
+                             f"{rep.failures[0].time:.6g} s of the optimum")
+    _report(progress, "replay", 1.0)
+    native = rep.sim
+    cv = cross_validate(native.model, native=native, twin_model=_twin_model(native, traj, res),
+                        progress=progress)
+    return OptimumReplay(study.method, study.mode, r.mass, traj, rep, excess, cv)
+
+
+def _twin_model(native: SimResult, traj: JointTrajectory, res: Resolution) -> Model:
+    """The twin's model: its step (`coopsim.twin.weld.twin_step`) and the same torques tabulated at the native
+    knots and at every RK4 stage time of the twin's steps too, so that neither reads an interpolated torque."""
+    model, _ = twin_step(native.model, native)
+    h, t = model.mujoco.timestep, native.t
+    steps = np.maximum(np.round(np.diff(t) / h).astype(int), 1)
+    stages = [t0 + (t1 - t0) * np.arange(2 * k + 1) / (2 * k) for t0, t1, k in zip(t[:-1], t[1:], steps)]
+    knots = np.unique(np.concatenate([native.model.torques[0].times, *stages]))
+    tau = stage_torques(native.model, traj, res, knots)
+    return replace(model, torques=tuple(TorqueTable(knots, tau[:, sl]) for sl in model.dof_slices))
+
+
+def replay_summary(rep: OptimumReplay) -> dict:
+    """optimize.json's "replay" entry (SI units).
+
+    Args:
+        rep: the OptimumReplay.
+
+    Returns:
+        dict: method, mode, mass, duration, samples and their interval; native (the largest joint angle
+        and rate errors against the optimised joint path, the largest line excess relative to τ_s); twin
+        (its step, the agreement with the native replay against the scenario's thresholds,
+        `coopsim.twin.compare.Comparison.as_dict`, its largest joint angle error and whether it passed);
+        the run log's name.
+    """
+    cv = rep.cross
+    angle = next(m for m in cv.comparison.metrics if m.name == "joint angle error")
+    return {
+        "method": rep.method, "mode": rep.mode, "mass_kg": rep.mass,
+        "duration_s": float(rep.traj.t[-1] - rep.traj.t[0]), "samples": len(rep.traj.t),
+        "output_dt_s": float(rep.traj.t[1] - rep.traj.t[0]), "open_loop": True,
+        "native": {"max_angle_error_rad": rep.native.max_angle_error, "max_rate_error_rad_s": rep.native.max_rate_error,
+                   "max_line_excess": rep.line_excess, "integrator": "dop853, fixed step = output_dt_s"},
+        "twin": {"timestep_s": (cv.mujoco or cv.native.model.mujoco).timestep,
+                 "max_angle_error_rad": angle.max, "threshold_rad": angle.threshold,
+                 "passed": cv.comparison.passed, "agreement": cv.comparison.as_dict()},
+        "log": RUN_LOG,
+    }
+
+
+def replay_run_log(rep: OptimumReplay, metadata: dict | None = None) -> tuple[list, dict]:
+    """(streams, metadata) of the replay's run log, as `coopsim run` writes one (`coopsim.io.log.run_log`).
+
+    Args:
+        rep: the OptimumReplay.
+        metadata: `run_metadata`'s extra (e.g. {"scenario": {"file": …, "sha256": …}}, which `coopsim animate`
+            takes the geometry from).
+
+    Returns:
+        tuple[list, dict]: the native and twin series, /tf and /scene, and the metadata records.
+    """
+    cv = rep.cross
+    return run_log(cv.native.model, cv.native, cv.twin, (), metadata)

@@ -1,0 +1,58 @@
+"""The retimed optimum replayed open loop through the forward dynamics (`coopsim.report.optimum_replay`) on the
+paper carry: the native model against the optimised joint path (the closed-chain IK of the retimed motion,
+independent of the forward dynamics), the MuJoCo twin against the native model (MuJoCo's own integrator
+and weld constraints), and the replay's run log read back as `coopsim animate` reads it."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coopsim.inverse import retime as rt
+from coopsim.io.log import read_run_log
+from coopsim.io.mcap_codec import write_mcap
+from coopsim.io.scenario import load_scenario
+from coopsim.report.optimize_report import retime_study
+from coopsim.report.optimum_replay import optimum_replay, replay_run_log, replay_summary
+from helpers import SCENARIOS
+
+
+@pytest.fixture(scope="module")
+def replayed():
+    """The bare object's minimum-time law (min energy, --payload 0: 4.9 s, the motors on their lines at the
+    critical points), replayed."""
+    model = load_scenario(SCENARIOS / "paper_planar_2x3_carry.yaml")
+    study = retime_study(model, payload=0.0, intervals=6, methods=("min_energy",))
+    return study, optimum_replay(study)
+
+
+def test_the_native_replay_follows_the_optimised_path_and_the_twin_the_native_run(replayed):
+    """Native against the optimised joint path within 1e-8 rad (the bound of the native replay test of the
+    retiming) over the whole law, open loop; the torques within their lines up to the law's excess between
+    grid points (≤ 1e-2 τ_s on this coarse grid); the twin within every threshold of the scenario."""
+    study, rep = replayed
+    s = replay_summary(rep)
+    assert s["mass_kg"] == 0.0 and s["duration_s"] == pytest.approx(study.methods["min_energy"].bare.duration, rel=1e-9)
+    assert s["duration_s"] == pytest.approx(s["output_dt_s"] * (s["samples"] - 1), rel=1e-12)
+    assert s["native"]["max_angle_error_rad"] <= 1e-8
+    assert s["native"]["max_line_excess"] <= 1e-2
+    assert s["twin"]["passed"], rep.cross.comparison.failures()
+    assert s["twin"]["max_angle_error_rad"] <= rep.cross.native.model.validation.max_angle_error
+
+
+def test_the_replay_run_log_reads_back_as_a_run_log(replayed, tmp_path):
+    """Native and twin series, the scenario named for `coopsim animate`, the native angles as replayed."""
+    _, rep = replayed
+    streams, meta = replay_run_log(rep, {"scenario": {"file": "scenarios/paper_planar_2x3_carry.yaml"}})
+    path = write_mcap(tmp_path / "optimum_run.mcap", streams, meta)
+    log = read_run_log(path)
+    assert {"/native/joint_state", "/mujoco/joint_state"} <= set(log.topics)
+    assert np.array_equal(log.topics["/native/joint_state"]["angle"], rep.cross.native.q)
+    assert log.metadata["scenario"]["file"] == "scenarios/paper_planar_2x3_carry.yaml"
+
+
+def test_the_lp_bound_is_not_replayed(replayed):
+    """The LP bound's wrenches exist at its grid points only: one line naming --replay and the methods."""
+    study, _ = replayed
+    with pytest.raises(rt.RetimeError, match=r"^--replay: the LP bound"):
+        optimum_replay(replace(study, method="lp"))
