@@ -343,6 +343,7 @@ def _cmd_optimize(args) -> int:
     from coopsim.apps.progress import ProgressBar
     from coopsim.io.atomic import write_text_atomic
     from coopsim.io.log import file_sha256, run_metadata
+    from coopsim.io.mcap_codec import write_mcap
     from coopsim.io.overrides import apply_overrides
     from coopsim.io.scenario import load_scenario, require_motor_limits, scenario_text
     from coopsim.io.yaml_rules import load_yaml
@@ -355,11 +356,18 @@ def _cmd_optimize(args) -> int:
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
                                                 retime_series, retime_study, retime_summary)
+    from coopsim.report.optimum_replay import (RUN_LOG, format_replay_summary, optimum_replay, replay_run_log,
+                                               replay_summary)
 
     if not (args.retime or args.path):
         raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
     if args.path and args.method == "lp":
         raise CoopsimError("--method lp: --path optimises a resolution's path (paper, nonsqueezing, min_energy)")
+    if args.replay and not args.retime:
+        raise CoopsimError("--replay: replays the retimed optimum; give it with --retime")
+    if args.replay and args.method == "lp":
+        raise CoopsimError("--replay: the LP bound has no torque distribution between its grid points; give "
+                           "--method paper, nonsqueezing or min_energy")
     if args.weights and not (args.path and args.method == "min_energy"):
         raise CoopsimError("--weights: the energy weights are optimised with --path and --method min_energy")
     for name in ("duration", "payload"):
@@ -379,6 +387,7 @@ def _cmd_optimize(args) -> int:
         bar = ProgressBar(enabled=not args.json)
         study = None if not args.retime else retime_study(model, duration=args.duration, payload=args.payload,
                                                            method=args.method, intervals=args.intervals, progress=bar)
+        rep = optimum_replay(study, progress=bar) if args.replay else None
         free = None if not args.path else path_study(model, args.method, weights=args.weights,
                                                      duration=args.duration, progress=bar)
         bar.close()
@@ -389,6 +398,8 @@ def _cmd_optimize(args) -> int:
         summary = retime_summary(study) if study is not None else {"scenario": model.name}
         if free is not None:
             summary["path"] = path_summary(free)
+        if rep is not None:
+            summary["replay"] = replay_summary(rep)
         data = load_yaml(Path(args.scenario))
         if args.set:
             data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
@@ -401,7 +412,9 @@ def _cmd_optimize(args) -> int:
             texts[f"{model.name}_path.yaml"] = scenario_text(
                 path_scenario(data, free.motion), f"{_display_path(args.scenario)} with the free path of coopsim "
                                                   f"optimize --path (the {args.method} resolution)")
-        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}}
+        meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
+                | ({"overrides": list(args.set)} if args.set else {})}
+        run_files = {} if rep is None else {RUN_LOG: replay_run_log(rep, dict(meta))}
         meta |= retime_metadata(summary) if study is not None else {}
         meta |= path_metadata(summary["path"]) if free is not None else {}
         streams = (retime_series(study) if study is not None else []) + (path_series(free) if free is not None else [])
@@ -415,18 +428,23 @@ def _cmd_optimize(args) -> int:
             summary["optimised_scenarios"] = [str(out / n) for n in texts]
             if study is not None:
                 summary["optimised_scenario"] = str(out / f"{model.name}_retimed.yaml")
+            if rep is not None:
+                summary["replay"]["log"] = str(out / RUN_LOG)
             return _summary_text(summary, log_path, plots, out / "optimize.json")
 
         def also(stage, log):
             for n, text in texts.items():
                 write_text_atomic(stage / n, text)
+            for n, (run_streams, run_meta) in run_files.items():
+                write_mcap(stage / n, run_streams, run_meta)
 
         log_path, plots = _write_set(out, "optimize.json", "optimize.mcap", streams, meta, draw, workers,
                                      summarize, also=also)
     text = "\n".join(([format_retime_summary(summary)] if study is not None else [])
+                     + ([format_replay_summary(summary["replay"])] if rep is not None else [])
                      + ([format_path_summary(summary["path"])] if free is not None else []))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
-          text + f"\nwrote {', '.join(str(out / n) for n in texts)}, {log_path}, {out / 'optimize.json'} and "
+          text + f"\nwrote {', '.join(str(out / n) for n in [*texts, *run_files])}, {log_path}, {out / 'optimize.json'} and "
                  f"{len(plots)} plots in {out}")
     return 0
 
@@ -754,6 +772,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the resolution whose time law the optimised scenario carries, and whose path --path "
                         "optimises (default min_energy)")
     p.add_argument("--intervals", type=int, default=50, help="grid intervals per waypoint segment (default 50)")
+    p.add_argument("--replay", action="store_true",
+                   help="with --retime: replay the optimum's torques open loop, native and MuJoCo twin, against the "
+                        "scenario's thresholds (optimize.json 'replay'); writes DIR/optimum_run.mcap, a run log "
+                        "for coopsim animate")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)

@@ -145,7 +145,27 @@ def replay_run_log(rep: OptimumReplay, metadata: dict | None = None) -> tuple[li
             takes the geometry from).
 
     Returns:
-        tuple[list, dict]: the native and twin series, /tf and /scene, and the metadata records.
+        tuple[list, dict]: the native and twin series, /tf and /scene, and the metadata records (the loaded
+        forward model's, with the twin's settings as it ran).
     """
     cv = rep.cross
-    return run_log(cv.native.model, cv.native, cv.twin, (), metadata)
+    return run_log(replace(cv.native.model, mujoco=cv.mujoco), cv.native, cv.twin, (), metadata)
+
+
+def format_replay_summary(s: dict) -> str:
+    """Short text version of `replay_summary`.
+
+    Args:
+        s: the "replay" entry.
+
+    Returns:
+        str: two lines, the native replay against the optimised path and the twin against the native run.
+    """
+    tw = s["twin"]
+    verdict = "PASS" if tw["passed"] else "FAIL: " + "; ".join(
+        f"{k} {m['max']:.3g} > {m['threshold']:.3g}" for k, m in tw["agreement"]["metrics"].items() if not m["passed"])
+    return (f"replay          {s['method']}, {s['mass_kg']:.6g} kg over {s['duration_s']:.6g} s open loop: native "
+            f"{s['native']['max_angle_error_rad']:.2e} rad from the optimised path, line excess "
+            f"{s['native']['max_line_excess']:.2e} τ_s\n"
+            f"                twin (step {tw['timestep_s']:.3g} s) {tw['max_angle_error_rad']:.2e} rad from the native "
+            f"run (threshold {tw['threshold_rad']:.3g}): {verdict}")

@@ -3,12 +3,14 @@ accepted as it is by `coopsim capacity`, and bad input as one line naming the fi
 nothing written."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from coopsim.inverse import retime as rt
+from coopsim.io.log import read_run_log
 from coopsim.io.mcap_codec import read_mcap
 from helpers import run_cli
 
@@ -17,10 +19,14 @@ CARRY = "scenarios/paper_planar_2x3_carry.yaml"
 
 def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
     """A coarse grid (6 intervals a segment): every method heavier after than before, the exact check at the
-    grid within 1e-9 of τ_s, the set (scenario, optimize.json, optimize.mcap, 3 figures) complete; the
-    optimised scenario loads in `coopsim capacity`, whose min-energy payload capacity along the sampled
-    law is the optimum up to the law's excess between grid points (within 2 %)."""
-    out = run_cli("optimize", CARRY, "--retime", "--intervals", "6", "--json", "--out", "res", cwd=workdir)
+    grid within 1e-9 of τ_s, the set (scenario, optimize.json, optimize.mcap, 3 figures, with --replay the
+    optimum's run log) complete; the optimised scenario loads in `coopsim capacity`, whose min-energy
+    payload capacity along the sampled law is the optimum up to the law's excess between grid points
+    (within 2 %). The replay of the heaviest load's law (13 s open loop): native within 1e-8 rad of the
+    optimised path, the twin within the scenario's thresholds, and its log a run log as `coopsim animate`
+    reads it, naming the scenario it draws."""
+    out = run_cli("optimize", CARRY, "--retime", "--replay", "--intervals", "6", "--json", "--out", "res",
+                  cwd=workdir)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
     for k, e in s["methods"].items():
@@ -30,7 +36,14 @@ def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
         assert len(e["saturating_motor_per_point"]) == s["grid"]["points"]
     names = sorted(p.name for p in (workdir / "res").iterdir())
     assert names == sorted(["optimize.json", "optimize.mcap", "optimize_motors.png", "optimize_payload_time.png",
-                            "optimize_phase_plane.png", "paper_planar_2x3_carry_retimed.yaml"])
+                            "optimize_phase_plane.png", "paper_planar_2x3_carry_retimed.yaml", "optimum_run.mcap"])
+    rep = s["replay"]
+    assert rep["mass_kg"] == s["methods"]["min_energy"]["after"]["mass_kg"] and rep["duration_s"] <= 13.0
+    assert rep["native"]["max_angle_error_rad"] <= 1e-8 and rep["twin"]["passed"]
+    assert rep["log"] == str(Path("res") / "optimum_run.mcap")
+    run = read_run_log(workdir / rep["log"])
+    assert {"/native/joint_state", "/mujoco/joint_state"} <= set(run.topics)
+    assert run.metadata["scenario"]["file"] == CARRY
     log = read_mcap(workdir / "res" / "optimize.mcap")
     assert {"/optimize/min_energy/law", "/optimize/min_energy/torque", "/optimize/lp/law"} <= set(log.topics)
     data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
@@ -74,4 +87,15 @@ def test_a_linearisation_that_does_not_converge_says_so_and_writes_nothing(workd
     assert out.returncode == 2
     assert "the linearisation of the motor lines did not converge" in out.stderr
     assert "status: not converged after 1 linearisations" in out.stderr
+    assert not (workdir / "res").exists()
+
+
+@pytest.mark.parametrize("args, line", [
+    (["--path", "--replay"], "coopsim: error: --replay: replays the retimed optimum; give it with --retime"),
+    (["--retime", "--replay", "--method", "lp"], "coopsim: error: --replay: the LP bound has no torque distribution"),
+])
+def test_replay_without_retime_or_of_the_lp_bound_is_refused(workdir, args, line):
+    """One line naming --replay, exit 2, nothing written."""
+    out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
+    assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
     assert not (workdir / "res").exists()
