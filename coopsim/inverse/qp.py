@@ -29,7 +29,7 @@ positive *semi*definite Hessian, here H = RᵀR), then polished to the exact min
    (one problem) raises QPError.
 
 `solve_lps` solves a batch of small LPs with HiGHS's simplex method (`highspy`): every
-LP_SEED_STRIDE-th problem first, as one block-diagonal LP; every other problem then at the optimal
+`lp_seed_stride`-th problem first (LP_SEED_STRIDE, fewer in a batch too short for LP_MIN_SEEDS seeds), as one block-diagonal LP; every other problem then at the optimal
 basis of a seed beside it (along a trajectory the basis rarely changes between samples), its vertex
 computed and certified in one compiled pass (`_vertices`, `coopsim.compiled.lp`; the NumPy reference
 `_vertices_reference`: feasible, its duals of the right sign — optimal; at an
@@ -57,6 +57,7 @@ PRIMAL_TOL = 1e-12         # row violation, relative to the problem's largest |b
 DUAL_TOL = 1e-10           # wrong-sign multiplier, relative to the largest |H x|, |g| (scaled problem)
 STATIONARITY_TOL = 1e-9    # |H x + g − Bᵀλ|, same scale
 LP_SEED_STRIDE = 64        # a batch of LPs is first solved at every 64th problem; their bases serve the others
+LP_MIN_SEEDS = 6           # a shorter batch: at least 6 seeds (stride N // 6; below a stride of 2, no seeds)
 
 
 class QPError(CoopsimError):
@@ -209,8 +210,8 @@ def solve_lps(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarra
 
     The variables the objective drives towards an infinite bound stop at ±cap; a problem that reaches
     it is unbounded where a ray certifies it (`_rays`), else solved alone without the cap, which gives
-    its own status (cap = inf: no cap). A batch of at least 2·LP_SEED_STRIDE problems is first solved
-    at every LP_SEED_STRIDE-th one (the seeds, one HiGHS LP); every problem's vertex is then computed
+    its own status (cap = inf: no cap). A batch is first solved at every `lp_seed_stride`-th problem
+    (the seeds, one HiGHS LP; none in a batch too short for a stride of 2); every problem's vertex is then computed
     at the optimal basis of its nearest seed, else of the other seed beside it, and kept where it is
     certified (`_vertices`). The others are solved as one block-diagonal HiGHS LP (each block is then
     optimal on its own: the objective is separable), its simplex method started from their nearest
@@ -234,11 +235,24 @@ def solve_lps(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarra
     capped = np.zeros(N, bool)                                      # optimal with the capped bounds
     with _HIGHS_LOCK:
         h = _highs_lp()
-        todo, basis = _from_seeds(h, P, out, capped) if N >= 2 * LP_SEED_STRIDE else (np.arange(N), None)
+        todo, basis = _from_seeds(h, P, out, capped) if lp_seed_stride(N) >= 2 else (np.arange(N), None)
         _solve_blocks(h, P, todo, True, basis, out, capped)
         for i in np.flatnonzero(capped & _at_cap(P, out.x)):
             _solve_blocks(h, P, np.array([i]), False, None, out, capped)
     return out
+
+
+def lp_seed_stride(N: int) -> int:
+    """The stride of `solve_lps`'s seeds in a batch of N problems: LP_SEED_STRIDE, or N // LP_MIN_SEEDS
+    when that is smaller (a short batch still has LP_MIN_SEEDS seeds whose bases serve the others).
+
+    Args:
+        N: the number of problems.
+
+    Returns:
+        int: every how many problems one is a seed (below 2: the batch is solved without seeds).
+    """
+    return min(LP_SEED_STRIDE, N // LP_MIN_SEEDS)
 
 
 def _at_cap(P: _LPs, x: np.ndarray) -> np.ndarray:
@@ -248,17 +262,18 @@ def _at_cap(P: _LPs, x: np.ndarray) -> np.ndarray:
 
 
 def _from_seeds(h, P: _LPs, out: LPBatch, capped: np.ndarray):
-    """Solve the seeds (every LP_SEED_STRIDE-th problem, capped, one HiGHS LP), then every problem at
+    """Solve the seeds (every `lp_seed_stride`-th problem, capped, one HiGHS LP), then every problem at
     the optimal basis of its nearest seed and, where that fails, of the other seed beside it; store the
     certified ones (capped), as unbounded those with a certified ray (`_rays`). Returns the problems
     left and the bases (col (N, v), row (N, r)) of every problem's nearest seed — all problems and None
     when the seeds' LP has no optimum."""
     N = len(P.G)
-    seeds = np.arange(0, N, LP_SEED_STRIDE)
+    stride = lp_seed_stride(N)
+    seeds = np.arange(0, N, stride)
     run = _run_lp(h, P, seeds, True, None, want_basis=True)
     if run.status != 0:
         return np.arange(N), None
-    pos = np.arange(N) / LP_SEED_STRIDE
+    pos = np.arange(N) / stride
     near = np.minimum(np.rint(pos), len(seeds) - 1).astype(int)
     other = np.minimum(np.where(near > pos, np.floor(pos), np.ceil(pos)), len(seeds) - 1).astype(int)
     todo = np.arange(N)

@@ -21,11 +21,12 @@ def _seed_bases(lp):
     """(the batch `_LPs`, col (N, v), row (N, r) codes): every problem with its nearest seed's basis."""
     P = qp._LPs.of(*lp, 1e9)
     N = len(P.G)
-    seeds = np.arange(0, N, qp.LP_SEED_STRIDE)
+    stride = qp.lp_seed_stride(N)
+    seeds = np.arange(0, N, stride)
     with qp._HIGHS_LOCK:
         run = qp._run_lp(qp._highs_lp(), P, seeds, True, None, want_basis=True)
     assert run.status == 0
-    near = np.minimum(np.rint(np.arange(N) / qp.LP_SEED_STRIDE), len(seeds) - 1).astype(int)
+    near = np.minimum(np.rint(np.arange(N) / stride), len(seeds) - 1).astype(int)
     return P, run.col_basis[near], run.row_basis[near]
 
 
