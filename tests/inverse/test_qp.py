@@ -17,6 +17,7 @@ from coopsim.inverse.problem import SampleFailureWarning, inverse_problem
 from coopsim.inverse.solve import default_bounds, resolution_for, resolve
 from coopsim.report.inverse_report import format_inverse_summary, inverse_study, inverse_summary
 from coopsim.inverse import capacity as cap
+from coopsim.inverse import qp
 from coopsim.inverse.qp import QPError, solve_lps, solve_qp, solve_qps
 from helpers import SCENARIOS, run_cli
 from inverse_cases import BUNDLED, capacity_lps, problem, run
@@ -336,6 +337,22 @@ def test_lps_match_linprog_on_the_bundled_scenes(name):
             for i in idx[::4]:
                 one = (lp[0], *(a[i:i + 1] for a in lp[1:5]), lp[5])
                 _agree(solve_lps(*one, cap=np.inf), one, [0])
+
+
+@pytest.mark.parametrize("name", ["spatial_6r_pair", "hard/spatial_3arm_mixed"])
+def test_short_lp_batches_start_from_seeds_and_match_linprog(name, monkeypatch):
+    """A batch shorter than 2·LP_SEED_STRIDE (the first 101 capacity LPs of a spatial scene, as a 101-sample
+    carry gives) is seeded too (`qp.lp_seed_stride`): the seeds are solved first and at least a third of
+    the problems are certified at their bases (a regression pin: 66 and 38 of 101 here, where the optimal
+    basis changes along the motion; the others go to HiGHS after them); every problem agrees with
+    linprog alone (`_agree`)."""
+    lp = capacity_lps(name, "scaled")
+    short = (lp[0], *(a[:101] for a in lp[1:5]), lp[5])
+    sizes, run_lp = [], qp._run_lp
+    monkeypatch.setattr(qp, "_run_lp", lambda h, P, idx, *a, **k: sizes.append(len(idx)) or run_lp(h, P, idx, *a, **k))
+    batch = solve_lps(*short)
+    assert sizes[0] == len(range(0, 101, qp.lp_seed_stride(101))) and sum(sizes[1:]) <= 101 * 2 / 3, sizes
+    assert _agree(batch, short, np.arange(101)) > 0
 
 
 def test_lps_infeasible_and_unbounded_problems_match_linprog():
