@@ -31,7 +31,7 @@ from coopsim.compiled.linalg import cholesky, cholesky_solve, trace_of_inverse
 from coopsim.compiled.toolchain.jit import entry, kernel
 
 PAPER, NONSQUEEZING, MIN_ENERGY = 0, 1, 2     # the methods' rows in the pass's outputs
-ARM_CONDITION = 1e3     # the arm-by-arm minimum energy only where max_a trace(H_a)·max_a trace(H_a⁻¹) <= this
+ARM_CONDITION = 3e3     # the arm-by-arm minimum energy only where every trace(H_a)·trace(H_a⁻¹) <= this
 
 
 @kernel
@@ -270,11 +270,11 @@ def _energy_blocks(JT, ta, A, Q, span, rank_tol, Hs, Gs, hs, SK, x):
     passive: H_a = Σ_j Q_j J_j J_jᵀ over arm a's joints (k × k, Cholesky-factored in Hs[a]), hs[a] ←
     H_a⁻¹ Σ_j Q_j J_j τ_arms,j, Gs[a] ← H_a⁻¹ A_aᵀ and SK ← Σ_a A_a H_a⁻¹ A_aᵀ (Cholesky). False unless
     every H_a and SK is positive definite, A Aᵀ is certified well-conditioned,
-    rank_tol·trace(A Aᵀ)·trace((A Aᵀ)⁻¹) < 1, and the block-diagonal H = blockdiag(H_a) to ARM_CONDITION:
-    max_a trace(H_a)·max_a trace(H_a⁻¹) <= ARM_CONDITION (and < 1 / rank_tol). That bounds the condition of
-    H, hence of the reduced Hessian Zᵀ H Z of the null-space form (its eigenvalues lie in H's range); this
-    form's rounding grows with H's condition, the null-space form's with Zᵀ H Z's only, so the other
-    samples take the null-space form. x (k,) work."""
+    rank_tol·trace(A Aᵀ)·trace((A Aᵀ)⁻¹) < 1, and so is H = blockdiag(H_a):
+    rank_tol·max_a trace(H_a)·max_a trace(H_a⁻¹) < 1 (it bounds the condition of H, hence of the reduced
+    Hessian Zᵀ H Z of the null-space form: its eigenvalues lie in H's range), and every arm's
+    trace(H_a)·trace(H_a⁻¹) <= ARM_CONDITION: this form's rounding grows with the arms' conditions, the
+    null-space form's with Zᵀ H Z's only, so the other samples take the null-space form. x (k,) work."""
     n, m = JT.shape
     k, r = A.shape[0], Hs.shape[0]
     for i in range(k):                            # A Aᵀ, its certificate
@@ -303,14 +303,15 @@ def _energy_blocks(JT, ta, A, Q, span, rank_tol, Hs, Gs, hs, SK, x):
             hs[a, p] += w * ta[j]
             for q in range(p + 1):
                 Hs[a, p, q] += w * JT[j, off + q]
-    top, inv = 0.0, 0.0
+    top, inv, worst = 0.0, 0.0, 0.0
     for a in range(r):
         trace = 0.0
         for p in range(k):
             trace += Hs[a, p, p]
         if not cholesky(Hs[a], k):
             return False
-        top, inv = max(top, trace), max(inv, trace_of_inverse(Hs[a], k, x))
+        trace_inv = trace_of_inverse(Hs[a], k, x)
+        top, inv, worst = max(top, trace), max(inv, trace_inv), max(worst, trace * trace_inv)
         cholesky_solve(Hs[a], k, hs[a])
         for q in range(k):                        # Gs[a][:, q] = H_a⁻¹ (row q of A_a)
             for p in range(k):
@@ -318,7 +319,7 @@ def _energy_blocks(JT, ta, A, Q, span, rank_tol, Hs, Gs, hs, SK, x):
             cholesky_solve(Hs[a], k, x)
             for p in range(k):
                 Gs[a, p, q] = x[p]
-    if not (rank_tol * top * inv < 1.0 and top * inv <= ARM_CONDITION):
+    if not (rank_tol * top * inv < 1.0 and worst <= ARM_CONDITION):
         return False
     for i in range(k):
         for q in range(i + 1):
