@@ -373,14 +373,18 @@ def _lp_rows(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: st
     lo, hi = torque_limits(motors, prob.qd)
     act = ~passive
     JT, ta = prob.JT, prob.tau_arms
-    rows, rhs = [JT[:, act], -JT[:, act]], [hi[:, act] - ta[:, act], ta[:, act] - lo[:, act]]
+    rows, rhs = [JT[:, act] if not np.all(act) else JT], [hi[:, act] - ta[:, act], ta[:, act] - lo[:, act]]
     if internal_bound is not None:
         comp = internal_bound_components(grasp_line_frames(prob), internal_operator(prob, definition, Mstar),
                                          *internal_bound)
         bound = np.where(comp.keep, comp.bound, np.inf)
-        rows, rhs = rows + [comp.C, -comp.C], rhs + [bound, bound]
-    A = np.concatenate(rows, axis=1)
-    A_ub = np.concatenate([A, np.zeros(A.shape[:2] + (1,))], axis=2)
+        rows, rhs = rows + [comp.C], rhs + [bound, bound]
+    A_ub = np.zeros((len(JT), 2 * sum(block.shape[1] for block in rows), JT.shape[2] + 1))
+    at = 0
+    for block in rows:                            # each block's upper rows, then its lower (negated) rows
+        A_ub[:, at:at + block.shape[1], :-1] = block
+        np.negative(block, out=A_ub[:, at + block.shape[1]:at + 2 * block.shape[1], :-1])
+        at += 2 * block.shape[1]
     zero = np.zeros((len(JT), int(passive.sum()), 1))
     A_eq = np.concatenate([np.concatenate([prob.A, -y1[:, :, None]], axis=2),
                            np.concatenate([JT[:, passive], zero], axis=2)], axis=1)
