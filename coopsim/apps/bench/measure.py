@@ -83,7 +83,7 @@ class Ladders:
     startup: bool = True
     own_grid: tuple[str, ...] = OWN_GRID
     inverse_dts: tuple[float, ...] = (0.04, 0.02, 0.01, 0.005)
-    inverse_arms: tuple[int, ...] = (2, 3, 4, 6)
+    inverse_arms: tuple[int, ...] = (2, 3, 4, 6, 8)
 
 
 FULL = Ladders()
