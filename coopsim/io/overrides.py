@@ -7,8 +7,9 @@ the same one-line errors (`coopsim.io.scenario.model_from_dict`). No I/O here.
 PATH addresses a field as the error lines name it: mapping keys joined by dots, list items by a
 0-based index in brackets — `object.box.density`, `arms[1].motors.stall_torque[0]`,
 `inverse.object_motion.waypoints[2].position`. Every key and index before the last must exist in the
-data; the last key of a mapping may be new (an optional field the file leaves out: the validator then
-checks that it is one), a list index must be within the list. VALUE is YAML (`0.25`, `[0.1, 0, 0]`,
+data; the last key of a mapping may be new (an optional field or section the file leaves out, set whole:
+`inverse.optimize={control_points: 3}`; the validator then checks that it is one), a list index must be
+within the list. VALUE is YAML (`0.25`, `[0.1, 0, 0]`,
 `{position: [0.1, 0, 0]}`, `rk4`), read with the scenario file's rules (`coopsim.io.yaml_rules.parse_yaml_text`).
 """
 
@@ -142,7 +143,9 @@ def apply_overrides(data: Any, overrides: Iterable[tuple[str, Any]], where: str 
                                         f"it has no key {part!r}")
                 if part not in node and not last:
                     keys = ", ".join(str(k) for k in node) or "none"
-                    raise OverrideError(f"{where} {path}: {here} has no key {part!r} (its keys: {keys})")
+                    whole = format_path(parts[:depth + 1])
+                    raise OverrideError(f"{where} {path}: {here} has no key {part!r} (its keys: {keys}; a section "
+                                        f"the file leaves out is set whole, e.g. {whole}={{...}})")
             if last:
                 node[part] = copy.deepcopy(value)
             else:
