@@ -355,7 +355,7 @@ def _cmd_optimize(args) -> int:
                                             path_study, path_summary)
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
-                                                retime_series, retime_study, retime_summary)
+                                                retime_series, retime_study, retime_summary, with_energy_weights)
     from coopsim.report.optimum_replay import (RUN_LOG, format_replay_summary, optimum_replay, replay_run_log,
                                                replay_summary)
 
@@ -368,8 +368,8 @@ def _cmd_optimize(args) -> int:
     if args.replay and args.method == "lp":
         raise CoopsimError("--replay: the LP bound has no torque distribution between its grid points; give "
                            "--method paper, nonsqueezing or min_energy")
-    if args.weights and not (args.path and args.method == "min_energy"):
-        raise CoopsimError("--weights: the energy weights are optimised with --path and --method min_energy")
+    if args.weights and args.method != "min_energy":
+        raise CoopsimError("--weights: the energy weights are the minimum energy's; give --method min_energy")
     for name in ("duration", "payload"):
         value = getattr(args, name)
         if value is not None and not (value > 0 if name == "duration" else value >= 0):
@@ -386,7 +386,8 @@ def _cmd_optimize(args) -> int:
     with FigureWorkers() as workers:
         bar = ProgressBar(enabled=not args.json)
         study = None if not args.retime else retime_study(model, duration=args.duration, payload=args.payload,
-                                                           method=args.method, intervals=args.intervals, progress=bar)
+                                                           method=args.method, intervals=args.intervals,
+                                                           weights=args.weights, progress=bar)
         rep = optimum_replay(study, progress=bar) if args.replay else None
         free = None if not args.path else path_study(model, args.method, weights=args.weights,
                                                      duration=args.duration, progress=bar)
@@ -405,13 +406,19 @@ def _cmd_optimize(args) -> int:
             data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
         texts = {}
         if study is not None:
+            retimed = optimised_scenario(data, study.motion)
+            if study.weights is not None:
+                retimed = with_energy_weights(retimed, model, study.weights.weights)
             texts[f"{model.name}_retimed.yaml"] = scenario_text(
-                optimised_scenario(data, study.motion), f"{_display_path(args.scenario)} retimed by coopsim "
-                                                        f"optimize --retime (the {args.method} time law)")
+                retimed, f"{_display_path(args.scenario)} retimed by coopsim optimize --retime (the {args.method} "
+                         f"time law{', its energy weights' if study.weights is not None else ''})")
         if free is not None:
+            freed = path_scenario(data, free.motion)
+            if args.weights:
+                freed = with_energy_weights(freed, model, free.optimum.resolution.weights)
             texts[f"{model.name}_path.yaml"] = scenario_text(
-                path_scenario(data, free.motion), f"{_display_path(args.scenario)} with the free path of coopsim "
-                                                  f"optimize --path (the {args.method} resolution)")
+                freed, f"{_display_path(args.scenario)} with the free path of coopsim optimize --path (the "
+                       f"{args.method} resolution{', its energy weights' if args.weights else ''})")
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
                 | ({"overrides": list(args.set)} if args.set else {})}
         run_files = {} if rep is None else {RUN_LOG: replay_run_log(rep, dict(meta))}
@@ -762,7 +769,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="free path: a B-spline between the first and last waypoint poses (inverse.optimize), "
                         "optimised with its time law for --method; writes DIR/NAME_path.yaml")
     p.add_argument("--weights", action="store_true",
-                   help="with --path and --method min_energy: optimise the energy weights with the path")
+                   help="with --method min_energy: optimise the energy weights with the time law (--retime) and "
+                        "with the path (--path); the written scenarios carry them")
     p.add_argument("--payload", type=float, default=None, metavar="KG",
                    help="also the minimum time of this carried mass (kg; the payload's, or the object's without "
                         "inverse.payload)")

@@ -20,6 +20,7 @@ from coopsim.core.model import Model, ObjectMotion
 from coopsim.inverse import retime as rt
 from coopsim.inverse.path import WaypointPath, joint_path, path_grid
 from coopsim.inverse.resolutions import LINEAR_METHODS
+from coopsim.inverse.retime_weights import WeightedLaw, weights_with_law
 from coopsim.io.mcap_codec import Series
 from coopsim.report.inverse_report import Progress, _report, capacity_study
 
@@ -83,6 +84,7 @@ class RetimeStudy:
         before: the scenario's own CapacityStudy (its quintic or cubic time law).
         motion: the optimised ObjectMotion (a sampled time law).
         intervals: the grid's intervals per waypoint segment.
+        weights: the minimum energy's weights optimised with its time law (`--weights`), else None.
     """
 
     model: Model
@@ -96,10 +98,11 @@ class RetimeStudy:
     before: object
     motion: ObjectMotion
     intervals: int
+    weights: WeightedLaw | None = None
 
 
 def retime_study(model: Model, duration: float | None = None, payload: float | None = None,
-                 method: str = "min_energy", intervals: int = 50, methods=METHODS,
+                 method: str = "min_energy", intervals: int = 50, methods=METHODS, weights: bool = False,
                  progress: Progress | None = None) -> RetimeStudy:
     """The retiming study of the scenario's object path, as `coopsim optimize --retime` runs it.
 
@@ -111,6 +114,8 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
         method: the resolution (or 'lp') whose time law goes into the optimised scenario.
         intervals: grid intervals per waypoint segment.
         methods: the resolutions (and 'lp') retimed.
+        weights: optimise the minimum energy's weights Q with its time law
+            (`coopsim.inverse.retime_weights.weights_with_law`); its entry is then retimed with them.
         progress: hears the stages ik, retime and check.
 
     Returns:
@@ -135,11 +140,15 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
     fs, fpiece = path_grid(path.knots, FINE * intervals)
     fine = joint_path(model, path, fs, fpiece, guess, motion.rest_posture, _path_gain(motion))
     _report(progress, "ik", 1.0)
-    out = {}
+    out, wl = {}, None
+    field = "--duration" if duration is not None else "inverse.object_motion.waypoints"
     for i, k in enumerate(methods):
         _report(progress, "retime", i / len(methods))
-        out[k] = _method_retime(model, jp, fine, k, mode, T_max, payload,
-                                "--duration" if duration is not None else "inverse.object_motion.waypoints")
+        m = model
+        if weights and k == "min_energy":
+            wl = weights_with_law(model, jp, T_max, mode, field, joint_labels(model))
+            m = wl.model
+        out[k] = _method_retime(m, jp, fine, k, mode, T_max, payload, field)
     _report(progress, "retime", 1.0)
     _report(progress, "check", 0.0)
     before = capacity_study(model, optimise=False)
@@ -148,7 +157,7 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
     if law is None:
         raise rt.RetimeError(f"--method {method}: no time law carries the load within {T_max:g} s")
     new = rt.retimed_motion(motion, law.law)
-    return RetimeStudy(model, mode, T_max, payload, method, path, jp, out, before, new, intervals)
+    return RetimeStudy(model, mode, T_max, payload, method, path, jp, out, before, new, intervals, wl)
 
 
 def _path_gain(motion: ObjectMotion) -> float:
@@ -305,6 +314,8 @@ def retime_summary(study: RetimeStudy) -> dict:
                                                     if kk not in ("f", "certificate")})},
             "dual_certificate": _certificate_entry(use, names),
         }
+        if k == "min_energy" and study.weights is not None:
+            out_methods[k]["energy_weights"] = _weights_entry(study.weights, names)
     return {
         "scenario": m.name, "mode": study.mode,
         "mass_meaning": ("a point payload at inverse.payload.position (object frame), kg" if study.mode == "payload"
@@ -317,6 +328,14 @@ def retime_summary(study: RetimeStudy) -> dict:
                      "waypoint_times_s": study.motion.times.tolist()},
         "methods": out_methods,
     }
+
+
+def _weights_entry(wl: WeightedLaw, names: list[str]) -> dict:
+    """The optimised energy weights by joint and the heaviest load of each kept round (the first: the
+    scenario's own weights)."""
+    return {"weights": {n: float(w) for n, w in zip(names, wl.weights)},
+            "rounds": [{"mass_kg": float(mass), "weights": [float(x) for x in w]} for w, mass in wl.rounds],
+            "gain": float(wl.mass / wl.rounds[0][1])}
 
 
 def format_retime_summary(s: dict) -> str:
@@ -338,6 +357,11 @@ def format_retime_summary(s: dict) -> str:
         lines.append(f"{k:<14}{before:>12.4f}{e['after']['mass_kg']:>12.4f}{e['bare_object']['duration_s']:>12.4f}"
                      f"{e['check_grid']['max_excess']:>13.2e}{e['check_fine_grid']['max_excess']:>13.2e}  "
                      f"{e['after']['critical_motor']} at s={e['after']['critical_s']:.4g}")
+    ew = s["methods"].get("min_energy", {}).get("energy_weights")
+    if ew is not None:
+        lines.append(f"min_energy weights optimised with the law: {ew['rounds'][0]['mass_kg']:.4f} -> "
+                     f"{ew['rounds'][-1]['mass_kg']:.4f} kg in {len(ew['rounds']) - 1} rounds, Q = "
+                     + " ".join(f"{w:.3g}" for w in ew["weights"].values()))
     lines.append(f"optimised scenario: the {s['method']} time law ({s['time_law']['samples']} samples), "
                  f"waypoints at {', '.join(f'{t:.4g}' for t in s['time_law']['waypoint_times_s'])} s")
     return "\n".join(lines)
@@ -416,6 +440,25 @@ def optimised_scenario(data: dict, motion: ObjectMotion) -> dict:
     om["time_law"] = "sampled"
     om["time_law_samples"] = {"t": [float(x) for x in motion.samples.t], "s": [float(x) for x in motion.samples.s],
                               "rate": [float(x) for x in motion.samples.rate]}
+    return out
+
+
+def with_energy_weights(data: dict, model: Model, weights) -> dict:
+    """The scenario's data with every arm's `energy_weights` set from the stacked weights.
+
+    Args:
+        data: the scenario file's data.
+        model: the Model (its arms' joint counts, in stacking order).
+        weights: (n_total,) the energy weights Q, arm after arm.
+
+    Returns:
+        dict: a copy; arms[i].energy_weights the arm's slice.
+    """
+    out = copy.deepcopy(data)
+    start = 0
+    for arm, a in zip(out["arms"], model.arms):
+        arm["energy_weights"] = [float(w) for w in weights[start:start + a.n]]
+        start += a.n
     return out
 
 

@@ -5,7 +5,6 @@ nothing written."""
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
@@ -98,4 +97,31 @@ def test_replay_without_retime_or_of_the_lp_bound_is_refused(workdir, args, line
     """One line naming --replay, exit 2, nothing written."""
     out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
     assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
+    assert not (workdir / "res").exists()
+
+
+def test_weights_with_the_time_law_are_written_and_carried(workdir):
+    """--retime --weights: the minimum energy's weights optimised with its law carry more than equal weights,
+    the written scenario carries them arm by arm, and `coopsim capacity` of it (its own weights, the sampled
+    law) finds the optimum up to the law's excess between grid points (within 2 %, as above)."""
+    out = run_cli("optimize", CARRY, "--retime", "--weights", "--intervals", "6", "--json", "--out", "res",
+                  cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    e = json.loads(out.stdout)["methods"]["min_energy"]
+    ew = e["energy_weights"]
+    assert ew["rounds"][0]["mass_kg"] < e["after"]["mass_kg"] == ew["rounds"][-1]["mass_kg"]
+    data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
+    written = [w for arm in data["arms"] for w in arm["energy_weights"]]
+    assert written == list(ew["weights"].values())
+    cap = run_cli("capacity", "res/paper_planar_2x3_carry_retimed.yaml", "--no-optimise", "--json", "--out", "cap",
+                  cwd=workdir)
+    assert cap.returncode == 0, cap.stderr
+    c = json.loads(cap.stdout)["capacity"]["payload"]["min_energy"]["mass_kg"]
+    assert c == pytest.approx(e["after"]["mass_kg"], rel=0.02)
+
+
+def test_weights_of_another_resolution_are_refused(workdir):
+    out = run_cli("optimize", CARRY, "--retime", "--weights", "--method", "paper", "--out", "res", cwd=workdir)
+    assert out.returncode == 2
+    assert out.stderr.startswith("coopsim: error: --weights: the energy weights are the minimum energy's")
     assert not (workdir / "res").exists()

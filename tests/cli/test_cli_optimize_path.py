@@ -45,7 +45,8 @@ def test_optimize_path_writes_one_set(workdir):
 
 @pytest.mark.parametrize("args,optimize,message", [
     (["--path", "--method", "lp"], {}, "coopsim: error: --method lp: --path optimises a resolution's path"),
-    (["--retime", "--weights"], {}, "coopsim: error: --weights: the energy weights are optimised with --path"),
+    (["--path", "--weights", "--method", "nonsqueezing"], {},
+     "coopsim: error: --weights: the energy weights are the minimum energy's; give --method min_energy"),
     (["--path", "--method", "paper"], {"max_iterations": 1},
      "coopsim: error: optimize --path: the optimiser did not converge (SLSQP status 9: Iteration limit reached)"),
 ])
@@ -54,3 +55,14 @@ def test_bad_input_or_no_convergence_is_one_line_and_writes_nothing(workdir, arg
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1 and out.stderr.startswith(message)
     assert not (workdir / "res").exists()
+
+
+def test_weights_with_the_free_path_are_written_into_its_scenario(workdir):
+    """--path --weights (min energy): the path entry's weights are the optimised ones (not all equal) and the
+    written scenario carries them arm by arm, so `coopsim inverse`/`capacity` of it use the optimum's Q."""
+    out = run_cli("optimize", _scenario(workdir), "--path", "--weights", "--json", "--out", "res", cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    w = json.loads(out.stdout)["path"]["weights"]
+    assert max(w) > 1.01 * min(w)
+    m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
+    assert m.motors.energy_weight.tolist() == w
