@@ -294,6 +294,11 @@ def _f(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
+def _pull(motion) -> float:
+    """The Motion's pull per unit path parameter: rest_gain × the duration for rest_pull 'path', else 0."""
+    return 0.0 if motion.rest_pull == "time" else float(motion.rest_gain * (motion.times[-1] - motion.times[0]))
+
+
 def _w(x, dtype=np.float64) -> np.ndarray:
     """x as a writable C-contiguous array of dtype (a copy only where x is not one already): a read-only
     argument would make numba compile an entry again, for the read-only signature."""
@@ -844,7 +849,7 @@ def object_motion_ik(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
                               else (motion.times[:2], np.zeros(2), np.zeros(2)))
     mo = object_motion.Motion(_f(motion.times).copy(), _f(motion.positions).copy(), _f(motion.rotations).copy(),
                               _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain),
-                              _f(law_t).copy(), _f(law_s).copy(), _f(law_rate).copy())
+                              _f(law_t).copy(), _f(law_s).copy(), _f(law_rate).copy(), _pull(motion))
     red = np.array(redundant, dtype=np.int64)
     square = np.array([m for m in range(len(P.dof) - 1) if m not in redundant], dtype=np.int64)
     idx = np.array([j for m in redundant for j in range(P.dof[m], P.dof[m + 1])], dtype=np.int64)

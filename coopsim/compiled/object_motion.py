@@ -55,6 +55,9 @@ class Motion(NamedTuple):
             otherwise).
         law_s: (K,) its path parameter σ at the samples (waypoint i at σ = i/(w − 1)).
         law_rate: (K,) 1/s, its σ̇ at the samples (σ̈ constant between them).
+        pull: 1/s·s, the null-space pull per unit of the path parameter σ (rest_pull 'path': rest_gain × the
+            motion's duration; the gain at time t is then pull · σ̇); 0: the constant gain `gain` (rest_pull
+            'time').
     """
 
     times: np.ndarray
@@ -67,6 +70,7 @@ class Motion(NamedTuple):
     law_t: np.ndarray
     law_s: np.ndarray
     law_rate: np.ndarray
+    pull: float
 
 
 class Buffers(NamedTuple):
@@ -85,6 +89,7 @@ class Buffers(NamedTuple):
         x: (n_red,) the redundant arms' coordinates, one after the other (a dense-output value).
         info: (3,) the square solve's diagnostics (`ik.solve`).
         det: (r,) det S J of each square arm at the previous sample.
+        law: (2,) [σ̇ 1/s, σ̈ 1/s²] of the whole path's parameter σ ∈ [0, 1] at the object's time.
     """
 
     y: np.ndarray
@@ -104,6 +109,7 @@ class Buffers(NamedTuple):
     x: np.ndarray
     info: np.ndarray
     det: np.ndarray
+    law: np.ndarray
 
 
 def buffers(n: int, n_red: int, r: int) -> Buffers:
@@ -119,7 +125,7 @@ def buffers(n: int, n_red: int, r: int) -> Buffers:
     """
     z = np.zeros
     return Buffers(z(n), z(n), z(n), z(3), z((3, 3)), z(6), z(6), z((3, 3)), z(3), z(3), z((3, 3)), z(6), z(6),
-                   z(6), z(n_red), z(3), z(r))
+                   z(6), z(n_red), z(3), z(r), z(2))
 
 
 @kernel
@@ -175,7 +181,8 @@ def object_state(mo, t, B):
     Args:
         mo: the Motion.
         t: s, the time.
-        B: the Buffers: pc (m, relative to mo.origin), Ro, tw, ac written (world axes); E, v scratch.
+        B: the Buffers: pc (m, relative to mo.origin), Ro, tw, ac written (world axes), law [σ̇, σ̈]; E, v
+            scratch.
     """
     ts, P, Rs = mo.times, mo.positions, mo.rotations
     w = len(ts)
@@ -183,6 +190,7 @@ def object_state(mo, t, B):
     i = w - 2 if t >= ts[w - 2] else bisect(ts, 0, w - 2, t)
     T = ts[i + 1] - ts[i]
     s, ds, dds = segment_law(mo, i, t, T)
+    B.law[0], B.law[1] = ds / (T * (w - 1)), dds / (T * T * (w - 1))
     Ra, Rb, E, phi = Rs[i], Rs[i + 1], B.E, B.v
     for a in range(3):
         for b in range(3):
@@ -324,9 +332,10 @@ def ee_jacobian_rate(P, W, m, qd, dJ):
 def redundant_rates(P, W, m, S, q, mo, B, with_acc, qd, qdd):
     """θ̇ (and θ̈) of redundant arm m at q for the end-effector target B.tw_m, B.ac_m (least |θ̇ − z|).
 
-    As `coopsim.inverse.trajectory.redundant_rates`: A = S J_m, z = gain (θ_rest − θ), AAᵀλ = S v_EE − Az,
-    θ̇ = z + Aᵀλ; with_acc: Ȧ = S J̇_m, ż = −gain θ̇, AAᵀλ̇ = S a_EE − Ȧθ̇ − Aż − A Ȧᵀλ,
-    θ̈ = ż + Ȧᵀλ + Aᵀλ̇.
+    As `coopsim.inverse.trajectory.redundant_rates`: A = S J_m, z = g (θ_rest − θ), AAᵀλ = S v_EE − Az,
+    θ̇ = z + Aᵀλ; with_acc: Ȧ = S J̇_m, ż = ġ (θ_rest − θ) − g θ̇, AAᵀλ̇ = S a_EE − Ȧθ̇ − Aż − A Ȧᵀλ,
+    θ̈ = ż + Ȧᵀλ + Aᵀλ̇; g = mo.gain, ġ = 0, or with a pull per unit path g = pull σ̇, ġ = pull σ̈
+    (`coopsim.inverse.trajectory.pull_gain`).
 
     Args:
         P: the compiled model (PackedModel StructRef, read only).
@@ -334,8 +343,8 @@ def redundant_rates(P, W, m, S, q, mo, B, with_acc, qd, qdd):
         m: arm index, 0-based (n_m > k joints).
         S: (k, 6) row selector.
         q: (N,) rad or m, stacked joint coordinates (arm m's rows read).
-        mo: the Motion (rest posture and gain).
-        B: the Buffers: tw_m and ac_m read (`grasp_target`).
+        mo: the Motion (rest posture, gain and pull).
+        B: the Buffers: tw_m and ac_m read (`grasp_target`), law (`object_state`).
         with_acc: also θ̈ and σ_min/σ_max of A.
         qd, qdd: (N,) written in arm m's rows: θ̇ (rad/s, m/s), and with with_acc θ̈ (rad/s², m/s²).
 
@@ -348,8 +357,9 @@ def redundant_rates(P, W, m, S, q, mo, B, with_acc, qd, qdd):
     A = rows_jacobian(P, W, m, S)
     AAt = gram(A, k, n)
     z, b, lam = np.empty(n), np.empty(k), np.empty(k)
+    g, gd = (mo.gain, 0.0) if mo.pull == 0 else (mo.pull * B.law[0], mo.pull * B.law[1])
     for j in range(n):
-        z[j] = mo.gain * (mo.rest[o + j] - q[o + j])
+        z[j] = g * (mo.rest[o + j] - q[o + j])
     rows_of(S, B.tw_m, b)
     for i in range(k):
         v = 0.0
@@ -376,7 +386,7 @@ def redundant_rates(P, W, m, S, q, mo, B, with_acc, qd, qdd):
         v1 = v2 = v3 = 0.0
         for j in range(n):
             v1 += dA[i, j] * qd[o + j]
-            v2 += A[i, j] * (-mo.gain * qd[o + j])
+            v2 += A[i, j] * (gd * (mo.rest[o + j] - q[o + j]) - g * qd[o + j])
             s = 0.0
             for c in range(k):
                 s += dA[c, j] * lam[c]
@@ -389,7 +399,7 @@ def redundant_rates(P, W, m, S, q, mo, B, with_acc, qd, qdd):
         for i in range(k):
             v1 += dA[i, j] * lam[i]
             v2 += A[i, j] * dlam[i]
-        qdd[o + j] = -mo.gain * qd[o + j] + v1 + v2
+        qdd[o + j] = gd * (mo.rest[o + j] - q[o + j]) - g * qd[o + j] + v1 + v2
     At = np.empty((n, k))
     for i in range(k):
         for j in range(n):

@@ -544,6 +544,10 @@ class ObjectMotion:
         rest_posture: (n_total,) rad, the redundant arms' null-space target (None: the scenario's initial
             angles).
         rest_gain: 1/s, the gain of the null-space pull toward rest_posture.
+        rest_pull: 'time': the pull z = rest_gain (θ_rest − θ) per second; 'path': per unit of the path
+            parameter σ ∈ [0, 1], z = rest_gain · T · σ̇ (θ_rest − θ) (T the motion's duration; the same
+            pull at a uniform σ̇ = 1/T), so the redundant arms' joint path θ(σ) does not depend on the time
+            law (the joint path `coopsim optimize` retimes).
         samples: the SampledTimeLaw of time_law 'sampled' (None otherwise).
         path: the free-form path between the two waypoints (then there are exactly two, and the time law
             runs once over their span); None: straight segments between the waypoints.
@@ -559,6 +563,7 @@ class ObjectMotion:
     rest_gain: float = 1.0
     samples: SampledTimeLaw | None = None
     path: PathSpline | None = None
+    rest_pull: str = "time"
 
 
 @dataclass(frozen=True)

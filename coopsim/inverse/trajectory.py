@@ -195,6 +195,52 @@ def sampled_time_law_at(law: SampledTimeLaw, t: float) -> tuple[float, float, fl
     return law.s[k] + law.rate[k] * tau + 0.5 * acc * tau * tau, law.rate[k] + acc * tau, acc
 
 
+def segment_at(motion: ObjectMotion, t: float) -> tuple[int, float, float, float, float]:
+    """The waypoint segment at time t (clamped to the span) and its law: (i, T, s, ds/du, d²s/du²).
+
+    Segment i runs from waypoint i to i + 1 over T s, u = (t − t_i)/T; s(u) is the normalised law
+    (`time_law`), or of a sampled law σ(t) (`sampled_time_law_at`, waypoint i at σ = i/(w − 1)):
+    s = (w − 1)σ − i, ds/du = (w − 1)σ̇T, d²s/du² = (w − 1)σ̈T².
+
+    Args:
+        motion: the ObjectMotion.
+        t: s, the time.
+
+    Returns:
+        tuple: i, T (s), s, ds/du and d²s/du² (dimensionless).
+    """
+    ts = motion.times
+    t = min(max(float(t), ts[0]), ts[-1])
+    i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
+    T = ts[i + 1] - ts[i]
+    if motion.time_law == "sampled":
+        sigma, rate, accel = sampled_time_law_at(motion.samples, t)
+        w1 = len(ts) - 1
+        return i, T, w1 * sigma - i, w1 * rate * T, w1 * accel * T**2
+    return (i, T, *time_law(motion.time_law, (t - ts[i]) / T))
+
+
+def pull_gain(motion: ObjectMotion, t: float) -> tuple[float, float]:
+    """The redundant arms' null-space pull gain at time t and its rate: (g 1/s, ġ 1/s²), z = g (θ_rest − θ).
+
+    rest_pull 'time': (rest_gain, 0). 'path': g = rest_gain · T · σ̇, ġ = rest_gain · T · σ̈, with σ the
+    whole path's parameter (σ̇ = (ds/du)/((w − 1) T_i) on segment i, `segment_at`) and T the motion's
+    duration: the pull per unit σ is rest_gain · T whatever the time law.
+
+    Args:
+        motion: the ObjectMotion.
+        t: s, the time.
+
+    Returns:
+        tuple[float, float]: g and ġ.
+    """
+    if motion.rest_pull == "time":
+        return motion.rest_gain, 0.0
+    i, T, _, ds, dds = segment_at(motion, t)
+    k = motion.rest_gain * float(motion.times[-1] - motion.times[0]) / (len(motion.times) - 1)
+    return k * ds / T, k * dds / T**2
+
+
 def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None = None):
     """Object state at time t (clamped to the waypoint span): p_C, R_o, twist [v_C; ω] and acceleration [a_C; ω̇].
 
@@ -215,16 +261,7 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
         tuple: p_C (3,) m, relative to `origin`, world axes; R_o (3, 3) world ← object; twist [v_C; ω]
         (6,) [m/s; rad/s] and acceleration [a_C; ω̇] (6,) [m/s²; rad/s²], world axes.
     """
-    ts = motion.times
-    t = min(max(float(t), ts[0]), ts[-1])
-    i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
-    T = ts[i + 1] - ts[i]
-    if motion.time_law == "sampled":
-        sigma, rate, accel = sampled_time_law_at(motion.samples, t)
-        w1 = len(ts) - 1
-        s, ds, dds = w1 * sigma - i, w1 * rate * T, w1 * accel * T**2
-    else:
-        s, ds, dds = time_law(motion.time_law, (t - ts[i]) / T)
+    i, T, s, ds, dds = segment_at(motion, t)
     if motion.path is not None:
         return spline_state(motion, s, ds / T, dds / T**2, origin)
     dp = motion.positions[i + 1] - motion.positions[i]
@@ -548,14 +585,14 @@ def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
 # ------------------------------------------------------------------------------------------------
 
 def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarray, acc: np.ndarray | None,
-                    rest: np.ndarray, gain: float):
+                    rest: np.ndarray, gain: float, gain_rate: float = 0.0):
     """Redundancy resolution of one arm with n joints for k < n rows S: θ̇ (and θ̈) of least |θ̇ − z|.
 
     With A = S J_m (k × n) of full row rank: θ̇ = A⁺ S v_EE + (I − A⁺A) z, z = gain (θ_rest − θ),
     A⁺ = Aᵀ(AAᵀ)⁻¹ — the joint velocity nearest z (least |θ̇ − z|) among those that move the end-effector
     as prescribed, i.e. least |θ̇| plus a null-space pull toward the rest posture that does not move the
     end-effector. Written θ̇ = z + Aᵀλ, AAᵀλ = b − Az (b = S v_EE). Its exact time derivative:
-    θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = −gain θ̇, AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ (so A θ̈ = S a_EE − Ȧθ̇, the
+    θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = ġ (θ_rest − θ) − gain θ̇ (ġ = gain_rate), AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ (so A θ̈ = S a_EE − Ȧθ̇, the
     differential kinematics of the square arms); Ȧ = S J̇ (`point_jacobian_rate`).
 
     Args:
@@ -567,6 +604,7 @@ def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarr
             computed.
         rest: (n,) rad (m), the rest posture θ_rest.
         gain: 1/s, the gain of the null-space pull toward the rest posture.
+        gain_rate: 1/s², its time derivative (`pull_gain`; 0 for a constant gain).
 
     Returns:
         tuple: θ̇ (n,) rad/s (m/s); θ̈ (n,) rad/s² (m/s²), or None when acc is None; A = S J_m (k, n).
@@ -580,7 +618,7 @@ def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarr
     if acc is None:
         return qd, None, A
     dA = S @ point_jacobian_rate(pose, pose.p_ee_rel, qd)
-    dz = -gain * qd
+    dz = gain_rate * (rest - q) - gain * qd
     dlam = np.linalg.solve(AAt, S @ acc - dA @ qd - A @ dz - A @ (dA.T @ lam))
     return qd, dz + dA.T @ lam + A.T @ dlam, A
 
@@ -664,10 +702,11 @@ def redundant_motion(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
 
     def rates(t, y, tg, acc=False):
         out = []
+        gain, gain_rate = pull_gain(motion, t)
         for m, sl in zip(arms, slices):
             y_m = y[sl]
             rd, rdd, A = redundant_rates(model.arms[m], S, y_m, tg[m][2], tg[m][3] if acc else None,
-                                         rest[sl], motion.rest_gain)
+                                         rest[sl], gain, gain_rate)
             sv = np.linalg.svd(A, compute_uv=False) if acc else np.ones(1)
             if not sv[-1] >= sing_tol * sv[0]:
                 raise _failure(model, "singular_redundant", m, t, np.zeros(3), sv[-1] / sv[0])

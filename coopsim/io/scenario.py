@@ -492,6 +492,7 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
         guess, rest = (_joint_values(om, key, *joints) if om.has(key) or om.has(f"{key}_deg") else None
                        for key in ("initial_guess", "rest_posture"))
         gain = om.number("rest_gain", 1.0, nonneg=True)
+        pull = om.string("rest_pull", ("time", "path"), "time")
         times, pos, rot = [], [], []
         for wp in om.items("waypoints", min_len=2):
             times.append(wp.number("time", nonneg=True))
@@ -504,7 +505,7 @@ def _inverse(sec: Section | None, r: int, joints: "_Joints") -> InverseSettings:
         path = _object_path(om.section("path", default=None), len(times), om)
         om.done()
         motion = ObjectMotion(np.array(times), np.array(pos), np.array(rot), law, dt, guess, rest, gain, samples,
-                              path)
+                              path, pull)
     if trajectory == "object_motion" and motion is None:
         sec.fail("object_motion", "trajectory: object_motion needs an object_motion section")
     masses = sec.array("nonsqueezing_masses", (r,), positive=True) if sec.has("nonsqueezing_masses") else None

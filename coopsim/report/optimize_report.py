@@ -430,14 +430,15 @@ def optimised_scenario(data: dict, motion: ObjectMotion) -> dict:
         motion: the optimised ObjectMotion (time law 'sampled').
 
     Returns:
-        dict: a copy; inverse.object_motion's waypoints carry the new times, time_law 'sampled' and
-        time_law_samples {t, s, rate}.
+        dict: a copy; inverse.object_motion's waypoints carry the new times, time_law 'sampled',
+        rest_pull (the motion's: 'path' for a retimed one) and time_law_samples {t, s, rate}.
     """
     out = copy.deepcopy(data)
     om = out["inverse"]["object_motion"]
     for wp, t in zip(om["waypoints"], motion.times):
         wp["time"] = float(t)
     om["time_law"] = "sampled"
+    om["rest_pull"] = motion.rest_pull
     om["time_law_samples"] = {"t": [float(x) for x in motion.samples.t], "s": [float(x) for x in motion.samples.s],
                               "rate": [float(x) for x in motion.samples.rate]}
     return out

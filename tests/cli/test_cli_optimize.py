@@ -47,6 +47,7 @@ def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
     assert {"/optimize/min_energy/law", "/optimize/min_energy/torque", "/optimize/lp/law"} <= set(log.topics)
     data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
     assert data["inverse"]["object_motion"]["time_law"] == "sampled"
+    assert data["inverse"]["object_motion"]["rest_pull"] == "path"            # the joint path retimed
     cap = run_cli("capacity", "res/paper_planar_2x3_carry_retimed.yaml", "--no-optimise", "--json", "--out", "cap",
                   cwd=workdir)
     assert cap.returncode == 0, cap.stderr

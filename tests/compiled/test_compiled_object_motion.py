@@ -169,3 +169,13 @@ def test_compiled_pass_equals_the_reference_on_a_sampled_time_law(name):
     law = _trapezoid_law(mo.times)
     assert law.s[-1] == pytest.approx(1.0, abs=1e-12)
     _assert_engines_agree(m, replace(mo, time_law="sampled", samples=law), ode_tol=1e-11)
+
+
+@pytest.mark.skipif(robots_folder() is None, reason="example-robot-data is not installed")
+def test_compiled_pass_equals_the_reference_with_a_pull_per_unit_path():
+    """rest_pull 'path' (the gain rest_gain·T·σ̇ and its rate σ̈ in θ̈) on the redundant Panda carry along a
+    sampled law, at 0.25 s samples (tolerance as the sampled law's above)."""
+    m = model("robots/panda_ceiling_carry")
+    mo = m.inverse.object_motion
+    mo = replace(mo, rest_pull="path", time_law="sampled", samples=_trapezoid_law(mo.times), output_dt=0.25)
+    _assert_engines_agree(m, mo, ode_tol=1e-11)

@@ -178,3 +178,33 @@ def test_joint_limit_violations_name_arm_joint_and_time():
     assert "arm 2 joint 2 at 1.25 rad is outside its range [0.9, 1.1] rad" in w.message()
     assert joint_limits(m, t, q) == []
 
+
+
+@needs_robots
+def test_a_pull_per_unit_path_gives_the_joint_path_whatever_the_time_law():
+    """rest_pull 'path': the Panda carry's joint motion along its quintic law is the joint path θ(σ) that
+    `coopsim.inverse.path.joint_path` integrates in σ (its own DOP853 in s, gain rest_gain·T per unit σ),
+    at σ(t) of every sample, within 1e-9 rad (both ODEs at rtol 1e-12 over 3 s, the conversion between
+    them ~1e-11); the time pull's motion leaves that path by more than 1e-4 rad (what this test tells
+    apart); a law twice as slow with half the gain keeps the path."""
+    from coopsim.inverse.path import WaypointPath, joint_path
+    from coopsim.inverse.trajectory import segment_at
+
+    m = model(CARRY)
+    mo = replace(m.inverse.object_motion, rest_pull="path", output_dt=0.25)
+    span = float(mo.times[-1] - mo.times[0])
+    slow = replace(mo, times=mo.times[0] + 2 * (mo.times - mo.times[0]), rest_gain=mo.rest_gain / 2)
+    w1 = len(mo.times) - 1
+
+    def on_path(motion):
+        traj = object_motion_trajectory(m, motion)
+        seg = [segment_at(motion, t) for t in traj.t]
+        piece = np.array([i for i, *_ in seg])                 # a waypoint's sample: the segment it starts
+        sigma = np.array([(i + s) / w1 for i, _, s, _, _ in seg])
+        jp = joint_path(m, WaypointPath.of(motion), sigma, piece, m.q0 if mo.initial_guess is None
+                        else mo.initial_guess, mo.rest_posture, mo.rest_gain * span)
+        return np.max(np.abs(traj.q - jp.q))
+
+    assert on_path(mo) <= 1e-9
+    assert on_path(slow) <= 1e-9
+    assert on_path(replace(mo, rest_pull="time")) > 1e-4

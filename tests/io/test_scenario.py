@@ -146,6 +146,7 @@ PATH_CASES = [
     (mutated(CARRY, ["inverse", "optimize"], {"manipulability_margin": 1.0}),
      r"inverse\.optimize\.manipulability_margin: must be below 1"),
     (mutated(CARRY, ["inverse", "optimize"], {"grid": 3}), r"inverse\.optimize\.grid: unknown field"),
+    (mutated(CARRY, OM + ["rest_pull"], "speed"), r"inverse\.object_motion\.rest_pull: must be one of time, path"),
 ]
 
 
@@ -175,3 +176,9 @@ def test_a_sampled_time_law_is_read_and_checked():
     with pytest.raises(ScenarioError, match=r"time_law_samples\.t: must increase strictly from the first "
                                             r"waypoint's time 0 s to the last's 5 s"):
         model_from_dict(bad, where="s.yaml")
+
+
+def test_the_rest_pull_is_read():
+    assert model_from_dict(CARRY, where="s.yaml").inverse.object_motion.rest_pull == "time"
+    data = mutated(CARRY, OM + ["rest_pull"], "path")
+    assert model_from_dict(data, where="s.yaml").inverse.object_motion.rest_pull == "path"
