@@ -5,6 +5,7 @@ the internal wrench and object stress, and the dynamic load carrying capacity.
     path.py           the geometric object path p(s), R(s) and the closed-chain joint path θ(s) along it
     retime.py         fixed path, free timing: the minimum-time law of a payload, the heaviest payload in a
                       duration (TOPP-RA reachability and one LP over the grid; eq. 36 lines exact)
+    retime_weights.py the minimum energy's weights Q optimised with its time law, in turn
     problem.py        the inverse-dynamics problem along a trajectory (eqs. 28–32) and its result
     distributions.py  the redundancy resolutions' kernels: paper W⁺, non-squeezing, minimum energy
                       (eqs. 33–35), bounded; the internal wrench
