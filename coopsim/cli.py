@@ -356,15 +356,13 @@ def _cmd_optimize(args) -> int:
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
                                                 retime_series, retime_study, retime_summary, with_energy_weights)
-    from coopsim.report.optimum_replay import (RUN_LOG, format_replay_summary, optimum_replay, replay_run_log,
+    from coopsim.report.optimum_replay import (format_replay_summary, optimum_replay, path_replay, replay_run_log,
                                                replay_summary)
 
     if not (args.retime or args.path):
         raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
     if args.path and args.method == "lp":
         raise CoopsimError("--method lp: --path optimises a resolution's path (paper, nonsqueezing, min_energy)")
-    if args.replay and not args.retime:
-        raise CoopsimError("--replay: replays the retimed optimum; give it with --retime")
     if args.replay and args.method == "lp":
         raise CoopsimError("--replay: the LP bound has no torque distribution between its grid points; give "
                            "--method paper, nonsqueezing or min_energy")
@@ -391,14 +389,18 @@ def _cmd_optimize(args) -> int:
         rep = optimum_replay(study, progress=bar) if args.replay else None
         free = None if not args.path else path_study(model, args.method, weights=args.weights,
                                                      duration=args.duration, progress=bar)
-        bar.close()
         if free is not None and not free.optimum.best.success:
+            bar.close()
             best = free.optimum.best
             raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
                                         f"{best.message}); nothing written")
+        free_rep = path_replay(free, progress=bar) if args.replay and free is not None else None
+        bar.close()
         summary = retime_summary(study) if study is not None else {"scenario": model.name}
         if free is not None:
             summary["path"] = path_summary(free)
+        if free_rep is not None:
+            summary["path"]["replay"] = replay_summary(free_rep)
         if rep is not None:
             summary["replay"] = replay_summary(rep)
         data = load_yaml(Path(args.scenario))
@@ -421,7 +423,7 @@ def _cmd_optimize(args) -> int:
                        f"{args.method} resolution{', its energy weights' if args.weights else ''})")
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
                 | ({"overrides": list(args.set)} if args.set else {})}
-        run_files = {} if rep is None else {RUN_LOG: replay_run_log(rep, dict(meta))}
+        run_files = {r.log: replay_run_log(r, dict(meta)) for r in (rep, free_rep) if r is not None}
         meta |= retime_metadata(summary) if study is not None else {}
         meta |= path_metadata(summary["path"]) if free is not None else {}
         streams = (retime_series(study) if study is not None else []) + (path_series(free) if free is not None else [])
@@ -435,8 +437,9 @@ def _cmd_optimize(args) -> int:
             summary["optimised_scenarios"] = [str(out / n) for n in texts]
             if study is not None:
                 summary["optimised_scenario"] = str(out / f"{model.name}_retimed.yaml")
-            if rep is not None:
-                summary["replay"]["log"] = str(out / RUN_LOG)
+            for entry in (summary.get("replay"), summary.get("path", {}).get("replay")):
+                if entry is not None:
+                    entry["log"] = str(out / entry["log"])
             return _summary_text(summary, log_path, plots, out / "optimize.json")
 
         def also(stage, log):
@@ -449,7 +452,8 @@ def _cmd_optimize(args) -> int:
                                      summarize, also=also)
     text = "\n".join(([format_retime_summary(summary)] if study is not None else [])
                      + ([format_replay_summary(summary["replay"])] if rep is not None else [])
-                     + ([format_path_summary(summary["path"])] if free is not None else []))
+                     + ([format_path_summary(summary["path"])] if free is not None else [])
+                     + ([format_replay_summary(summary["path"]["replay"])] if free_rep is not None else []))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           text + f"\nwrote {', '.join(str(out / n) for n in [*texts, *run_files])}, {log_path}, {out / 'optimize.json'} and "
                  f"{len(plots)} plots in {out}")
@@ -781,9 +785,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "optimises (default min_energy)")
     p.add_argument("--intervals", type=int, default=50, help="grid intervals per waypoint segment (default 50)")
     p.add_argument("--replay", action="store_true",
-                   help="with --retime: replay the optimum's torques open loop, native and MuJoCo twin, against the "
-                        "scenario's thresholds (optimize.json 'replay'); writes DIR/optimum_run.mcap, a run log "
-                        "for coopsim animate")
+                   help="replay the optimum's torques open loop, native and MuJoCo twin, against the scenario's "
+                        "thresholds: with --retime the retimed law (optimize.json 'replay', DIR/optimum_run.mcap), "
+                        "with --path the free path (its 'replay', DIR/optimum_path_run.mcap), run logs for "
+                        "coopsim animate")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)

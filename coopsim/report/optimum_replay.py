@@ -1,7 +1,8 @@
-"""The optimum of `coopsim optimize --retime --replay` replayed through the forward dynamics, native and
-MuJoCo twin, open loop.
+"""The optimum of `coopsim optimize --replay` replayed through the forward dynamics, native and MuJoCo twin,
+open loop: the retimed fixed path (`--retime`) and the free path (`--path`) alike.
 
-    the optimised scenario's time law (the asked payload's, else the heaviest load's) and its load
+    the optimised scenario's motion (the retimed path's time law, the asked payload's else the heaviest
+      load's; or the free path's B-spline and sampled law) and its load
       → the joint path sampled evenly over the law's duration (the closed-chain IK of the retimed motion)
       → the resolution's torques with the load carried as one rigid body, tabulated at the native
         integrator's stage times (`coopsim.report.path_report.carried_replay`)
@@ -16,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from coopsim.core.model import Model, TorqueTable
+from coopsim.core.model import Model, ObjectMotion, TorqueTable
 from coopsim.forward.simulate import SimResult
 from coopsim.inverse import retime as rt
 from coopsim.inverse.problem import Resolution
@@ -26,11 +27,12 @@ from coopsim.inverse.trajectory import JointTrajectory, object_motion_trajectory
 from coopsim.io.log import run_log
 from coopsim.report.inverse_report import Progress, _report
 from coopsim.report.optimize_report import RetimeStudy, with_motion
-from coopsim.report.path_report import carried_replay
+from coopsim.report.path_report import PathStudy, carried_replay
 from coopsim.twin.harness import CrossValidation, cross_validate
 from coopsim.twin.weld import twin_step
 
-RUN_LOG = "optimum_run.mcap"       # the replay's run log in the optimize output set
+RUN_LOG = "optimum_run.mcap"            # the retimed optimum's run log in the optimize output set
+PATH_RUN_LOG = "optimum_path_run.mcap"  # the free path's
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +40,7 @@ class OptimumReplay:
     """The optimum replayed open loop: the native run against the optimised joint path, the twin against it.
 
     Attributes:
+        source: 'retimed' (the fixed path retimed, `--retime`) or 'free_path' (`--path`).
         method: the resolution whose torques are replayed (the optimised scenario's).
         mode: 'payload' (mass: a point payload's) or 'scaled' (mass: the whole object's).
         mass: kg, the load carried.
@@ -46,8 +49,10 @@ class OptimumReplay:
         line_excess: the largest excess of a replayed torque over its motor line at the samples, relative
             to τ_s (≤ 0: within).
         cross: the CrossValidation of the twin against the native replay (scenario thresholds).
+        log: the run log's file name in the output set.
     """
 
+    source: str
     method: str
     mode: str
     mass: float
@@ -55,20 +60,18 @@ class OptimumReplay:
     native: Replay
     line_excess: float
     cross: CrossValidation
+    log: str = RUN_LOG
 
 
 def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> OptimumReplay:
-    """Replay the study's optimum (the law the optimised scenario carries) native and in the MuJoCo twin.
-
-    The samples are spaced evenly at the motion's output_dt shortened so that a whole number of them spans
-    the law's duration (the twin's steps must divide every interval).
+    """Replay the retiming study's optimum (the law the optimised scenario carries) native and in the twin.
 
     Args:
         study: the RetimeStudy (method a linear resolution).
         progress: hears the stages replay (the IK and native run) and mujoco.
 
     Returns:
-        OptimumReplay.
+        OptimumReplay (`motion_replay` of the study's motion at its law's mass).
 
     Raises:
         coopsim.inverse.retime.RetimeError: the method is the LP bound (no distribution between grid points)
@@ -77,35 +80,90 @@ def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> Opti
     if study.method == rt.LP_BOUND:
         raise rt.RetimeError("--replay: the LP bound has no torque distribution between its grid points; "
                              "give --method paper, nonsqueezing or min_energy")
-    r = study.methods[study.method].law_of
-    motion = study.motion
+    return motion_replay(study.model, study.motion, resolution_for(study.model, study.method), study.mode,
+                         study.methods[study.method].law_of.mass, "retimed", progress)
+
+
+def path_replay(study: PathStudy, progress: Progress | None = None) -> OptimumReplay:
+    """Replay the free-path study's optimum (the written scenario's B-spline path and law) native and in the twin.
+
+    The load is the retimed stage's payload (without that stage: the first stage's capacity on the
+    scenario's grid), carried with the optimised resolution (its weights, with `--weights`).
+
+    Args:
+        study: the PathStudy.
+        progress: hears the stages replay and mujoco.
+
+    Returns:
+        OptimumReplay (`motion_replay`, source 'free_path', log PATH_RUN_LOG).
+
+    Raises:
+        coopsim.inverse.retime.RetimeError: the resolution has no torques somewhere along the law.
+    """
+    o = study.optimum
+    mass = o.retimed.mass if o.retimed is not None else study.checks["scenario_grid_kg"]
+    return motion_replay(study.model, study.motion, o.resolution, o.mode, mass, "free_path", progress)
+
+
+def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str, mass: float, source: str,
+                  progress: Progress | None = None) -> OptimumReplay:
+    """Replay an optimised object motion carrying `mass` with the torques of `res`, native and MuJoCo twin.
+
+    The samples are spaced evenly at the motion's output_dt shortened so that a whole number of them spans
+    the law's duration, and a scenario's `mujoco.timestep` is shortened so that whole steps span a sample
+    (the twin's steps must divide every interval).
+
+    Args:
+        model: the Model (nominal object; its validation thresholds judge the twin).
+        motion: the optimised ObjectMotion (waypoints or a B-spline path; its time law).
+        res: the Resolution (a linear one: paper, nonsqueezing, min_energy; its weights).
+        mode: 'payload' (mass: a point payload's at inverse.payload_position) or 'scaled' (the object's).
+        mass: kg, the load carried.
+        source: 'retimed' or 'free_path' (the run log's name: RUN_LOG, PATH_RUN_LOG).
+        progress: hears the stages replay (the IK and native run) and mujoco.
+
+    Returns:
+        OptimumReplay.
+
+    Raises:
+        coopsim.inverse.retime.RetimeError: the resolution has no torques somewhere along the law.
+    """
     span = float(motion.times[-1] - motion.times[0])
     dt = span / np.ceil(span / motion.output_dt - 1e-9)
-    model = with_motion(study.model, replace(motion, output_dt=dt))
+    model = with_motion(model, replace(motion, output_dt=dt))
     _report(progress, "replay", 0.0)
     traj = object_motion_trajectory(model, model.inverse.object_motion)
-    res = resolution_for(model, study.method)
-    rep, excess = carried_replay(model, traj, res, study.mode, r.mass)
+    rep, excess = carried_replay(model, traj, res, mode, mass)
     if rep.sim is None:
-        raise rt.RetimeError(f"--replay: the {study.method} resolution has no torques at t = "
+        raise rt.RetimeError(f"--replay: the {res.method} resolution has no torques at t = "
                              f"{rep.failures[0].time:.6g} s of the optimum")
     _report(progress, "replay", 1.0)
     native = rep.sim
     cv = cross_validate(native.model, native=native, twin_model=_twin_model(native, traj, res),
                         progress=progress)
-    return OptimumReplay(study.method, study.mode, r.mass, traj, rep, excess, cv)
+    return OptimumReplay(source, res.method, mode, mass, traj, rep, excess, cv,
+                         RUN_LOG if source == "retimed" else PATH_RUN_LOG)
 
 
 def _twin_model(native: SimResult, traj: JointTrajectory, res: Resolution) -> Model:
     """The twin's model: its step (`coopsim.twin.weld.twin_step`) and the same torques tabulated at the native
     knots and at every RK4 stage time of the twin's steps too, so that neither reads an interpolated torque."""
-    model, _ = twin_step(native.model, native)
+    model, _ = twin_step(_dividing_step(native.model), native)
     h, t = model.mujoco.timestep, native.t
     steps = np.maximum(np.round(np.diff(t) / h).astype(int), 1)
     stages = [t0 + (t1 - t0) * np.arange(2 * k + 1) / (2 * k) for t0, t1, k in zip(t[:-1], t[1:], steps)]
     knots = np.unique(np.concatenate([native.model.torques[0].times, *stages]))
     tau = stage_torques(native.model, traj, res, knots)
     return replace(model, torques=tuple(TorqueTable(knots, tau[:, sl]) for sl in model.dof_slices))
+
+
+def _dividing_step(model: Model) -> Model:
+    """The model with its `mujoco.timestep` (when set) shortened to the largest step that divides its output_dt
+    into whole steps (None: left to `twin_step`)."""
+    h, dt = model.mujoco.timestep, model.integrator.output_dt
+    if h is None:
+        return model
+    return replace(model, mujoco=replace(model.mujoco, timestep=dt / np.ceil(dt / h - 1e-9)))
 
 
 def replay_summary(rep: OptimumReplay) -> dict:
@@ -115,7 +173,7 @@ def replay_summary(rep: OptimumReplay) -> dict:
         rep: the OptimumReplay.
 
     Returns:
-        dict: method, mode, mass, duration, samples and their interval; native (the largest joint angle
+        dict: source, method, mode, mass, duration, samples and their interval; native (the largest joint angle
         and rate errors against the optimised joint path, the largest line excess relative to τ_s); twin
         (its step, the agreement with the native replay against the scenario's thresholds,
         `coopsim.twin.compare.Comparison.as_dict`, its largest joint angle error and whether it passed);
@@ -124,7 +182,7 @@ def replay_summary(rep: OptimumReplay) -> dict:
     cv = rep.cross
     angle = next(m for m in cv.comparison.metrics if m.name == "joint angle error")
     return {
-        "method": rep.method, "mode": rep.mode, "mass_kg": rep.mass,
+        "source": rep.source, "method": rep.method, "mode": rep.mode, "mass_kg": rep.mass,
         "duration_s": float(rep.traj.t[-1] - rep.traj.t[0]), "samples": len(rep.traj.t),
         "output_dt_s": float(rep.traj.t[1] - rep.traj.t[0]), "open_loop": True,
         "native": {"max_angle_error_rad": rep.native.max_angle_error, "max_rate_error_rad_s": rep.native.max_rate_error,
@@ -132,7 +190,7 @@ def replay_summary(rep: OptimumReplay) -> dict:
         "twin": {"timestep_s": (cv.mujoco or cv.native.model.mujoco).timestep,
                  "max_angle_error_rad": angle.max, "threshold_rad": angle.threshold,
                  "passed": cv.comparison.passed, "agreement": cv.comparison.as_dict()},
-        "log": RUN_LOG,
+        "log": rep.log,
     }
 
 
@@ -164,7 +222,8 @@ def format_replay_summary(s: dict) -> str:
     tw = s["twin"]
     verdict = "PASS" if tw["passed"] else "FAIL: " + "; ".join(
         f"{k} {m['max']:.3g} > {m['threshold']:.3g}" for k, m in tw["agreement"]["metrics"].items() if not m["passed"])
-    return (f"replay          {s['method']}, {s['mass_kg']:.6g} kg over {s['duration_s']:.6g} s open loop: native "
+    head = "replay (free)  " if s.get("source") == "free_path" else "replay         "
+    return (f"{head} {s['method']}, {s['mass_kg']:.6g} kg over {s['duration_s']:.6g} s open loop: native "
             f"{s['native']['max_angle_error_rad']:.2e} rad from the optimised path, line excess "
             f"{s['native']['max_line_excess']:.2e} τ_s\n"
             f"                twin (step {tw['timestep_s']:.3g} s) {tw['max_angle_error_rad']:.2e} rad from the native "

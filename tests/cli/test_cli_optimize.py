@@ -91,11 +91,11 @@ def test_a_linearisation_that_does_not_converge_says_so_and_writes_nothing(workd
 
 
 @pytest.mark.parametrize("args, line", [
-    (["--path", "--replay"], "coopsim: error: --replay: replays the retimed optimum; give it with --retime"),
+    (["--replay"], "coopsim: error: optimize: give --retime (the fixed path's time law) and/or --path"),
     (["--retime", "--replay", "--method", "lp"], "coopsim: error: --replay: the LP bound has no torque distribution"),
 ])
-def test_replay_without_retime_or_of_the_lp_bound_is_refused(workdir, args, line):
-    """One line naming --replay, exit 2, nothing written."""
+def test_replay_without_an_optimum_or_of_the_lp_bound_is_refused(workdir, args, line):
+    """--replay alone (nothing to replay) and the LP bound's optimum: one line, exit 2, nothing written."""
     out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
     assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
     assert not (workdir / "res").exists()

@@ -7,6 +7,7 @@ import json
 import pytest
 import yaml
 
+from coopsim.io.log import read_run_log
 from coopsim.io.scenario import load_scenario
 from helpers import run_cli
 
@@ -22,11 +23,13 @@ def _scenario(workdir, **optimize):
 
 
 def test_optimize_path_writes_one_set(workdir):
-    """With --retime beside it: optimize.json's path entry holds the payloads, the gain over the scenario's own path (its quintic law)
-    and over the own path retimed, the solver's runs and the checks; the written scenario loads as any
-    scenario (its capacity: tests/report/test_path_report.py)."""
+    """With --retime and --replay beside it: optimize.json's path entry holds the payloads, the gain over the
+    scenario's own path (its quintic law) and over the own path retimed, the solver's runs and the checks; the
+    written scenario loads as any scenario (its capacity: tests/report/test_path_report.py); both optima are
+    replayed in the one set (native within 1e-8 rad, the twin within the thresholds: the figures in
+    tests/report/test_path_report.py), each with its run log."""
     out = run_cli("optimize", _scenario(workdir), "--retime", "--intervals", "10", "--path", "--method", "paper",
-                  "--json", "--out", "res", cwd=workdir)
+                  "--replay", "--json", "--out", "res", cwd=workdir)
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
     p = summary["path"]
@@ -38,7 +41,12 @@ def test_optimize_path_writes_one_set(workdir):
     assert p["checks"]["brute_force"]["ok"]
     files = {f.name for f in (workdir / "res").iterdir()}
     assert {"optimize.json", "optimize.mcap", "optimize_path.png", "optimize_payload_time.png",
-            "paper_planar_2x3_carry_path.yaml", "paper_planar_2x3_carry_retimed.yaml"} <= files
+            "paper_planar_2x3_carry_path.yaml", "paper_planar_2x3_carry_retimed.yaml", "optimum_run.mcap",
+            "optimum_path_run.mcap"} <= files
+    for rep, source in ((summary["replay"], "retimed"), (p["replay"], "free_path")):
+        assert rep["source"] == source and rep["native"]["max_angle_error_rad"] <= 1e-8 and rep["twin"]["passed"]
+        assert {"/native/joint_state", "/mujoco/joint_state"} <= set(read_run_log(workdir / rep["log"]).topics)
+    assert p["replay"]["mass_kg"] == kg["free_path_retimed"]
     m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
     assert m.inverse.object_motion.path is not None and m.inverse.object_motion.time_law == "sampled"
 

@@ -1,5 +1,5 @@
 """The free-path study on the paper carry (one via point, a 0.5 s grid): its checks, the optimised scenario
-written back and read as any scenario, the path figure."""
+written back and read as any scenario, the path figure, the optimum replayed native and in the twin."""
 
 from dataclasses import replace
 
@@ -10,9 +10,11 @@ import yaml
 from coopsim.inverse.capacity import method_capacity
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.trajectory import object_motion_trajectory
-from coopsim.io.mcap_codec import log_data
+from coopsim.io.log import read_run_log
+from coopsim.io.mcap_codec import log_data, write_mcap
 from coopsim.io.scenario import model_from_dict
 from coopsim.plots.free_path import path_jobs
+from coopsim.report.optimum_replay import path_replay, replay_run_log, replay_summary
 from coopsim.report.path_report import format_path_summary, path_scenario, path_series, path_study, path_summary
 from helpers import SCENARIOS
 from inverse_cases import model
@@ -65,3 +67,23 @@ def test_path_figure(study):
     assert path.name == "optimize_path.png"
     fig = builder(*args)
     assert len(fig.axes) >= 2 and all(np.isfinite(log.topics["/optimize/path/free"]["p_C"]).ravel())
+
+
+def test_the_free_path_optimum_replays_native_and_twin(study, tmp_path):
+    """The written scenario's motion (the B-spline path under the sampled retimed law) at the retimed payload,
+    replayed open loop (`coopsim.report.optimum_replay.path_replay`): native within 1e-8 rad of the optimised
+    joint path (the closed-chain IK, independent of the forward dynamics), every torque within its line up to
+    the retimed law's excess between its grid points (≤ 1e-2 τ_s on this 0.5 s grid), the twin within every
+    threshold of the scenario; the log reads back as a run log of the loaded model."""
+    rep = path_replay(study)
+    s = replay_summary(rep)
+    assert s["source"] == "free_path" and s["log"] == "optimum_path_run.mcap"
+    assert s["mass_kg"] == study.optimum.retimed.mass
+    assert s["duration_s"] == pytest.approx(float(study.motion.times[-1] - study.motion.times[0]), rel=1e-9)
+    assert s["native"]["max_angle_error_rad"] <= 1e-8
+    assert s["native"]["max_line_excess"] <= 1e-2
+    assert s["twin"]["passed"], rep.cross.comparison.failures()
+    streams, meta = replay_run_log(rep, {"scenario": {"file": f"scenarios/{CARRY}.yaml"}})
+    log = read_run_log(write_mcap(tmp_path / s["log"], streams, meta))
+    assert np.array_equal(log.topics["/native/joint_state"]["angle"], rep.cross.native.q)
+    assert log.metadata["scenario"]["file"] == f"scenarios/{CARRY}.yaml"
