@@ -356,13 +356,15 @@ def _cmd_optimize(args) -> int:
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
                                                 retime_series, retime_study, retime_summary, with_energy_weights)
-    from coopsim.report.optimum_replay import (format_replay_summary, optimum_replay, path_replay, replay_run_log,
-                                               replay_summary)
+    from coopsim.report.closed_replay import format_replay_entry, replay_entry
+    from coopsim.report.optimum_replay import optimum_replay, path_replay, replay_run_log
 
     if not (args.retime or args.path):
         raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
     if args.path and args.method == "lp":
         raise CoopsimError("--method lp: --path optimises a resolution's path (paper, nonsqueezing, min_energy)")
+    if args.closed_loop and not args.replay:
+        raise CoopsimError("--closed-loop: replays the optimum under feedback; give it with --replay")
     if args.replay and args.method == "lp":
         raise CoopsimError("--replay: the LP bound has no torque distribution between its grid points; give "
                            "--method paper, nonsqueezing or min_energy")
@@ -386,7 +388,7 @@ def _cmd_optimize(args) -> int:
         study = None if not args.retime else retime_study(model, duration=args.duration, payload=args.payload,
                                                            method=args.method, intervals=args.intervals,
                                                            weights=args.weights, progress=bar)
-        rep = optimum_replay(study, progress=bar) if args.replay else None
+        rep = optimum_replay(study, progress=bar) if args.replay and study is not None else None
         free = None if not args.path else path_study(model, args.method, weights=args.weights,
                                                      duration=args.duration, progress=bar)
         if free is not None and not free.optimum.best.success:
@@ -395,14 +397,15 @@ def _cmd_optimize(args) -> int:
             raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
                                         f"{best.message}); nothing written")
         free_rep = path_replay(free, progress=bar) if args.replay and free is not None else None
+        entries = {id(r): replay_entry(model, r, args.closed_loop) for r in (rep, free_rep) if r is not None}
         bar.close()
         summary = retime_summary(study) if study is not None else {"scenario": model.name}
         if free is not None:
             summary["path"] = path_summary(free)
         if free_rep is not None:
-            summary["path"]["replay"] = replay_summary(free_rep)
+            summary["path"]["replay"] = entries[id(free_rep)]
         if rep is not None:
-            summary["replay"] = replay_summary(rep)
+            summary["replay"] = entries[id(rep)]
         data = load_yaml(Path(args.scenario))
         if args.set:
             data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
@@ -451,9 +454,9 @@ def _cmd_optimize(args) -> int:
         log_path, plots = _write_set(out, "optimize.json", "optimize.mcap", streams, meta, draw, workers,
                                      summarize, also=also)
     text = "\n".join(([format_retime_summary(summary)] if study is not None else [])
-                     + ([format_replay_summary(summary["replay"])] if rep is not None else [])
+                     + ([format_replay_entry(summary["replay"])] if rep is not None else [])
                      + ([format_path_summary(summary["path"])] if free is not None else [])
-                     + ([format_replay_summary(summary["path"]["replay"])] if free_rep is not None else []))
+                     + ([format_replay_entry(summary["path"]["replay"])] if free_rep is not None else []))
     print(json.dumps(json_safe(summary), indent=2) if args.json else
           text + f"\nwrote {', '.join(str(out / n) for n in [*texts, *run_files])}, {log_path}, {out / 'optimize.json'} and "
                  f"{len(plots)} plots in {out}")
@@ -789,6 +792,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "thresholds: with --retime the retimed law (optimize.json 'replay', DIR/optimum_run.mcap), "
                         "with --path the free path (its 'replay', DIR/optimum_path_run.mcap), run logs for "
                         "coopsim animate")
+    p.add_argument("--closed-loop", action="store_true",
+                   help="with --replay: also replay under feedback about the optimised joint path with the optimum "
+                        "as feedforward (replay 'closed_loop': tracking error, feedback share, motor lines); done "
+                        "without asking where the open loop leaves the thresholds or the scenario has a control: "
+                        "section")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)

@@ -110,6 +110,9 @@ class Controller:
 
     Args:
         model: the scene, with `control` set (ControlSettings).
+        trajectory: joint_pd with reference 'object_motion': the JointTrajectory it tracks in place of the
+            closed-chain IK of inverse.object_motion (e.g. an optimum's, computed on another model than the
+            plant's); None: that IK.
 
     Attributes:
         model: the scene as given.
@@ -120,8 +123,8 @@ class Controller:
         ControlError: computed_torque on an arm with more or fewer joints than constrained rows.
     """
 
-    def __init__(self, model: Model):
-        self.model, self.settings = model, model.control
+    def __init__(self, model: Model, trajectory: JointTrajectory | None = None):
+        self.model, self.settings, self._given = model, model.control, trajectory
         self.plant = _controller_model(model, model.control.mass_scale)
         k = model.rows.shape[0]
         if self.settings.law == "computed_torque" and any(arm.n != k for arm in model.arms):
@@ -184,7 +187,10 @@ class Controller:
 
     @cached_property
     def trajectory(self):
-        """The joint trajectory of inverse.object_motion (`coopsim.inverse.trajectory.JointTrajectory`)."""
+        """The joint trajectory of inverse.object_motion (`coopsim.inverse.trajectory.JointTrajectory`), or the
+        one given."""
+        if self._given is not None:
+            return self._given
         return object_motion_trajectory(self.model, self.model.inverse.object_motion)
 
     def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:

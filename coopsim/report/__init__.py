@@ -7,6 +7,8 @@ and capacity study's summary, series and checks.
     optimize_report.py the retiming study of `coopsim optimize --retime`: the fixed path's time law
                        freed, summary, series and the optimised scenario
     path_report.py     the free-path study: what `coopsim optimize --path` reports and logs
-    optimum_replay.py  the retimed optimum replayed open loop, native and MuJoCo twin
-                       (`coopsim optimize --retime --replay`): agreement and run log
+    optimum_replay.py  the optimum (retimed or free path) replayed open loop, native and MuJoCo twin
+                       (`coopsim optimize --replay`): agreement and run log
+    closed_replay.py   the optimum replayed under feedback about its joint path, the optimum as
+                       feedforward (open loop outside the thresholds, a control: section, --closed-loop)
 """

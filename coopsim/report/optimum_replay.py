@@ -49,6 +49,7 @@ class OptimumReplay:
         line_excess: the largest excess of a replayed torque over its motor line at the samples, relative
             to τ_s (≤ 0: within).
         cross: the CrossValidation of the twin against the native replay (scenario thresholds).
+        twin_model: the twin's Model (its step, the torques tabulated at its RK4 stage times).
         log: the run log's file name in the output set.
     """
 
@@ -60,6 +61,7 @@ class OptimumReplay:
     native: Replay
     line_excess: float
     cross: CrossValidation
+    twin_model: Model
     log: str = RUN_LOG
 
 
@@ -139,9 +141,9 @@ def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str
                              f"{rep.failures[0].time:.6g} s of the optimum")
     _report(progress, "replay", 1.0)
     native = rep.sim
-    cv = cross_validate(native.model, native=native, twin_model=_twin_model(native, traj, res),
-                        progress=progress)
-    return OptimumReplay(source, res.method, mode, mass, traj, rep, excess, cv,
+    twin_model = _twin_model(native, traj, res)
+    cv = cross_validate(native.model, native=native, twin_model=twin_model, progress=progress)
+    return OptimumReplay(source, res.method, mode, mass, traj, rep, excess, cv, twin_model,
                          RUN_LOG if source == "retimed" else PATH_RUN_LOG)
 
 

@@ -93,9 +93,12 @@ def test_a_linearisation_that_does_not_converge_says_so_and_writes_nothing(workd
 @pytest.mark.parametrize("args, line", [
     (["--replay"], "coopsim: error: optimize: give --retime (the fixed path's time law) and/or --path"),
     (["--retime", "--replay", "--method", "lp"], "coopsim: error: --replay: the LP bound has no torque distribution"),
+    (["--retime", "--closed-loop"], "coopsim: error: --closed-loop: replays the optimum under feedback; give it "
+                                    "with --replay"),
 ])
 def test_replay_without_an_optimum_or_of_the_lp_bound_is_refused(workdir, args, line):
-    """--replay alone (nothing to replay) and the LP bound's optimum: one line, exit 2, nothing written."""
+    """--replay alone (nothing to replay), the LP bound's optimum, --closed-loop without --replay: one line,
+    exit 2, nothing written."""
     out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
     assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
     assert not (workdir / "res").exists()

@@ -1,0 +1,251 @@
+"""The optimum of `coopsim optimize --replay` replayed in closed loop, where open loop it does not hold.
+
+A pose held against gravity (the Panda carry) is open-loop unstable: the optimum's torques replayed open
+loop drift away from the optimised path at the rate of its unstable modes, however exact they are. The
+closed-loop replay puts feedback about the optimised joint path around the optimum's torques,
+
+    τ(t, θ, θ̇) = τ_opt(t) + Kp (θ_r(t) − θ) + Kd (θ̇_r(t) − θ̇),
+
+τ_opt the resolution's torques with the load (the open-loop replay's tables, feedforward), θ_r the
+optimised joint path (the closed-chain IK of the optimum, not the loaded plant's own IK: the merged body's
+frame sits at the composite centre of mass). It runs as the scenario's joint_pd law in the loop
+(`coopsim.control.controller.Controller`, compiled, reference the given trajectory, compensation none:
+the feedforward replaces it), native and twin, from the same state. The gains:
+
+  * the scenario's `control:` joint_pd gains (kp, kd) when it has that law;
+  * otherwise Kp = ω² I_jj, Kd = 2ζω I_jj, I_jj the diagonal of each arm's joint-space inertia
+    (`coopsim.dynamics.gibbs_appell.mass_matrix`) at the first sample — a computed-torque law with the
+    inertia frozen and diagonal — with ω², 2ζω the scenario's computed_torque object gains (object_kp,
+    object_kd, linear) when it has that law, else ω = 10 rad/s, ζ = 1 (DEFAULT_OMEGA).
+
+`saturate` is the scenario's (default off, so that the total torque's excess over its lines is reported,
+not hidden).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from coopsim.control.controller import Controller, record
+from coopsim.core.model import ControlSettings, Model, TorqueFeedback, torque_at, torque_limits
+from coopsim.core.spatial import orientation_error, rots_to_quats
+from coopsim.dynamics.closed_chain import arm_poses
+from coopsim.dynamics.gibbs_appell import mass_matrix
+from coopsim.forward.simulate import SimResult, simulate
+from coopsim.inverse.problem import inverse_problem
+from coopsim.report.optimum_replay import OptimumReplay, format_replay_summary, replay_summary
+from coopsim.twin.compare import Comparison, compare
+from coopsim.twin.mujoco_run import TwinResult, run_twin
+
+DEFAULT_OMEGA = 10.0      # rad/s, the default law's natural frequency (critically damped)
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedReplay:
+    """The optimum replayed under feedback about the optimised joint path (module docstring).
+
+    Attributes:
+        why: why it was run: 'open loop outside the thresholds', "the scenario's control: section" or 'asked'.
+        gains: where the gains come from (a sentence).
+        kp, kd: (n,) N·m/rad, N·m·s/rad (N/m, N·s/m on a prismatic joint), the gains.
+        native: the native closed-loop SimResult (fixed DOP853 steps of one sample, as the open loop).
+        twin: the twin's closed-loop TwinResult.
+        comparison: the twin against the native closed loop (the scenario's thresholds).
+        feedforward: (N, n) N·m, τ_opt at the samples.
+        tau: (N, n) N·m, the native closed loop's applied torques at the samples.
+        twin_tau: (N, n) N·m, the twin's applied torques at its samples.
+        reference: (p (N, 3) m, quaternions (N, 4) [w, x, y, z]) of the loaded object along the optimised
+            joint path (its forward kinematics).
+        saturation_events: (sample, joint) pairs the motor lines clipped (native), with `saturate`.
+    """
+
+    why: str
+    gains: str
+    kp: np.ndarray
+    kd: np.ndarray
+    native: SimResult
+    twin: TwinResult
+    comparison: Comparison
+    feedforward: np.ndarray
+    tau: np.ndarray
+    twin_tau: np.ndarray
+    reference: tuple
+    saturation_events: int
+
+
+def closed_loop_reason(model: Model, rep: OptimumReplay, asked: bool = False) -> str | None:
+    """Why the optimum is also replayed in closed loop, or None.
+
+    Args:
+        model: the scenario's Model (its validation thresholds and control section).
+        rep: the open-loop `coopsim.report.optimum_replay.OptimumReplay`.
+        asked: the user asked for it (--closed-loop).
+
+    Returns:
+        str | None: 'asked', 'open loop outside the thresholds' (the native run farther than
+        validation.max_angle_error from the optimised path, or the twin failing a threshold), "the scenario's
+        control: section", or None.
+    """
+    if asked:
+        return "asked"
+    if rep.native.max_angle_error > model.validation.max_angle_error or not rep.cross.comparison.passed:
+        return "open loop outside the thresholds"
+    if model.control is not None:
+        return "the scenario's control: section"
+    return None
+
+
+def feedback_gains(model: Model, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+    """The feedback gains of the closed-loop replay (module docstring).
+
+    Args:
+        model: the scenario's Model (its control section, its arms).
+        q0: (n,) rad, the first sample of the optimised joint path (where the inertia is frozen).
+
+    Returns:
+        tuple: kp (n,) N·m/rad, kd (n,) N·m·s/rad, and a sentence saying where they come from.
+    """
+    c = model.control
+    if c is not None and c.law == "joint_pd":
+        return np.asarray(c.kp, float), np.asarray(c.kd, float), "the scenario's control: joint_pd gains"
+    inertia = np.concatenate([np.diag(mass_matrix(arm, pose)) for arm, pose in zip(model.arms, arm_poses(model, q0))])
+    if c is not None:
+        w2, zw = float(c.object_kp[0]), float(c.object_kd[0])
+        where = f"the scenario's computed_torque object gains ({w2:g}/s², {zw:g}/s) per unit joint inertia"
+    else:
+        w2, zw = DEFAULT_OMEGA**2, 2.0 * DEFAULT_OMEGA
+        where = f"ω = {DEFAULT_OMEGA:g} rad/s, ζ = 1 per unit joint inertia (no control: section)"
+    return w2 * inertia, zw * inertia, f"Kp = ω² I_jj, Kd = 2ζω I_jj, I_jj each arm's inertia diagonal at the " \
+                                       f"first sample: {where}"
+
+
+def closed_loop_replay(model: Model, rep: OptimumReplay, why: str) -> ClosedReplay:
+    """Replay the optimum under τ_opt(t) + joint PD about the optimised joint path, native and twin.
+
+    Args:
+        model: the scenario's Model (gains, saturate).
+        rep: the open-loop OptimumReplay (its tables: the native model's at the DOP853 stage times, the
+            twin's at its RK4 stage times; its joint path).
+        why: `closed_loop_reason`'s answer.
+
+    Returns:
+        ClosedReplay.
+    """
+    traj = rep.traj
+    kp, kd, where = feedback_gains(model, traj.q[0])
+    settings = ControlSettings("joint_pd", kp, kd, compensation="none", distribution=rep.method,
+                               reference="object_motion", saturate=model.control is not None and model.control.saturate)
+    native_model = _in_the_loop(rep.native.sim.model, settings, traj)
+    dt = float(traj.t[1] - traj.t[0])
+    native = simulate(native_model, fixed_step=dt)
+    twin_model = _in_the_loop(rep.twin_model, settings, traj)
+    twin = run_twin(twin_model, native.initial.q, native.initial.qd, native.t)
+    cmd = record(native_model.torques.fn, native.t, native.q, native.qd)
+    ff = np.array([torque_at(rep.native.sim.model.torques, t) for t in native.t])
+    prob = inverse_problem(rep.native.sim.model, traj)
+    return ClosedReplay(why, where, kp, kd, native, twin, compare(native, twin), ff, cmd.tau, twin.tau,
+                        (prob.p_C, rots_to_quats(prob.R_o)), cmd.saturation_events)
+
+
+def _in_the_loop(model: Model, settings: ControlSettings, traj) -> Model:
+    """The replay's model (its torque tables: the feedforward) with the feedback law in the loop about traj."""
+    m = replace(model, control=settings)
+    return replace(m, torques=TorqueFeedback(Controller(m, trajectory=traj)))
+
+
+def _tracking(q, p, quat, traj, reference) -> dict:
+    """The largest joint, object position and orientation errors of a run against the optimised path."""
+    return {"max_angle_error_rad": float(np.max(np.abs(q - traj.q))),
+            "final_angle_error_rad": float(np.max(np.abs(q[-1] - traj.q[-1]))),
+            "max_object_position_error_m": float(np.max(np.linalg.norm(p - reference[0], axis=1))),
+            "max_object_orientation_error_rad": float(np.max(orientation_error(quat, reference[1])))}
+
+
+def _line_excess(motors, tau, qd, active) -> float:
+    """The largest excess of a torque over its motor line at its own rate, relative to τ_s (≤ 0: within)."""
+    lo, hi = torque_limits(motors, qd)
+    return float(np.max((np.maximum(tau - hi, lo - tau) / motors.stall_torque)[:, active]))
+
+
+def closed_summary(cr: ClosedReplay, traj) -> dict:
+    """optimize.json's replay "closed_loop" entry (SI units).
+
+    Args:
+        cr: the ClosedReplay.
+        traj: the optimised joint path (the open-loop replay's).
+
+    Returns:
+        dict: why, the law and its gains (and their source), the native and twin tracking errors against the
+        optimised path (joint angle max and final, object position and orientation max), the feedback
+        torque's share (its peak relative to τ_s and its RMS over the total's), the total torque's largest
+        excess over its line relative to τ_s (native and twin) and whether it is within (≤ 1e-9), the
+        saturation events, and the twin against the native closed loop (the scenario's thresholds).
+    """
+    motors = cr.native.model.motors
+    active = ~motors.passive & np.isfinite(motors.stall_torque)
+    fb = cr.tau - cr.feedforward
+    excess = {"native": _line_excess(motors, cr.tau, cr.native.qd, active),
+              "twin": _line_excess(motors, cr.twin_tau, cr.twin.qd, active)}
+    return {
+        "why": cr.why, "law": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd), q_r the optimised joint path",
+        "gains": cr.gains, "kp": cr.kp.tolist(), "kd": cr.kd.tolist(),
+        "native": _tracking(cr.native.q, cr.native.object_pos, cr.native.object_quat, traj, cr.reference),
+        "twin": _tracking(cr.twin.q, cr.twin.object_pos, cr.twin.object_quat, traj, cr.reference),
+        "feedback": {"peak_rel_stall": float(np.max(np.abs(fb[:, active]) / motors.stall_torque[active])),
+                     "rms_share": float(np.linalg.norm(fb) / max(np.linalg.norm(cr.tau), 1e-300))},
+        "line_excess": excess, "within_lines": bool(max(excess.values()) <= 1e-9),
+        "saturation_events": cr.saturation_events,
+        "twin_vs_native": {"passed": cr.comparison.passed, "agreement": cr.comparison.as_dict()},
+    }
+
+
+def format_closed_summary(s: dict) -> str:
+    """Short text version of `closed_summary`.
+
+    Args:
+        s: the "closed_loop" entry.
+
+    Returns:
+        str: one line per model and one for the torques.
+    """
+    n, t = s["native"], s["twin"]
+    return (f"  closed loop ({s['why']}): native {n['max_angle_error_rad']:.2e} rad, "
+            f"{n['max_object_position_error_m']:.2e} m from the optimised path; twin {t['max_angle_error_rad']:.2e} "
+            f"rad, {t['max_object_position_error_m']:.2e} m ({'PASS' if s['twin_vs_native']['passed'] else 'FAIL'} "
+            f"against the native loop)\n"
+            f"  feedback peak {s['feedback']['peak_rel_stall']:.2e} τ_s (RMS share {s['feedback']['rms_share']:.2e}); "
+            f"total torque {'within' if s['within_lines'] else 'OVER'} its lines (excess "
+            f"{max(s['line_excess'].values()):.2e} τ_s)")
+
+
+def replay_entry(model: Model, rep: OptimumReplay, asked: bool = False) -> dict:
+    """optimize.json's "replay" entry of an optimum: the open loop (`replay_summary`), and where
+    `closed_loop_reason` says so its "closed_loop" (`closed_summary`).
+
+    Args:
+        model: the scenario's Model.
+        rep: the open-loop OptimumReplay.
+        asked: --closed-loop given.
+
+    Returns:
+        dict: the entry.
+    """
+    out = replay_summary(rep)
+    why = closed_loop_reason(model, rep, asked)
+    if why is not None:
+        out["closed_loop"] = closed_summary(closed_loop_replay(model, rep, why), rep.traj)
+    return out
+
+
+def format_replay_entry(s: dict) -> str:
+    """Short text of a "replay" entry: the open loop's lines, then the closed loop's where there is one.
+
+    Args:
+        s: the entry (`replay_entry`).
+
+    Returns:
+        str: the lines.
+    """
+    return format_replay_summary(s) + ("\n" + format_closed_summary(s["closed_loop"]) if "closed_loop" in s else "")
