@@ -206,10 +206,16 @@ def replay_run_log(rep: OptimumReplay, metadata: dict | None = None) -> tuple[li
 
     Returns:
         tuple[list, dict]: the native and twin series, /tf and /scene, and the metadata records (the loaded
-        forward model's, with the twin's settings as it ran).
+        forward model's, with the twin's settings as it ran), with record "payload": mass_kg, mode, source
+        and position_m (the point payload's, object frame from the scenario object's centre of mass; null
+        when scaled), which `coopsim animate` draws on the scenario's object.
     """
     cv = rep.cross
-    return run_log(replace(cv.native.model, mujoco=cv.mujoco), cv.native, cv.twin, (), metadata)
+    model = cv.native.model
+    pos = model.inverse.payload_position if rep.mode == "payload" else None
+    payload = {"mass_kg": rep.mass, "mode": rep.mode, "source": rep.source,
+               "position_m": None if pos is None else np.asarray(pos, dtype=float)}
+    return run_log(replace(model, mujoco=cv.mujoco), cv.native, cv.twin, (), dict(metadata or {}) | {"payload": payload})
 
 
 def format_replay_summary(s: dict) -> str:

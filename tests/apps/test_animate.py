@@ -214,3 +214,34 @@ def test_view_opens_the_twin_at_the_keyframe(monkeypatch, capsys):
     assert cli.main(["view", str(SCENARIOS / f"{PAPER}.yaml")]) == 0
     assert cli.main(["view", str(ROOT / "models" / f"{PAPER}.xml")]) == 0
     assert len(seen) == 2 and max(seen) <= 1e-12, seen
+
+
+def _gold(frame: np.ndarray) -> np.ndarray:
+    """The payload's gold pixels (frames.PAYLOAD_RGBA shaded), above the legend strip."""
+    f = frame.astype(int)[: H - H // 8]
+    return (f[..., 0] > 120) & (f[..., 1] > 90) & (f[..., 2] < 0.6 * f[..., 1])
+
+
+def test_a_replayed_optimum_draws_its_payload_on_the_object(renderer):
+    """A motion carrying a point payload (an optimum's replay log) draws a gold sphere on the object where the
+    payload sits, and names its mass in the legend: no gold pixel without it, a blob with it, which moves
+    with the payload from the bar's right end (0.2 m) to its left end (−0.2 m)."""
+    from coopsim.apps.animate.frames import payload_label
+    from coopsim.apps.animate.motion import Payload
+
+    model = load_scenario(SCENARIOS / "paper_planar_2x3_carry.yaml")
+    q = np.array([model.q0, model.q0])
+    t = np.array([0.0, 1.0])
+
+    def frame(payload):
+        motion = Motion(model, t, q, q, "test", payload)
+        return list(render_frames(motion, t[:1], W, H))[0]
+
+    bare, right, left = (frame(p) for p in (None, Payload(206.04, "payload", np.array([0.2, 0.0, 0.0])),
+                                            Payload(206.04, "payload", np.array([-0.2, 0.0, 0.0]))))
+    assert _gold(bare).sum() == 0
+    assert _gold(right).sum() >= 100 and _gold(left).sum() >= 100
+    column = lambda f: np.nonzero(_gold(f))[1].mean()        # noqa: E731
+    assert column(right) - column(left) >= 0.1 * W, (column(right), column(left))
+    assert payload_label(Payload(206.04, "payload", np.zeros(3))) == "payload 206.04 kg"
+    assert payload_label(Payload(12.3, "scaled", None)) == "object 12.3 kg (scaled)"

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from coopsim.apps.animate.motion import log_payload
 from coopsim.inverse import retime as rt
 from coopsim.io.log import read_run_log
 from coopsim.io.mcap_codec import write_mcap
@@ -41,7 +42,8 @@ def test_the_native_replay_follows_the_optimised_path_and_the_twin_the_native_ru
 
 
 def test_the_replay_run_log_reads_back_as_a_run_log(replayed, tmp_path):
-    """Native and twin series, the scenario named for `coopsim animate`, the native angles as replayed."""
+    """Native and twin series, the scenario named for `coopsim animate`, the native angles as replayed, the
+    payload's mass and position (object frame) for the animation to draw."""
     _, rep = replayed
     streams, meta = replay_run_log(rep, {"scenario": {"file": "scenarios/paper_planar_2x3_carry.yaml"}})
     path = write_mcap(tmp_path / "optimum_run.mcap", streams, meta)
@@ -49,6 +51,9 @@ def test_the_replay_run_log_reads_back_as_a_run_log(replayed, tmp_path):
     assert {"/native/joint_state", "/mujoco/joint_state"} <= set(log.topics)
     assert np.array_equal(log.topics["/native/joint_state"]["angle"], rep.cross.native.q)
     assert log.metadata["scenario"]["file"] == "scenarios/paper_planar_2x3_carry.yaml"
+    payload = log_payload(log)               # what `coopsim animate` draws on the object
+    assert (payload.mass, payload.mode) == (rep.mass, "payload")
+    assert np.array_equal(payload.position, rep.cross.native.model.inverse.payload_position)
 
 
 def test_the_lp_bound_is_not_replayed(replayed):

@@ -20,6 +20,8 @@ with the light and floor of `coopsim mjcf`, `mjcf.build_spec(scene=True)`) at ea
 - the MuJoCo twin over it as a translucent white sleeve (its boxes grown on every side by 0.8 of a link's
   typical half-thickness: coincident faces would flicker), so where the twin departs from the native
   model the two part,
+- the load of a replayed optimum (`coopsim optimize --replay`, its log's "payload" record): a gold sphere
+  on the object at the point payload's position, its mass in the legend (a scaled object: the mass only),
 - with Pillow: the time stamp, the largest joint-angle difference of the two models at that time, a legend.
 
 The camera keeps every frame's boxes in view from the scene's azimuth and elevation. Angles between logged

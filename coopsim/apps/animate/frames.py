@@ -1,7 +1,8 @@
 """The frames: one MuJoCo model of the scene (the twin's spec with the light and floor of `coopsim mjcf`)
 posed at each frame time with `mj_kinematics` (nothing is stepped), the native model drawn with the
-object and grasp frames, the twin over it as a translucent sleeve, and with Pillow the time stamp, the
-largest joint-angle difference and a legend.
+object and grasp frames, the twin over it as a translucent sleeve, the load a replayed optimum carried (a
+sphere at the point payload's position on the object, its mass in the legend), and with Pillow the time
+stamp, the largest joint-angle difference and a legend.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from coopsim.core.errors import CoopsimError
 from coopsim.core.model import Model
 from coopsim.twin.mjcf import build_spec, qpos_address, static_settings
 from coopsim.apps.animate.gl import OffscreenRenderer
-from coopsim.apps.animate.motion import Motion
+from coopsim.apps.animate.motion import Motion, Payload
 
 
 NATIVE_RGBA = (0.25, 0.5, 0.9, 1.0)           # native links (the log's Foxglove colours: native blue)
@@ -31,23 +32,36 @@ TWIN_RGBA = (0.95, 0.95, 1.0, 0.22)            # MuJoCo twin: translucent orange
 SLEEVE = 0.8                                  # the twin's sleeve: margin / the boxes' typical half-thickness
 
 
-def scene_model(model: Model, q0: np.ndarray) -> mujoco.MjModel:
+PAYLOAD_RGBA = (1.0, 0.8, 0.0, 1.0)           # a replayed optimum's point payload: gold
+
+
+PAYLOAD_SIZE = 0.45                           # its sphere's radius / the object's largest half-extent
+
+
+def scene_model(model: Model, q0: np.ndarray, payload: Payload | None = None) -> mujoco.MjModel:
     """The compiled MuJoCo model of the scene that :func:`render_frames` poses.
 
     The twin's MJCF with its scene (light, floor), posed at q0 for the floor, plus a site marking the
     object frame; the end-effector sites hidden (group 4: they coincide with the grasp sites). Multisampling
-    on, shadows off.
+    on, shadows off. With a point payload, a sphere geom "payload" on the object at its position (visual:
+    no contact, the object's inertia is explicit), radius PAYLOAD_SIZE × the object's largest half-extent.
 
     Args:
         model: the scenario's Model.
         q0: (n,) rad (m on a prismatic joint), joint coordinates in coopsim's joint order: the keyframe
             `initial` (zero velocities) the light, floor and camera are placed for.
+        payload: the load a replayed optimum carried (a sphere where it is a point payload); None: none.
 
     Returns:
         mujoco.MjModel: the compiled scene.
     """
     spec = build_spec(model, static_settings(model), initial=(np.asarray(q0, float), np.zeros(model.n_total)), scene=True)
     spec.body("object").add_site(name="object_frame", size=[1e-3, 1e-3, 1e-3])
+    if payload is not None and payload.position is not None:
+        half = 0.5 * float(np.max(model.object.box)) if np.any(model.object.box > 0) else 0.1
+        spec.body("object").add_geom(name="payload", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                                     size=[PAYLOAD_SIZE * half, 0, 0], pos=payload.position, rgba=PAYLOAD_RGBA,
+                                     contype=0, conaffinity=0, density=0.0)
     for m in range(model.r):
         spec.site(f"a{m}_ee").group = 4
     for site in spec.sites:
@@ -103,7 +117,7 @@ class _Overlay:
     """Text on each frame: the time stamp (top left), a legend (bottom left; drawn once) and the joint-angle
     difference of the two models (bottom right, when it fits)."""
 
-    def __init__(self, width: int, height: int, native: bool, twin: bool):
+    def __init__(self, width: int, height: int, native: bool, twin: bool, payload: Payload | None = None):
         self.width, self.height = width, height
         self.size = max(9, round(height / 24))
         self.font, self.small = _font(self.size), _font(max(8, round(self.size * 0.8)))
@@ -113,7 +127,8 @@ class _Overlay:
         self.legend = Image.new("RGBA", (width, s + 2 * self.pad), (0, 0, 0, 0))
         draw = ImageDraw.Draw(self.legend)
         x, y = self.pad, self.pad
-        for on, label, rgba in ((native, "native", NATIVE_RGBA), (twin, "MuJoCo twin (sleeve)", TWIN_RGBA)):
+        for on, label, rgba in ((native, "native", NATIVE_RGBA), (twin, "MuJoCo twin (sleeve)", TWIN_RGBA),
+                                (payload is not None, payload_label(payload), PAYLOAD_RGBA)):
             if on:
                 draw.rectangle([x, y + 1, x + s - 2, y + s - 1], fill=tuple(round(255 * c) for c in rgba[:3]),
                                outline=(0, 0, 0))
@@ -138,6 +153,14 @@ class _Overlay:
                 x, y = self.width - self.pad - w, self.legend_y + self.pad
                 draw.rectangle([x - self.pad, y - self.pad, self.width, self.height], fill=(20, 20, 24))
                 draw.text((x, y), text, font=self.small, fill=(255, 255, 255))
+
+
+def payload_label(payload: Payload | None) -> str:
+    """The legend's words for a replayed optimum's load: 'payload 206.04 kg' (a point payload) or 'object
+    12.3 kg (scaled)'; '' for none."""
+    if payload is None:
+        return ""
+    return f"payload {payload.mass:.5g} kg" if payload.position is not None else f"object {payload.mass:.5g} kg (scaled)"
 
 
 def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: int = 360, *,
@@ -172,7 +195,7 @@ def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: i
     if not (native or twin):
         raise CoopsimError("nothing to draw: neither model's angles are given")
     q_first = (q_native if q_native is not None else q_twin)[0]
-    m = scene_model(motion.model, q_first)
+    m = scene_model(motion.model, q_first, motion.payload)
     qadr = qpos_address(m, motion.model)
     dyn = np.flatnonzero((m.geom_bodyid > 0) & (m.geom_type == mujoco.mjtGeom.mjGEOM_BOX))
     obj_geoms = np.flatnonzero(m.geom_bodyid == m.body("object").id)
@@ -183,6 +206,9 @@ def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: i
     native_rgba[np.intersect1d(dyn, obj_geoms)] = NATIVE_OBJECT_RGBA
     twin_rgba = native_rgba.copy()
     twin_rgba[dyn] = TWIN_RGBA
+    payload = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "payload")
+    if payload >= 0 and native:        # the payload drawn once, on the native model
+        twin_rgba[payload, 3] = 0.0
     native_size = m.geom_size.copy()
     twin_size = native_size.copy()
     if twin_sleeve:                    # every box grown by the same margin: a sleeve of even thickness
@@ -212,7 +238,7 @@ def render_frames(motion: Motion, times: np.ndarray, width: int = 480, height: i
     scn = mujoco.MjvScene(m, maxgeom=1000)
     for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION, mujoco.mjtRndFlag.mjRND_SKYBOX):
         scn.flags[flag] = 0
-    overlay = _Overlay(width, height, native, twin) if text else None
+    overlay = _Overlay(width, height, native, twin, motion.payload) if text else None
     dq = (np.max(np.abs(q_native - q_twin), axis=1) if native and twin else [None] * len(times))
     catall = int(mujoco.mjtCatBit.mjCAT_ALL)
     pert = mujoco.MjvPerturb()

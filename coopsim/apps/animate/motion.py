@@ -1,11 +1,13 @@
 """What an animation shows (:class:`Motion`): the scenario's frozen `Model` and the joint angles of the
 native model and of the MuJoCo twin over time, from a `coopsim run` log (the log holds the angles, the
-geometry comes from the scenario file it names) or from running the scenario (`scenario_motion` prefers
-the scenario's log in `out/NAME/` when it was written from the same file); and the frame times.
+geometry comes from the scenario file it names; the load an optimum's replay carried, its "payload"
+record, comes with them) or from running the scenario (`scenario_motion` prefers the scenario's log in
+`out/NAME/` when it was written from the same file); and the frame times.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +24,22 @@ from coopsim.twin.harness import cross_validate
 
 
 @dataclass(frozen=True, eq=False)
+class Payload:
+    """The load a replayed optimum carried (`coopsim optimize --replay`: its run log's "payload" record).
+
+    Attributes:
+        mass: kg, the point payload's mass ('payload'), or the whole object's ('scaled').
+        mode: 'payload' (a point mass on the object) or 'scaled' (the object scaled at constant geometry).
+        position: (3,) m, the point payload's position in the object frame (from the scenario object's
+            centre of mass); None for 'scaled'.
+    """
+
+    mass: float
+    mode: str
+    position: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
 class Motion:
     """Joint angles to animate: both models' joint coordinates over time, and the model they belong to.
 
@@ -34,6 +52,7 @@ class Motion:
             order (arm by arm, n = model.n_total), or None.
         q_twin: (N, n) rad (m on a prismatic joint), the MuJoCo twin's, in the same order, or None.
         source: where they came from, for messages ("log PATH" or "run").
+        payload: the load the run carried beyond the scenario's object (an optimum's replay), or None.
     """
 
     model: Model
@@ -41,6 +60,7 @@ class Motion:
     q_native: np.ndarray | None
     q_twin: np.ndarray | None
     source: str
+    payload: Payload | None = None
 
     def at(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Both models' joint coordinates at `times`: linear between samples, exact on them.
@@ -126,7 +146,24 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
         t, q[k] = s["t"], s["angle"]
     if len(t) == 0:
         raise CoopsimError(f"{log_path}: the joint states hold no samples")
-    return Motion(model, t, q["native"], q["mujoco"], f"log {log_path}")
+    return Motion(model, t, q["native"], q["mujoco"], f"log {log_path}", log_payload(log))
+
+
+def log_payload(log) -> Payload | None:
+    """The load of a run log's "payload" record (`coopsim.report.optimum_replay.replay_run_log`), or None.
+
+    Args:
+        log: the log as read (`read_mcap`).
+
+    Returns:
+        Payload | None: None where the log has no such record (a `coopsim run` log).
+    """
+    rec = log.metadata.get("payload")
+    if rec is None:
+        return None
+    position = json.loads(rec.get("position_m", "null"))
+    return Payload(float(json.loads(rec["mass_kg"])), str(rec["mode"]),
+                   None if position is None else np.asarray(position, dtype=float))
 
 
 def motion_from_run(model: Model, duration: float | None = None, progress=None) -> Motion:
