@@ -156,8 +156,14 @@ class _Overlay:
 
 
 def payload_label(payload: Payload | None) -> str:
-    """The legend's words for a replayed optimum's load: 'payload 206.04 kg' (a point payload) or 'object
-    12.3 kg (scaled)'; '' for none."""
+    """The legend's words for a replayed optimum's load.
+
+    Args:
+        payload: the Payload, or None.
+
+    Returns:
+        str: 'payload 206.04 kg' (a point payload), 'object 12.3 kg (scaled)', or '' for none.
+    """
     if payload is None:
         return ""
     return f"payload {payload.mass:.5g} kg" if payload.position is not None else f"object {payload.mass:.5g} kg (scaled)"
