@@ -73,7 +73,8 @@ def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> Opti
         progress: hears the stages replay (the IK and native run) and mujoco.
 
     Returns:
-        OptimumReplay (`motion_replay` of the study's motion at its law's mass).
+        OptimumReplay (`motion_replay` of the study's motion at its law's mass; with `--weights` the minimum
+        energy's torques with the weights optimised with the law).
 
     Raises:
         coopsim.inverse.retime.RetimeError: the method is the LP bound (no distribution between grid points)
@@ -82,8 +83,10 @@ def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> Opti
     if study.method == rt.LP_BOUND:
         raise rt.RetimeError("--replay: the LP bound has no torque distribution between its grid points; "
                              "give --method paper, nonsqueezing or min_energy")
-    return motion_replay(study.model, study.motion, resolution_for(study.model, study.method), study.mode,
-                         study.methods[study.method].law_of.mass, "retimed", progress)
+    weighted = study.weights is not None and study.method == "min_energy"
+    res = resolution_for(study.weights.model if weighted else study.model, study.method)
+    return motion_replay(study.model, study.motion, res, study.mode, study.methods[study.method].law_of.mass,
+                         "retimed", progress)
 
 
 def path_replay(study: PathStudy, progress: Progress | None = None) -> OptimumReplay:

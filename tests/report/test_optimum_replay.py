@@ -4,15 +4,18 @@ independent of the forward dynamics), the MuJoCo twin against the native model (
 and weld constraints), and the replay's run log read back as `coopsim animate` reads it."""
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from coopsim.apps.animate.motion import log_payload
 from coopsim.inverse import retime as rt
+from coopsim.inverse.retime_weights import with_weights
 from coopsim.io.log import read_run_log
 from coopsim.io.mcap_codec import write_mcap
 from coopsim.io.scenario import load_scenario
+from coopsim.report import optimum_replay as optimum_replay_module
 from coopsim.report.optimize_report import retime_study
 from coopsim.report.optimum_replay import optimum_replay, replay_run_log, replay_summary
 from helpers import SCENARIOS
@@ -61,3 +64,16 @@ def test_the_lp_bound_is_not_replayed(replayed):
     study, _ = replayed
     with pytest.raises(rt.RetimeError, match=r"^--replay: the LP bound"):
         optimum_replay(replace(study, method="lp"))
+
+
+def test_a_law_retimed_with_its_weights_is_replayed_with_them(replayed, monkeypatch):
+    """With --weights the minimum energy's torques are those of the weights optimised with the law (the
+    scenario's would carry a lighter load and leave the lines); the replay itself is not rerun here."""
+    study, _ = replayed
+    w = np.linspace(0.5, 2.0, study.model.n_total)
+    weighted = replace(study, weights=SimpleNamespace(model=with_weights(study.model, w), weights=w))
+    seen = {}
+    monkeypatch.setattr(optimum_replay_module, "motion_replay",
+                        lambda model, motion, res, *rest: seen.setdefault("res", res))
+    optimum_replay(weighted)
+    assert np.array_equal(seen["res"].weights, w)
