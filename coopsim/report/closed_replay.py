@@ -19,7 +19,8 @@ the feedforward replaces it), native and twin, from the same state. The gains:
     object_kd, linear) when it has that law, else ω = 10 rad/s, ζ = 1 (DEFAULT_OMEGA).
 
 `saturate` is the scenario's (default off, so that the total torque's excess over its lines is reported,
-not hidden).
+not hidden). The scenario's other control fields (distribution, squeeze, mass_scale, grasp gains, its
+torque tables) do not apply: the feedforward is the optimum's, on the loaded model.
 """
 
 from __future__ import annotations
