@@ -18,8 +18,9 @@ waypoint k at s = k/(w − 1), a straight line and a single-axis rotation unifor
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -161,12 +162,16 @@ class JointPath:
         q: (N, n) rad (m on a prismatic joint), θ(s).
         d1: (N, n) rad (m), θ′(s) = dθ/ds.
         d2: (N, n) rad (m), θ″(s).
+        recipe: (s, piece) ↦ the JointPath of the same path, branch and redundancy resolution at other
+            points (`joint_path` with this path's arguments), or None (`refined` then has none).
     """
 
     points: PathPoints
     q: np.ndarray
     d1: np.ndarray
     d2: np.ndarray
+    recipe: Callable | None = None
+    _refined: dict = field(default_factory=dict, init=False, repr=False)
 
     @property
     def s(self) -> np.ndarray:
@@ -186,6 +191,30 @@ class JointPath:
         a, b = np.broadcast_to(a, self.s.shape)[:, None], np.broadcast_to(b, self.s.shape)[:, None]
         return JointTrajectory(self.s.copy(), self.q.copy(), self.d1 * np.sqrt(b), self.d1 * a + self.d2 * b,
                                "object_motion")
+
+    def refined(self, factor: int) -> "JointPath | None":
+        """The joint path at the interior points of a `factor`× finer grid: s_i + (k/factor)(s_{i+1} − s_i),
+        k = 1 … factor − 1, on every interval of a piece (computed once per factor, by `recipe`).
+
+        Args:
+            factor: the finer grid's intervals per interval (≥ 2).
+
+        Returns:
+            JointPath | None: (N_intervals (factor − 1) points, interval after interval), or None
+            without a recipe.
+
+        Raises:
+            TrajectoryError: as `joint_path`.
+        """
+        if self.recipe is None:
+            return None
+        if factor not in self._refined:
+            s, piece = self.s, self.points.piece
+            i = np.flatnonzero(piece[1:] == piece[:-1])
+            u = np.arange(1, factor) / factor
+            fs = (s[i, None] + u[None, :] * (s[i + 1] - s[i])[:, None]).ravel()
+            self._refined[factor] = self.recipe(fs, np.repeat(piece[i], factor - 1))
+        return self._refined[factor]
 
 
 def joint_path(model: Model, path: ObjectPath, s: np.ndarray, piece: np.ndarray,
@@ -248,7 +277,8 @@ def joint_path(model: Model, path: ObjectPath, s: np.ndarray, piece: np.ndarray,
     if hit is not None:
         raise TrajectoryError(f"inverse.object_motion: at s={s[hit[0]]:.6g} "
                               f"{joint_limit_reason(model, hit[1], q[hit[0], hit[1]])}")
-    return JointPath(pts, q, d1, d2)
+    return JointPath(pts, q, d1, d2, partial(joint_path, model, path, guess=guess, rest=rest, rest_gain=rest_gain,
+                                             plane_tol=plane_tol))
 
 
 def _where(model: Model, m: int, s: float) -> str:

@@ -21,7 +21,14 @@ Discretisation (TOPP-RA's first-order interpolation): the grid s_0 < … < s_M o
 the path, b linear and a = a_i constant on [s_i, s_{i+1}], b_{i+1} = b_i + 2Δ_i a_i, b = 0 at both ends
 of every piece (the path may have a corner there). The constraints hold at both ends of every
 interval with that interval's a, i.e. on both sides of every grid point: the torques of the sampled
-time law are within the lines at every grid point exactly, not only approximately.
+time law are within the lines at every grid point exactly, not only approximately. Between the grid
+points the law (b linear, a constant) can still exceed them, most where ṡ = √b rises from rest (√b is
+concave). The check points (`PathDynamics.fine_points`: by default the interior points of the FINE×
+finer grid) fix that lazily: at a check point at σ in interval i, b = (1 − σ)b_i + σb_{i+1} and a = a_i,
+so its torques are affine in the interval's unknowns with the path dynamics evaluated there (the LP
+bound: its own grasp wrenches, free); `retime` solves, checks the law exactly at every check point
+(`fine_excess`), adds the rows of every check point of each interval holding one that exceeds by more
+than REFINE_TOL (their velocity terms by the tangent at b̄ there), and solves again, until none does.
 
 Two solvers of the same discrete problem: `reachability` (TOPP-RA: a backward pass of controllable
 sets and a greedy forward pass, each stage a two-variable LP solved exactly in NumPy by its vertices)
@@ -35,7 +42,8 @@ time itself, a convex function of b over the linearised constraints.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -54,6 +62,9 @@ B_FLOOR = 1e-14                 # relative floor of b̄ in the tangent (b̄ = 0 
 SHRINKS = 30                    # the most times b̄ is quartered when the rows linearised at it have no solution
 MAX_LINEARISATIONS = 60         # the most linearisations of the motor lines per minimum-time solve
 BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's LP bounded
+FINE = 10                       # the check grid's intervals per grid interval (the rows added between grid points)
+REFINE_TOL = 1e-9               # the excess over a line (relative to τ_s) at a check point that adds its interval's rows
+MAX_REFINE = 8                  # the most rounds of rows added between grid points per minimum-time solve
 
 
 class RetimeError(CoopsimError):
@@ -78,6 +89,8 @@ class PathDynamics:
         slope: (n,) N·m·s/rad, k = τ_s/ω_s (0: flat line).
         active: (n,) bool, the actuated joints (the passive ones carry zero torque).
         nominal_mass: kg, μ of the nominal object (the object's mass for 'scaled', 0 for 'payload').
+        fine_maker: () ↦ the PathDynamics at the check points between the grid points (`fine_points`),
+            or None (no check points: the constraints hold at the grid points only).
     """
 
     path: JointPath
@@ -91,6 +104,23 @@ class PathDynamics:
     slope: np.ndarray
     active: np.ndarray
     nominal_mass: float
+    fine_maker: Callable | None = None
+    _fine: dict = field(default_factory=dict, init=False, repr=False)
+
+    def fine_points(self) -> "FinePoints | None":
+        """The check points between the grid points with their intervals (computed once; None: none).
+
+        Returns:
+            FinePoints | None: the dynamics at the points carry this PathDynamics' motors.
+        """
+        if self.fine_maker is None:
+            return None
+        if "points" not in self._fine:
+            fd = self.fine_maker()
+            self._fine["points"] = None if fd is None else fine_points(self, fd)
+        fp = self._fine["points"]
+        return None if fp is None else replace(fp, dyn=replace(fp.dyn, stall=self.stall, slope=self.slope,
+                                                               active=self.active))
 
     def torques(self, mass: float, a, b, f: np.ndarray | None = None) -> np.ndarray:
         """τ (N, n) at carried mass μ and (a, b) per point (for 'lp' the grasp wrenches f (N, rk) too).
@@ -111,12 +141,12 @@ class PathDynamics:
 
 
 def path_dynamics(model: Model, jp: JointPath, method: str, mode: str = "payload",
-                  payload_position: np.ndarray | None = None) -> PathDynamics:
+                  payload_position: np.ndarray | None = None, fine=FINE) -> PathDynamics:
     """The affine coefficients of the inverse dynamics along a joint path (`PathDynamics`).
 
     Three inverse problems, at (a, b) = (0, 0), (1, 0), (0, 1); for a resolution each gives τ(μ) = α + μβ
     (`coopsim.inverse.capacity.affine_torques`), the coefficients of a and b their differences from
-    the first.
+    the first. The same at the check points between the grid points when first needed (`fine_points`).
 
     Args:
         model: the Model (its motors, weights, passive joints, object).
@@ -125,6 +155,10 @@ def path_dynamics(model: Model, jp: JointPath, method: str, mode: str = "payload
         mode: 'scaled' or 'payload'.
         payload_position: (3,) m, object frame, the point payload's position ('payload'); None: the
             scenario's.
+        fine: the check points: an int F (the interior points of the F× finer grid, `JointPath.refined`;
+            none without the joint path's recipe), a JointPath on the same path (its points that are not
+            grid points), the PathDynamics of the same method and mode at such points, or None / 0 / 1
+            (none).
 
     Returns:
         PathDynamics.
@@ -151,8 +185,70 @@ def path_dynamics(model: Model, jp: JointPath, method: str, mode: str = "payload
     tau[:, 1:] -= tau[:, :1]
     if y is not None:
         y[:, 1:] -= y[:, :1]
+    maker = None
+    if isinstance(fine, (JointPath, PathDynamics)) or (fine is not None and fine > 1 and jp.recipe is not None):
+        def maker():
+            if isinstance(fine, PathDynamics):
+                return fine
+            fjp = fine if isinstance(fine, JointPath) else jp.refined(fine)
+            return path_dynamics(model, fjp, method, mode, payload_position, None)
     return PathDynamics(jp, method, mode, tau, y, JT, A, motors.stall_torque.astype(float), motors.line_slope,
-                        ~motors.passive.astype(bool), model.object.mass if mode == "scaled" else 0.0)
+                        ~motors.passive.astype(bool), model.object.mass if mode == "scaled" else 0.0, maker)
+
+
+@dataclass(frozen=True, eq=False)
+class FinePoints:
+    """Check points strictly inside the grid's intervals (P points): on interval k (`_stages`), a = a_k and
+    b = (1 − σ) b_i + σ b_{i+1} exactly (b linear in s), so each point's torques are linear in its
+    interval's unknowns with the path dynamics evaluated there.
+
+    Attributes:
+        dyn: the PathDynamics at the P points.
+        stage: (P,) int, each point's interval (an index into `_stages` of the grid).
+        sigma: (P,) its place in the interval, (s − s_i)/(s_{i+1} − s_i) ∈ (0, 1).
+    """
+
+    dyn: PathDynamics
+    stage: np.ndarray
+    sigma: np.ndarray
+
+    def subset(self, idx: np.ndarray) -> "FinePoints":
+        """The points idx (int) only."""
+        d = self.dyn
+        pts = d.path.points
+        sub = JointPath(replace(pts, s=pts.s[idx], piece=pts.piece[idx], p=pts.p[idx], R=pts.R[idx], d1=pts.d1[idx],
+                                d2=pts.d2[idx]), d.path.q[idx], d.path.d1[idx], d.path.d2[idx])
+        pick = (lambda x, ax: None if x is None else np.take(x, idx, axis=ax))
+        dyn = replace(d, path=sub, tau=d.tau[:, :, idx], y=pick(d.y, 2), JT=pick(d.JT, 0), A=pick(d.A, 0),
+                      fine_maker=None)
+        return FinePoints(dyn, self.stage[idx], self.sigma[idx])
+
+
+def fine_points(dyn: PathDynamics, fine: PathDynamics) -> FinePoints | None:
+    """The points of `fine` strictly inside an interval of dyn's grid (the others dropped), with their intervals.
+
+    Args:
+        dyn: the PathDynamics on the grid.
+        fine: the PathDynamics at other points of the same path and pieces.
+
+    Returns:
+        FinePoints | None: None when no point lies inside an interval.
+    """
+    s, piece = dyn.path.s, dyn.path.points.piece
+    st = _stages(s, piece)
+    fs, fpc = fine.path.s, fine.path.points.piece
+    k = np.full(len(fs), -1)
+    for p in np.unique(fpc):
+        own = np.flatnonzero(piece[st] == p)
+        sel = np.flatnonzero(fpc == p)
+        if own.size:
+            k[sel] = own[np.clip(np.searchsorted(s[st[own]], fs[sel], side="right") - 1, 0, own.size - 1)]
+    i = st[np.maximum(k, 0)]
+    sigma = (fs - s[i]) / (s[i + 1] - s[i])
+    keep = np.flatnonzero((k >= 0) & (sigma > 1e-9) & (sigma < 1 - 1e-9))
+    if not keep.size:
+        return None
+    return FinePoints(fine, k, sigma).subset(keep)
 
 
 @dataclass(frozen=True, eq=False)
@@ -374,17 +470,19 @@ def _boxed(G, H, E, scale_a, scale_b):
             np.concatenate([E, BIG * scale_a * one, BIG * scale_a * one, BIG * scale_b * one], 1))
 
 
-def reachability(dyn: PathDynamics, mass: float, lam) -> np.ndarray | None:
+def reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> np.ndarray | None:
     """ṡ² (N,) of the time-optimal law for the linearised rows, by TOPP-RA; None when none exists.
 
     Backward: K_M = {0} and K_i = the range of b over the stage polygon cut by b + 2Δa ∈ K_{i+1} (its
     vertices inside the strip and the polygon's chords on the strip's two lines). Forward from b_0 = 0:
-    the largest a of the polygon at b_i that stays in K_{i+1}.
+    the largest a of the polygon at b_i that stays in K_{i+1}. A check point of `extra` at σ on stage i
+    adds its rows to that stage's polygon: b = b_i + 2σΔ a there (`_extra_stage_rows`).
 
     Args:
         dyn: the PathDynamics of a linear resolution.
         mass: kg, μ.
         lam: (λ₀, λ₁) (N,) the tangent of √b.
+        extra: (FinePoints, (λ₀, λ₁) (P,)) the check points' rows, or None.
 
     Returns:
         np.ndarray | None: b (N,) 1/s², or None (a stage without a controllable state).
@@ -401,6 +499,10 @@ def reachability(dyn: PathDynamics, mass: float, lam) -> np.ndarray | None:
     Gs, Hs, Es = _boxed(Gs, Hs, Es, 1.0 / max(np.min(d), 1e-300), 1.0 / max(np.min(d), 1e-300) ** 2)
     tol = 1e-12 * scale
     va, vb = _vertices(Gs, Hs, Es, tol)
+    Gs, Hs, Es, va, vb = list(Gs), list(Hs), list(Es), list(va), list(vb)
+    if extra is not None:
+        for k, rows in _extra_stage_rows(extra, mass, d, (Gs, Hs, Es), tol).items():
+            Gs[k], Hs[k], Es[k], va[k], vb[k] = rows
     b = np.zeros(len(s))
     lo, hi = np.zeros(len(s)), np.zeros(len(s))
     for k in range(len(st) - 1, -1, -1):
@@ -432,69 +534,112 @@ def reachability(dyn: PathDynamics, mass: float, lam) -> np.ndarray | None:
     return b
 
 
+def _extra_stage_rows(extra, mass: float, d: np.ndarray, base, tol: np.ndarray) -> dict:
+    """{stage k: (G, H, E, vertices a, vertices b)} of the stages with check points: the stage's rows
+    (`base`: lists of (m,) arrays) and each point's, G_p a + H_p (b_i + 2σΔ a) ≤ E_p and its speed bound
+    b_i + 2σΔ a ≤ b_max(p), padded with 0 ≤ 1 to a common length."""
+    fp, flam = extra
+    Gf, Hf, Ef, _ = motor_rows(fp.dyn, mass, flam)
+    top = speed_bound(fp.dyn)
+    w = (2 * d[fp.stage] * fp.sigma)[:, None]
+    Gf, Hf, Ef = (np.concatenate([x, y[:, None]], 1) for x, y in ((Gf + w * Hf, w[:, 0]), (Hf, np.ones(len(top))),
+                                                                   (Ef, top)))
+    stages = np.unique(fp.stage)
+    rows = []
+    for k in stages:
+        on = fp.stage == k
+        rows.append([np.concatenate([base[x][k], M[on].ravel()]) for x, M in enumerate((Gf, Hf, Ef))])
+    m = max(len(r[0]) for r in rows)
+    G, H, E = (np.stack([np.pad(r[x], (0, m - len(r[x])), constant_values=float(x == 2)) for r in rows])
+               for x in range(3))
+    fin = np.isfinite(E)
+    G, H, E = np.where(fin, G, 0.0), np.where(fin, H, 0.0), np.where(fin, E, 1.0)
+    va, vb = _vertices(G, H, E, tol[stages])
+    return {int(k): (G[n], H[n], E[n], va[n], vb[n]) for n, k in enumerate(stages)}
+
+
 # ------------------------------------------------------------------------------------------------
 # One LP over the grid (any resolution, and the LP bound)
 # ------------------------------------------------------------------------------------------------
 
-def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dict]:
+def grid_lp(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np.ndarray | None, dict]:
     """ṡ² (N,) maximising Σ b over the grid for the linearised rows, one sparse LP (HiGHS); None: infeasible.
 
     Unknowns b (N,) (a_i = (b_{i+1} − b_i)/(2Δ_i)), for 'lp' also the grasp wrenches f at both ends
-    of every interval (A f = y(a, b, μ), passive torques 0). The maximal ṡ² profile is the pointwise
-    largest feasible one, so it maximises Σ b.
+    of every interval and at every check point of `extra` (A f = y(a, b, μ), passive torques 0). The
+    rows hold at both ends of every interval and at the check points (b = (1 − σ)b_i + σb_{i+1} there,
+    their speed bounds too). The maximal ṡ² profile is the pointwise largest feasible one, so it
+    maximises Σ b.
 
     Args:
         dyn: the PathDynamics.
         mass: kg, μ.
         lam: (λ₀, λ₁) (N,) the tangent of √b.
+        extra: (FinePoints, (λ₀, λ₁) (P,) its tangent of √b) the check points' rows, or None.
 
     Returns:
         tuple: b (N,) 1/s² or None, and the LP's statistics (status, message, iterations, the grasp
-        wrenches f (K, 2, rk) for 'lp').
+        wrenches f (K, 2, rk) and f_fine (P, rk) for 'lp').
     """
     s, piece = dyn.path.s, dyn.path.points.piece
     N = len(s)
     G, H, E, j = motor_rows(dyn, mass, lam)
     st = _stages(s, piece)
     K, d = len(st), s[st + 1] - s[st]
+    ks = np.arange(K)
+    blocks = [(ks, np.zeros(K), dyn, st, G[st], H[st], E[st], "start"),
+              (ks, np.ones(K), dyn, st + 1, G[st + 1], H[st + 1], E[st + 1], "end")]
+    if extra is not None:
+        fp, flam = extra
+        Gf, Hf, Ef, _ = motor_rows(fp.dyn, mass, flam)
+        blocks.append((fp.stage, fp.sigma, fp.dyn, np.arange(len(fp.stage)), Gf, Hf, Ef, "inside"))
     lp = dyn.method == LP_BOUND
     rk = dyn.JT.shape[2] if lp else 0
-    nv = N + 2 * K * rk
-    rows, rhs, eq_rows, eq_rhs = [], [], [], []
-    for side, pt in ((0, st), (1, st + 1)):
-        # a_i = (b_{i+1} − b_i)/(2Δ); the row G a + H b_pt ≤ E − (Jᵀ f)·sign
-        g, h, e = G[pt], H[pt], E[pt]
-        cb0, cb1 = -g / (2 * d[:, None]), g / (2 * d[:, None])
-        (cb0 if side == 0 else cb1)[:] += h
-        m = g.shape[1]
-        r_idx = np.arange(K * m).reshape(K, m)
-        data = [sp.coo_matrix((cb0.ravel(), (r_idx.ravel(), np.repeat(st, m))), shape=(K * m, nv)),
-                sp.coo_matrix((cb1.ravel(), (r_idx.ravel(), np.repeat(st + 1, m))), shape=(K * m, nv))]
-        M = data[0] + data[1]
+    sizes = [len(b[0]) for b in blocks]
+    offs = N + rk * np.concatenate([[0], np.cumsum(sizes)])
+    nv = int(offs[-1])
+    rows, rhs, eqs, meta = [], [], [], []
+    for (k, sig, src, pt, g, h, e, side), off in zip(blocks, offs):
+        P, m = g.shape
+        i = st[k]
+        ga = g / (2 * d[k])[:, None]                                  # a = (b_{i+1} − b_i)/(2Δ), b = (1−σ)b_i + σb_{i+1}
+        r_idx = np.arange(P * m)
+        M = (sp.coo_matrix(((-ga + h * (1 - sig)[:, None]).ravel(), (r_idx, np.repeat(i, m))), shape=(P * m, nv))
+             + sp.coo_matrix(((ga + h * sig[:, None]).ravel(), (r_idx, np.repeat(i + 1, m))), shape=(P * m, nv)))
         if lp:
-            JT = dyn.JT[pt][:, j, :]                                    # (K, n_a, rk)
+            JT = src.JT[pt][:, j, :]                                    # (P, n_a, rk)
             blk = np.concatenate([JT, -JT], axis=1)                     # upper, lower rows
-            cols = N + (np.arange(K)[:, None] * 2 + side) * rk + np.arange(rk)[None, :]
-            rr = np.repeat(np.arange(K * m).reshape(K, m, 1), rk, axis=2)
+            cols = off + np.arange(P)[:, None] * rk + np.arange(rk)[None, :]
+            rr = np.repeat(r_idx.reshape(P, m, 1), rk, axis=2)
             cc = np.repeat(cols[:, None, :], m, axis=1)
-            M = M + sp.coo_matrix((blk.ravel(), (rr.ravel(), cc.ravel())), shape=(K * m, nv))
+            M = M + sp.coo_matrix((blk.ravel(), (rr.ravel(), cc.ravel())), shape=(P * m, nv))
+            eqs.append(_lp_equalities(src, mass, pt, i, k, sig, d, nv, off, rk))
         rows.append(M.tocsr())
         rhs.append(e.ravel())
-        if lp:
-            eq_rows.append(_lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv))
+        meta.append((np.repeat(src.path.s[pt], m), np.repeat(np.where(side == "inside", -1, pt), m),
+                     np.tile(np.arange(m), P), np.full(P * m, side)))
+    if extra is not None:                                               # the check points' speed bounds
+        top = speed_bound(fp.dyn)
+        on = np.flatnonzero(np.isfinite(top))
+        i = st[fp.stage[on]]
+        r_idx = np.arange(len(on))
+        rows.append((sp.coo_matrix((1 - fp.sigma[on], (r_idx, i)), shape=(len(on), nv))
+                     + sp.coo_matrix((fp.sigma[on], (r_idx, i + 1)), shape=(len(on), nv))).tocsr())
+        rhs.append(top[on])
+        meta.append((fp.dyn.path.s[on], np.full(len(on), -1), np.full(len(on), -1), np.full(len(on), "inside")))
     A_ub = sp.vstack(rows).tocsr()
     b_ub = np.concatenate(rhs)
     keep = np.isfinite(b_ub)
     A_eq = b_eq = None
     if lp:
-        A_eq = sp.vstack([m for m, _ in eq_rows]).tocsr()
-        b_eq = np.concatenate([r for _, r in eq_rows])
+        A_eq = sp.vstack([m for m, _ in eqs]).tocsr()
+        b_eq = np.concatenate([r for _, r in eqs])
     bounds = np.zeros((nv, 2))
     bounds[:, 1] = np.inf
     bounds[N:, 0] = -np.inf
     bounds[:N, 1] = speed_bound(dyn)
-    for k in np.unique(piece):
-        bounds[np.flatnonzero(piece == k)[[0, -1]], 1] = 0.0
+    for p in np.unique(piece):
+        bounds[np.flatnonzero(piece == p)[[0, -1]], 1] = 0.0
     c = np.zeros(nv)
     c[:N] = -1.0
     r = linprog(c, A_ub=A_ub[keep], b_ub=b_ub[keep], A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
@@ -502,15 +647,18 @@ def grid_lp(dyn: PathDynamics, mass: float, lam) -> tuple[np.ndarray | None, dic
     if r.status != 0:
         return None, stats
     if lp:
-        stats["f"] = r.x[N:].reshape(K, 2, rk)
-    stats["certificate"] = _certificate(r, b_ub[keep], b_eq, bounds, np.flatnonzero(keep), K, G.shape[1], st, j)
+        stats["f"] = r.x[N:offs[2]].reshape(2, K, rk).transpose(1, 0, 2)
+        stats["f_fine"] = r.x[offs[2]:].reshape(-1, rk)
+    where = tuple(np.concatenate([m[x] for m in meta])[keep] for x in range(4))
+    stats["certificate"] = _certificate(r, b_ub[keep], b_eq, bounds, where, j)
     return np.maximum(r.x[:N], 0.0), stats
 
 
-def _certificate(r, b_ub, b_eq, bounds, rows, K, m, st, joints) -> dict:
+def _certificate(r, b_ub, b_eq, bounds, where, joints) -> dict:
     """The grid LP's dual certificate: the dual objective (equal to the primal's at an optimum, its duals of
     the right sign), their gap, how many motor-line rows bind (nonzero dual) and the one of largest dual
-    (its grid point, stacked joint, side of the interval and line)."""
+    (its s, grid point (or None inside an interval), stacked joint, side of the interval and line).
+    `where`: per row its point's s, grid point (−1 inside an interval), column (−1: a speed bound), side."""
     y_ub = r.ineqlin.marginals
     dual = float(b_ub @ y_ub + (0.0 if b_eq is None else b_eq @ r.eqlin.marginals)
                  + np.where(np.isfinite(bounds[:, 1]), bounds[:, 1], 0.0) @ r.upper.marginals
@@ -519,39 +667,36 @@ def _certificate(r, b_ub, b_eq, bounds, rows, K, m, st, joints) -> dict:
     out = {"primal": float(r.fun), "dual": dual, "gap": abs(float(r.fun) - dual), "sign_ok": bool(np.all(y_ub <= 0)),
            "binding_rows": int(big.sum())}
     if np.any(big):
-        k = int(rows[int(np.argmax(np.abs(y_ub)))])
-        side, rest = divmod(k, K * m)
-        stage, col = divmod(rest, m)
+        k = int(np.argmax(np.abs(y_ub)))
+        s, point, col, side = (w[k] for w in where)
         n_a = len(joints)
-        out["largest"] = {"point": int(st[stage] + side), "joint": int(joints[col % n_a]),
-                          "interval_side": "start" if side == 0 else "end",
-                          "line": "tau_max" if col < n_a else "tau_min", "dual": float(y_ub[int(np.argmax(np.abs(y_ub)))])}
+        out["largest"] = {"s": float(s), "point": None if point < 0 else int(point),
+                          "joint": None if col < 0 else int(joints[col % n_a]), "interval_side": str(side),
+                          "line": "speed" if col < 0 else ("tau_max" if col < n_a else "tau_min"),
+                          "dual": float(y_ub[k])}
     return out
 
 
-def _lp_equalities(dyn, mass, st, pt, side, d, N, K, rk, nv):
-    """A f − y_a a − y_b b = y₀ at the points pt (K,) on `side` of each interval, and Jᵀf = −τ_arms on
-    the passive joints (τ_arms' a, b parts moved to the b columns)."""
-    Y = dyn.y[0] + mass * dyn.y[1]                                      # (3, N, k)
-    k = Y.shape[2]
-    cols_f = N + (np.arange(K)[:, None] * 2 + side) * rk + np.arange(rk)[None, :]
+def _lp_equalities(src, mass, pt, i, k, sig, d, nv, off, rk):
+    """A f − y_a a − y_b b = y₀ at the points pt (P,) of `src` (on intervals k, at σ), and Jᵀf = −τ_arms on
+    the passive joints (τ_arms' a, b parts moved to the b columns i, i + 1); f at columns off + p·rk."""
+    Y = src.y[0] + mass * src.y[1]                                      # (3, N, k)
+    P = len(pt)
+    cols_f = off + np.arange(P)[:, None] * rk + np.arange(rk)[None, :]
     blocks = []
-    for Mat, y3, n_r in ((dyn.A[pt], Y[:, pt], k),
-                         (dyn.JT[pt][:, ~dyn.active, :], -dyn.tau[0][:, pt][:, :, ~dyn.active], int((~dyn.active).sum()))):
+    for Mat, y3 in ((src.A[pt], Y[:, pt]), (src.JT[pt][:, ~src.active, :], -src.tau[0][:, pt][:, :, ~src.active])):
+        n_r = Mat.shape[1]
         if n_r == 0:
             continue
-        rr = np.arange(K * n_r).reshape(K, n_r)
+        rr = np.arange(P * n_r).reshape(P, n_r)
         f_part = sp.coo_matrix((Mat.ravel(), (np.repeat(rr[:, :, None], rk, 2).ravel(),
-                                              np.repeat(cols_f[:, None, :], n_r, 1).ravel())), shape=(K * n_r, nv))
-        ya, yb = y3[1], y3[2]                                           # (K, n_r)
-        cb_i = ya / (2 * d[:, None])                                    # −y_a a = y_a/(2Δ) b_i − y_a/(2Δ) b_{i+1}
-        cb_j = -cb_i
-        if side == 0:
-            cb_i = cb_i - yb
-        else:
-            cb_j = cb_j - yb
-        b_part = (sp.coo_matrix((cb_i.ravel(), (rr.ravel(), np.repeat(st, n_r))), shape=(K * n_r, nv))
-                  + sp.coo_matrix((cb_j.ravel(), (rr.ravel(), np.repeat(st + 1, n_r))), shape=(K * n_r, nv)))
+                                              np.repeat(cols_f[:, None, :], n_r, 1).ravel())), shape=(P * n_r, nv))
+        ya, yb = y3[1], y3[2]                                           # (P, n_r)
+        ca = ya / (2 * d[k])[:, None]                                   # −y_a a − y_b ((1−σ)b_i + σb_{i+1})
+        b_part = (sp.coo_matrix(((ca - yb * (1 - sig)[:, None]).ravel(), (rr.ravel(), np.repeat(i, n_r))),
+                                shape=(P * n_r, nv))
+                  + sp.coo_matrix(((-ca - yb * sig[:, None]).ravel(), (rr.ravel(), np.repeat(i + 1, n_r))),
+                                  shape=(P * n_r, nv)))
         blocks.append((f_part + b_part, y3[0].ravel()))
     return sp.vstack([m for m, _ in blocks]), np.concatenate([r for _, r in blocks])
 
@@ -569,10 +714,15 @@ class Retiming:
         law: the TimeLaw (None: no motion carries μ).
         feasible: a motion exists.
         converged: the linearisation converged (max |Δb| ≤ tol·max b).
-        iterations: the linearisations solved.
+        iterations: the linearisations solved (all rounds).
         solver: 'reachability' or 'grid_lp'.
         f: (K, 2, rk) [N; N·m] the LP bound's grasp wrenches at both ends of every interval, or None.
         stats: the last LP's statistics (grid_lp) or {}.
+        refine: the rows between the grid points (`retime`), or None (no check points): rounds (solves
+            after the first), rows (int (R,), the check points whose rows the law meets, indices into
+            `PathDynamics.fine_points`), intervals (how many intervals carry them), max_excess (the
+            largest excess over a line or a no-load speed at any check point, relative), s (its point),
+            within (max_excess ≤ REFINE_TOL).
     """
 
     mass: float
@@ -583,6 +733,7 @@ class Retiming:
     solver: str
     f: np.ndarray | None = None
     stats: dict | None = None
+    refine: dict | None = None
 
     @property
     def duration(self) -> float:
@@ -591,13 +742,18 @@ class Retiming:
 
 
 def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float = 1e-7, max_iter: int | None = None,
-           start: np.ndarray | None = None) -> Retiming:
-    """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module).
+           start: np.ndarray | None = None, refine: bool = True, rows: np.ndarray | None = None) -> Retiming:
+    """The minimum-time law of carried mass μ along the path, the motor lines exact (see the module), at the
+    grid points and (`refine`) at the check points between them.
 
     The rows are linearised at b̄ (first without the velocity term, or at `start`; where the rows
     linearised there have no solution, at b̄/4, up to SHRINKS times), solved, and
     linearised again at the solution until max |b − b̄| ≤ tol·max b; `check_time_law` then measures
-    the exact lines.
+    the exact lines. With check points (`PathDynamics.fine_points`) and `refine`, the law is then
+    checked exactly at every check point (`fine_excess`); every check point of an interval holding one
+    that exceeds by more than REFINE_TOL adds its rows to that interval (b linear, a constant: the
+    point's torques are linear in the interval's unknowns, its velocity term by the tangent at b̄ there)
+    and the law is solved again from the last, up to MAX_REFINE rounds.
 
     Args:
         dyn: the PathDynamics.
@@ -605,23 +761,57 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
         solver: 'reachability' (linear resolutions) or 'grid_lp' (any; None: grid_lp, the faster here).
         tol: the relative change of b that ends the loop (the tangent's error at the solution is of its
             square: 1e-7 leaves ~1e-15 of the velocity term).
-        max_iter: the most linearisations; None: MAX_LINEARISATIONS.
+        max_iter: the most linearisations per round; None: MAX_LINEARISATIONS.
         start: (N,) 1/s², b̄ to linearise at first; None: the law without velocity terms.
+        refine: add the rows of the check points where the law exceeds (no effect without check points).
+        rows: int (R,), check points whose rows are there from the first solve (a previous law's
+            `refine['rows']`); None: none.
 
     Returns:
         Retiming (infeasible when no motion carries μ).
     """
     solver = solver or "grid_lp"
-    max_iter = MAX_LINEARISATIONS if max_iter is None else max_iter
-    N = len(dyn.path.s)
+    fp = dyn.fine_points() if refine else None
+    rows = np.zeros(0, dtype=int) if rows is None or fp is None else np.unique(np.asarray(rows, dtype=int))
+    its = 0
+    for rounds in range(MAX_REFINE + 1):
+        r = _min_time(dyn, mass, solver, tol, max_iter, start, None if fp is None or not rows.size else fp.subset(rows))
+        its += r.iterations
+        if fp is None or not r.feasible:
+            return replace(r, iterations=its)
+        ex = fine_excess(fp, r)
+        bad = np.isin(fp.stage, np.unique(fp.stage[ex > REFINE_TOL]))
+        add = np.setdiff1d(np.flatnonzero(bad), rows)
+        if not add.size or rounds == MAX_REFINE or not r.converged:
+            break
+        rows, start = np.union1d(rows, add), r.law.b
+    w = int(np.argmax(ex))
+    info = {"rounds": rounds, "rows": rows, "intervals": int(np.unique(fp.stage[rows]).size),
+            "max_excess": float(ex[w]), "s": float(fp.dyn.path.s[w]), "within": bool(ex[w] <= REFINE_TOL)}
+    return replace(r, iterations=its, refine=info)
 
-    def solve(lam):
+
+def _min_time(dyn: PathDynamics, mass: float, solver: str, tol: float, max_iter: int | None,
+              start: np.ndarray | None, extra: FinePoints | None) -> Retiming:
+    """The linearisation loop of `retime` with the rows of the check points `extra` (None: none)."""
+    max_iter = MAX_LINEARISATIONS if max_iter is None else max_iter
+    s, piece = dyn.path.s, dyn.path.points.piece
+    N = len(s)
+    st = _stages(s, piece)
+
+    def solve(b_ref, scale):
+        lam = (np.zeros(N), np.zeros(N)) if b_ref is None else _tangent(b_ref, scale)
+        more = None
+        if extra is not None:
+            k, sig = st[extra.stage], extra.sigma
+            fb = None if b_ref is None else (1 - sig) * b_ref[k] + sig * b_ref[k + 1]
+            more = (extra, (np.zeros(len(sig)), np.zeros(len(sig))) if fb is None else _tangent(fb, scale))
         if solver == "grid_lp":
-            return grid_lp(dyn, mass, lam)
-        return reachability(dyn, mass, lam), {}
+            return grid_lp(dyn, mass, lam, more)
+        return reachability(dyn, mass, lam, more), {}
 
     if start is None:
-        b, stats = solve((np.zeros(N), np.zeros(N)))
+        b, stats = solve(None, 1.0)
         if b is None and not np.any(dyn.slope):
             return Retiming(mass, None, False, True, 1, solver, stats=stats)
         b = np.zeros(N) if b is None else b
@@ -630,7 +820,7 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     scale = max(float(np.max(b)), 1e-300)
     shrunk = 0
     for it in range(1, max_iter + 1):
-        new, stats = solve(_tangent(b, scale))
+        new, stats = solve(b, scale)
         if new is None and shrunk < SHRINKS and np.any(b > 0):
             b, shrunk = b / 4.0, shrunk + 1        # a tangent far above the feasible ṡ² overestimates θ̇ at rest
             continue
@@ -639,10 +829,32 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
         change = float(np.max(np.abs(new - b)))
         b, scale = new, max(float(np.max(new)), 1e-300)
         if change <= tol * scale:
-            return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, True, it, solver,
-                            stats.pop("f", None), stats)
-    return Retiming(mass, time_of(dyn.path.s, dyn.path.points.piece, b), True, False, max_iter, solver,
-                    stats.pop("f", None), stats | {"relative_change": change / scale})
+            return Retiming(mass, time_of(s, piece, b), True, True, it, solver, stats.pop("f", None), stats)
+    return Retiming(mass, time_of(s, piece, b), True, False, max_iter, solver, stats.pop("f", None),
+                    stats | {"relative_change": change / scale})
+
+
+def fine_excess(fp: FinePoints, r: Retiming) -> np.ndarray:
+    """The excess of a law at the check points (P,): the largest over the joints of the excess over eq. 36
+    (relative to τ_s; the LP bound: with the best grasp wrenches at each point, `best_excess`) and of
+    |θ̇|/ω_s − 1 (≤ 0: within).
+
+    Args:
+        fp: the FinePoints.
+        r: the feasible Retiming on their grid.
+
+    Returns:
+        np.ndarray: (P,).
+    """
+    law = r.law
+    i = _stages(law.s, law.piece)[fp.stage]
+    a = law.a[i]
+    b = np.maximum((1 - fp.sigma) * law.b[i] + fp.sigma * law.b[i + 1], 0.0)
+    if fp.dyn.method == LP_BOUND:
+        ex = best_excess(fp.dyn, r.mass, a, b)[0]
+    else:
+        ex = np.max(line_excess(fp.dyn, r.mass, a, b)[0], axis=1, initial=-np.inf)
+    return np.maximum(ex, _speed_ratio(fp.dyn, b) - 1.0)
 
 
 def static_capacity(dyn: PathDynamics) -> float:
@@ -695,12 +907,14 @@ def _static_problem(dyn: PathDynamics):
 
 
 def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10,
-                field: str = "--duration", names: list[str] | None = None):
+                field: str = "--duration", names: list[str] | None = None, refine: bool = True):
     """The heaviest carried mass whose minimum time is within `duration`, and its Retiming.
 
     The minimum time grows with μ; the bracket [nominal mass, μ_hi] is grown (×4 from twice the nominal
     mass or 1 kg, never past the static capacity) until T(μ_hi) > duration, then Brent's method on
     T(μ) − duration (an infeasible μ counts as infinitely slow). The heaviest μ found feasible is kept.
+    With `refine` every solve starts with the rows of every check point any earlier solve added
+    (`retime`), so that later solves rarely need a second round.
 
     Args:
         dyn: the PathDynamics.
@@ -709,6 +923,7 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
         rtol: the relative tolerance on μ.
         field: the input that set the duration, for the message when even the nominal load is too slow.
         names: (n,) the joints' labels, for the message when the motors cannot hold the nominal load.
+        refine: as `retime` (the rows between the grid points).
 
     Returns:
         tuple: (mass kg, Retiming at it, the minimum-time solves made).
@@ -721,16 +936,18 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
     top = static_capacity(dyn)
     if not top > lo:
         raise RetimeError(hold_failure(dyn, names))
-    first = retime(dyn, lo, solver)
+    first = retime(dyn, lo, solver, refine=refine)
     if not first.feasible or first.duration > duration:
         raise RetimeError(f"{field}: no motion carries the bare object along the path within {duration:g} s "
                           f"(its minimum time is {first.duration:.6g} s)")
-    best = {"r": first}
+    best = {"r": first, "rows": None if first.refine is None else first.refine["rows"]}
     count = [1]
 
     def excess(mu):
         count[0] += 1
-        r = retime(dyn, mu, solver, start=best["r"].law.b)
+        r = retime(dyn, mu, solver, start=best["r"].law.b, refine=refine, rows=best["rows"])
+        if r.refine is not None:
+            best["rows"] = np.union1d(best["rows"], r.refine["rows"])
         if r.feasible and r.duration <= duration and mu >= best["r"].mass:
             best["r"] = r
         return (r.duration if r.feasible else np.inf) - duration
@@ -872,10 +1089,15 @@ def speed_excess(dyn: PathDynamics, b: np.ndarray) -> float:
     Returns:
         float: the largest relative excess of a joint's speed over its no-load speed.
     """
+    return float(np.max(_speed_ratio(dyn, b), initial=0.0)) - 1.0
+
+
+def _speed_ratio(dyn: PathDynamics, b: np.ndarray) -> np.ndarray:
+    """max over the joints with a finite no-load speed of |θ̇|/ω_s (N,) (0: none)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         omega = np.where(dyn.slope > 0, dyn.stall / np.where(dyn.slope > 0, dyn.slope, 1.0), np.inf)
         ratio = np.abs(dyn.path.d1) * np.sqrt(np.maximum(b, 0.0))[:, None] / omega
-    return float(np.max(np.where(dyn.active & np.isfinite(omega), ratio, 0.0), initial=0.0)) - 1.0
+    return np.max(np.where(dyn.active & np.isfinite(omega), ratio, 0.0), axis=1, initial=0.0)
 
 
 def point_wrenches(r: Retiming) -> np.ndarray | None:

@@ -26,7 +26,7 @@ from coopsim.report.inverse_report import Progress, _report, capacity_study
 
 METHODS = LINEAR_METHODS + (rt.LP_BOUND,)
 CURVE_POINTS = 9          # masses on the payload–time curve, from the nominal load to near the heaviest
-FINE = 10                 # the check grid's intervals per grid interval
+FINE = rt.FINE           # the check grid's intervals per grid interval
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +47,8 @@ class MethodRetime:
         evaluations: the minimum-time solves of the heaviest-load search.
         wall_s: s, the wall time of the heaviest-load search; retime_s that of one minimum-time solve.
         retime_s: s, the wall time of the nominal load's minimum-time solve.
+        grid_only_mass: kg, the heaviest load within T_max with the rows at the grid points only (no rows
+            added between them: what the refinement costs).
     """
 
     dyn: rt.PathDynamics
@@ -61,6 +63,7 @@ class MethodRetime:
     evaluations: int
     wall_s: float
     retime_s: float
+    grid_only_mass: float
 
     @property
     def law_of(self) -> rt.Retiming:
@@ -166,12 +169,14 @@ def _path_gain(motion: ObjectMotion) -> float:
 
 
 def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float, payload: float | None, field: str):
-    dyn = rt.path_dynamics(model, jp, method, mode)
+    fdyn = rt.path_dynamics(model, fine, method, mode, fine=None)
+    dyn = rt.path_dynamics(model, jp, method, mode, fine=fdyn)
     t0 = time.perf_counter()
     bare = rt.retime(dyn, dyn.nominal_mass)
     t1 = time.perf_counter()
     mass, best, evals = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model))
     t2 = time.perf_counter()
+    grid_only = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model), refine=False)[0]
     chosen = None
     if payload is not None:
         chosen = rt.retime(dyn, float(payload))
@@ -189,9 +194,8 @@ def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float,
         curve.append((float(mu), r.duration))
     curve.append((float(mass), best.duration))
     use = chosen if chosen is not None else best
-    fdyn = rt.path_dynamics(model, fine, method, mode)
     return MethodRetime(dyn, bare, best, chosen, curve, rt.check_time_law(dyn, use), fine_check(fdyn, use),
-                        rt.saturating(dyn, use), max_velocity_curve(dyn, use), evals, t2 - t1, t1 - t0)
+                        rt.saturating(dyn, use), max_velocity_curve(dyn, use), evals, t2 - t1, t1 - t0, grid_only)
 
 
 def fine_check(fine: rt.PathDynamics, r: rt.Retiming) -> dict:
@@ -253,6 +257,18 @@ def _retiming_entry(model: Model, r: rt.Retiming | None) -> dict | None:
             "linearisations": r.iterations, "solver": r.solver}
 
 
+def _refinement_entry(mr: MethodRetime, r: rt.Retiming) -> dict | None:
+    """The rows the reported law carries between the grid points (`coopsim.inverse.retime.retime`) and the
+    payload they cost (the heaviest load within T_max with and without them)."""
+    f = r.refine
+    if f is None:
+        return None
+    return {"rounds": f["rounds"], "rows_added": int(len(f["rows"])), "intervals": f["intervals"],
+            "max_excess_check_points": f["max_excess"], "within": f["within"], "tolerance": rt.REFINE_TOL,
+            "payload_grid_rows_only_kg": mr.grid_only_mass, "payload_kg": mr.best.mass,
+            "payload_cost_kg": mr.grid_only_mass - mr.best.mass}
+
+
 def _certificate_entry(r: rt.Retiming, names: list[str]) -> dict | None:
     """The grid LP's dual certificate with its largest dual's point as s and its joint by name."""
     c = (r.stats or {}).get("certificate")
@@ -261,7 +277,9 @@ def _certificate_entry(r: rt.Retiming, names: list[str]) -> dict | None:
     c = dict(c)
     if "largest" in c:
         big = dict(c["largest"])
-        big["s"], big["motor"] = float(r.law.s[big.pop("point")]), names[big.pop("joint")]
+        big.pop("point")
+        j = big.pop("joint")
+        big["motor"] = None if j is None else names[j]
         c["largest"] = big
     return c
 
@@ -305,13 +323,14 @@ def retime_summary(study: RetimeStudy) -> dict:
                            "law": "payload" if mr.chosen is not None else "after"},
             "check_fine_grid": {"max_excess": mr.fine_check["max_excess"], "s": mr.fine_check["s"],
                                 "max_speed_excess": mr.fine_check["max_speed_excess"],
-                                "motor": names[mr.fine_check["joint"]], "points_per_interval": FINE},
+                                "motor": names[mr.fine_check["joint"]], "points_per_interval": FINE,
+                                "refinement": _refinement_entry(mr, use)},
             "saturating_motor_per_point": [names[j] for j in sat["joint"]],
             "on_line_per_point": [bool(x) for x in sat["on_line"]],
             "solver": {"name": use.solver, "heaviest_load_evaluations": mr.evaluations,
                        "heaviest_load_wall_s": mr.wall_s, "bare_object_retime_wall_s": mr.retime_s,
                        **({} if not use.stats else {kk: v for kk, v in use.stats.items()
-                                                    if kk not in ("f", "certificate")})},
+                                                    if kk not in ("f", "f_fine", "certificate")})},
             "dual_certificate": _certificate_entry(use, names),
         }
         if k == "min_energy" and study.weights is not None:

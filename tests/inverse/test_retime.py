@@ -82,6 +82,7 @@ def test_the_heaviest_load_meets_eq_36_exactly_and_a_motor_sits_on_its_line(carr
     mass, r, _ = rt.max_payload(dyn, 13.0)
     assert r.duration <= 13.0 and r.duration == pytest.approx(13.0, rel=1e-8)
     assert rt.check_time_law(dyn, r)["max_excess"] <= 1e-9
+    assert r.refine["within"]                 # and at the 10× finer grid's points (`JointPath.refined`)
     sat = rt.saturating(dyn, r)
     assert sat["excess"][sat["critical"]["index"]] >= -1e-7
     cert = r.stats["certificate"]           # the grid LP's duals: of the right sign, the dual objective = the primal
@@ -140,10 +141,10 @@ def test_the_retimed_scenario_replays_and_follows_the_joint_path(carry):
 
 
 def test_between_grid_points_only_the_rest_intervals_exceed_their_lines(carry):
-    """On a 10x finer grid between the grid points (10 and 20 intervals a segment): the paper W⁺ law stays
-    within its lines (1e-9 of τ_s); the minimum-energy law exceeds them by at most 1e-3 τ_s, and only in an
-    interval touching a waypoint, where ṡ = √b rises from 0 faster than linearly (√b is concave in s; the
-    grid bounds the velocity term at the interval's ends only)."""
+    """Without the check points' rows (refine=False), on a 10x finer grid between the grid points (10 and 20
+    intervals a segment): the paper W⁺ law stays within its lines (1e-9 of τ_s); the minimum-energy law
+    exceeds them by at most 1e-3 τ_s, and only in an interval touching a waypoint, where ṡ = √b rises from 0
+    faster than linearly (√b is concave in s; the grid bounds the velocity term at the interval's ends only)."""
     model, path, _ = carry
     for n in (10, 20):
         s, piece = path_grid(path.knots, n)
@@ -151,11 +152,75 @@ def test_between_grid_points_only_the_rest_intervals_exceed_their_lines(carry):
         fs, fp = path_grid(path.knots, 10 * n)
         fg = joint_path(model, path, fs, fp, model.inverse.object_motion.initial_guess)
         for method, bound in (("paper", 1e-9), ("min_energy", 1e-3)):
-            _, r, _ = rt.max_payload(rt.path_dynamics(model, g, method, "payload"), 13.0)
+            _, r, _ = rt.max_payload(rt.path_dynamics(model, g, method, "payload"), 13.0, refine=False)
+            assert r.refine is None
             fc = fine_check(rt.path_dynamics(model, fg, method, "payload"), r)
             assert fc["max_excess"] <= bound
             if fc["max_excess"] > 1e-9:
                 assert np.min(np.abs(fc["s"] - path.knots)) <= 1.0 / (len(path.knots) - 1) / n
+
+
+REFINED = {"paper": 38.0, "nonsqueezing": 38.0, "min_energy": 190.0, "lp": 300.0}   # kg, near each heaviest load
+
+
+@pytest.fixture(scope="module")
+def short(carry):
+    """The paper carry on 8 intervals a segment and on the 10× finer grid (its joint paths)."""
+    model, path, _ = carry
+    guess = model.inverse.object_motion.initial_guess
+    grids = [path_grid(path.knots, n) for n in (8, 80)]
+    return [(s, piece, joint_path(model, path, s, piece, guess)) for s, piece in grids]
+
+
+@pytest.mark.parametrize("method", list(REFINED))
+def test_with_the_check_points_rows_the_law_meets_eq_36_between_the_grid_points(carry, short, method):
+    """8 intervals a segment, a payload near each one's heaviest within 13 s: without the rows of the check
+    points the minimum-time law exceeds its lines between the grid points (min energy, LP bound: by more than
+    1e-7 τ_s, `fine_check`); with them (`retime`'s default; both solvers for the linear resolutions) at every
+    point of the 10× finer grid the torques recomputed from scratch — the inverse dynamics rerun on a model
+    carrying the payload at θ̇ = θ′√b, θ̈ = θ′a + θ″b with the law's a and b there (b linear, a constant on
+    the interval), the LP bound's best distribution by one linprog per point on that rerun's grasp matrix —
+    are within their lines to 1e-9 τ_s, and the minimum time is no shorter (the rows only remove laws)."""
+    model, _, _ = carry
+    (_, _, g), (fs, fp, fine) = short
+    dyn = rt.path_dynamics(model, g, method, "payload", fine=fine)       # its check points: the finer grid's
+    mass = REFINED[method]
+    coarse = rt.retime(dyn, mass, refine=False)
+    ex0 = fine_check(rt.path_dynamics(model, fine, method, "payload"), coarse)["max_excess"]
+    assert ex0 > (1e-7 if method in ("min_energy", "lp") else -1.0)
+    heavy = cap.payload_model(model, model.inverse.payload_position, mass)
+    ts, active = model.motors.stall_torque, ~model.motors.passive.astype(bool)
+    for solver in ("grid_lp",) + (("reachability",) if method != "lp" else ()):
+        r = rt.retime(dyn, mass, solver)
+        assert r.refine["within"] and (r.refine["rows"].size > 0) == (ex0 > rt.REFINE_TOL)
+        assert r.duration >= coarse.duration * (1 - 1e-12)
+        a, b = r.law.at(fs, fp)
+        prob = inverse_problem(heavy, fine.states(a, b))
+        lo, hi = torque_limits(model.motors, fine.d1 * np.sqrt(b)[:, None])
+        if method == "lp":
+            excess = max(_best_distribution_excess(prob, lo[i], hi[i], ts, active, i) for i in range(len(fs)))
+        else:
+            tau = resolve(prob, resolution_for(model, method)).tau
+            excess = float(np.max(np.maximum(tau - hi, lo - tau) / ts))
+        assert excess <= 1e-9
+
+
+def _best_distribution_excess(prob, lo, hi, ts, active, i):
+    """min over the grasp wrenches f (A f = y, passive torques 0) of max_j excess_j/τ_s at sample i: linprog."""
+    from scipy.optimize import linprog
+
+    JT, A, y, ta = prob.JT[i], prob.A[i], prob.y[i], prob.tau_arms[i]
+    rk = JT.shape[1]
+    col = -ts[active][:, None]
+    A_ub = np.vstack([np.hstack([JT[active], col]), np.hstack([-JT[active], col])])
+    b_ub = np.concatenate([hi[active] - ta[active], ta[active] - lo[active]])
+    A_eq = np.vstack([np.hstack([A, np.zeros((A.shape[0], 1))]), np.hstack([JT[~active], np.zeros(((~active).sum(), 1))])])
+    b_eq = np.concatenate([y, -ta[~active]])
+    c = np.zeros(rk + 1)
+    c[-1] = 1.0
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * (rk + 1), method="highs")
+    assert res.status == 0
+    return float(res.x[-1])
 
 
 def test_motors_that_cannot_hold_the_object_and_a_too_short_duration_are_named(carry):

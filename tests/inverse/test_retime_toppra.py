@@ -95,7 +95,7 @@ def _coopsim_time(model, method, mass, n):
     s, piece = path_grid(path.knots, n)
     jp = joint_path(model, path, s, piece, model.inverse.object_motion.initial_guess)
     dyn = rt.path_dynamics(model, jp, method, "payload")
-    r = rt.retime(replace(dyn, slope=np.zeros_like(dyn.slope)), mass, "reachability")
+    r = rt.retime(replace(dyn, slope=np.zeros_like(dyn.slope)), mass, "reachability", refine=False)  # toppra's grid
     assert r.feasible and r.converged
     return r.duration
 
