@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, lp, manifold,
-                              object_motion, sample, stress)
+                              object_motion, reachability, sample, stress)
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
@@ -62,12 +62,13 @@ class Compiled(NamedTuple):
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles it,
     `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories), the
-    capacity objective, the linear resolutions' pass, the LP vertices and the section loads (`inverse`, `capacity`,
-    a trajectory given as object motion: their first use compiles them, a few seconds); "control", the controllers
-    (the first closed-loop run)."""
+    capacity objective, the linear resolutions' pass, the LP vertices, the section loads and the retiming's
+    reachability pass (`inverse`, `capacity`, `optimize`, a trajectory given as object motion: their first use
+    compiles them, a few seconds); "control", the controllers (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
             "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval,
-                       distributions.linear_pass, lp.lp_vertices, stress.section_loads),
+                       distributions.linear_pass, lp.lp_vertices, stress.section_loads,
+                       reachability.reachability_pass),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -671,6 +672,31 @@ def lp_vertices(G, g_lo, g_hi, norm, bound, c, lo, hi, cap_lo, cap_hi, r: int, i
     lp.lp_vertices(_w(G), _w(g_lo), _w(g_hi), _w(norm), _w(bound), _w(c), _w(lo), _w(hi), _w(cap_lo), _w(cap_hi),
                    int(r), _w(idx, np.int64), _w(held, np.int8), *(float(t) for t in tols), x, dual, ok, unbounded)
     return x, dual, ok, unbounded
+
+
+def reachability_pass(G, H, E, off, d, tol, start, end_at, start_at, N: int) -> np.ndarray | None:
+    """TOPP-RA's backward and forward passes over ragged stage polygons, compiled
+    (`reachability.reachability_pass`).
+
+    Args:
+        G, H, E: (R,) the stages' rows G a + H b ≤ E, flat, stage after stage.
+        off: (K + 1,) int, the stages' row offsets.
+        d: (K,) the intervals' lengths.
+        tol: (K,) each stage's feasibility tolerance.
+        start: (K,) int, the grid point each stage starts at.
+        end_at: (K,) bool, the stage's end point ends a piece.
+        start_at: (K,) bool, its start point starts a piece.
+        N: the grid points.
+
+    Returns:
+        np.ndarray | None: b (N,) 1/s², or None (a stage without a controllable state).
+    """
+    announce_compile("extras")
+    b, lo, hi = np.empty(N), np.empty(N), np.empty(N)
+    status = reachability.reachability_pass(_w(G), _w(H), _w(E), _w(off, np.int64), _w(d), _w(tol),
+                                            _w(start, np.int64), _w(end_at, np.bool_), _w(start_at, np.bool_),
+                                            b, lo, hi)
+    return None if status else b
 
 
 def section_loads(mass: float, R_o, twist, acc, gravity, F_e, rows, grasp_pos, axis: int, frac, K_diag, c_o, ps_o,

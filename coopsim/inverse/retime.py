@@ -31,9 +31,11 @@ bound: its own grasp wrenches, free); `retime` solves, checks the law exactly at
 than REFINE_TOL (their velocity terms by the tangent at b̄ there), and solves again, until none does.
 
 Two solvers of the same discrete problem: `reachability` (TOPP-RA: a backward pass of controllable
-sets and a greedy forward pass, each stage a two-variable LP solved exactly in NumPy by its vertices)
-for the linear resolutions, and `grid_lp` (one sparse LP over the whole grid, maximising Σ b, HiGHS)
-for any of them and for the LP bound (the default: about twice as fast here). The time is
+sets and a greedy forward pass, each stage a two-variable LP solved exactly by its vertices, compiled;
+cost linear in the grid points) for the linear resolutions (their default), and `grid_lp` (one sparse
+LP over the whole grid, maximising Σ b, HiGHS; its simplex grows faster than linearly) for any of them
+and for the LP bound (its default: the grasp wrenches make it more than two variables a stage); `certificate`
+gives the grid LP's dual certificate at a law found either way. The time is
 Σ 2Δ_i/(√b_i + √b_{i+1}). Where the feasible profiles have a pointwise largest one the two give it (the
 paper carry: to 1e-9); with this discretisation they need not, and then the greedy forward pass can be
 slower than the grid LP's law (both within the lines, as `check_time_law` shows). Neither minimises the
@@ -471,12 +473,81 @@ def _boxed(G, H, E, scale_a, scale_b):
 
 
 def reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> np.ndarray | None:
-    """ṡ² (N,) of the time-optimal law for the linearised rows, by TOPP-RA; None when none exists.
+    """ṡ² (N,) of the time-optimal law for the linearised rows, by TOPP-RA; None when none exists — the
+    compiled pass (`coopsim.compiled.reachability.reachability_pass`; `reachability_reference` the NumPy
+    one, same rows, same words).
 
     Backward: K_M = {0} and K_i = the range of b over the stage polygon cut by b + 2Δa ∈ K_{i+1} (its
     vertices inside the strip and the polygon's chords on the strip's two lines). Forward from b_0 = 0:
     the largest a of the polygon at b_i that stays in K_{i+1}. A check point of `extra` at σ on stage i
-    adds its rows to that stage's polygon: b = b_i + 2σΔ a there (`_extra_stage_rows`).
+    adds its rows to that stage's polygon: b = b_i + 2σΔ a there (`_extra_rows`). Each stage costs
+    O(m³) for its m rows, so the pass is linear in the grid points.
+
+    Args:
+        dyn: the PathDynamics of a linear resolution.
+        mass: kg, μ.
+        lam: (λ₀, λ₁) (N,) the tangent of √b.
+        extra: (FinePoints, (λ₀, λ₁) (P,)) the check points' rows, or None.
+
+    Returns:
+        np.ndarray | None: b (N,) 1/s², or None (a stage without a controllable state).
+    """
+    from coopsim.compiled import api
+
+    s, piece = dyn.path.s, dyn.path.points.piece
+    st, Gs, Hs, Es, d, tol = _stage_polygons(dyn, mass, lam)
+    K, m = Gs.shape
+    who = np.repeat(np.arange(K), m)
+    flat = [Gs.ravel(), Hs.ravel(), Es.ravel()]
+    if extra is not None:
+        k, rows = _extra_rows(extra, mass, d)
+        order = np.argsort(np.concatenate([who, k]), kind="stable")
+        flat = [np.concatenate([x, y])[order] for x, y in zip(flat, rows)]
+        who = np.concatenate([who, k])[order]
+    off = np.concatenate([[0], np.cumsum(np.bincount(who, minlength=K))])
+    N = len(s)
+    end_at = (piece[st + 1] != piece[np.minimum(st + 2, N - 1)]) | (st + 1 == N - 1)
+    start_at = (st == 0) | (piece[np.maximum(st - 1, 0)] != piece[st])
+    b = api.reachability_pass(*flat, off, d, tol, st, end_at, start_at, N)
+    if b is None:
+        return None
+    for p in np.unique(piece):
+        b[np.flatnonzero(piece == p)[[0, -1]]] = 0.0
+    return b
+
+
+def _stage_polygons(dyn: PathDynamics, mass: float, lam):
+    """Every stage's rows in (a_i, b_i) (`_stage_rows` with each point's speed bound and the box `_boxed`):
+    st (K,), G, H, E (K, m), Δ (K,) and the stages' feasibility tolerances (K,)."""
+    s = dyn.path.s
+    G, H, E, _ = motor_rows(dyn, mass, lam)
+    st = _stages(s, dyn.path.points.piece)
+    scale = np.maximum(np.max(np.abs(np.concatenate([E[st], E[st + 1]], 1)), axis=1), 1e-300)
+    cap_b = BIG / max(float(np.min(np.diff(s)[st])), 1e-300) ** 2
+    top = np.minimum(speed_bound(dyn), cap_b)
+    G, H, E = (np.concatenate([x, y[:, None]], 1) for x, y in ((G, np.zeros(len(s))), (H, np.ones(len(s))),
+                                                                 (E, top)))
+    Gs, Hs, Es, d = _stage_rows(G, H, E, s, st)
+    Gs, Hs, Es = _boxed(Gs, Hs, Es, 1.0 / max(np.min(d), 1e-300), 1.0 / max(np.min(d), 1e-300) ** 2)
+    return st, Gs, Hs, Es, d, 1e-12 * scale
+
+
+def _extra_rows(extra, mass: float, d: np.ndarray):
+    """The check points' rows in their stage's (a_i, b_i): G_p a + H_p (b_i + 2σΔ a) ≤ E_p and the speed bound
+    b_i + 2σΔ a ≤ b_max(p) (where finite): the stage of each row (R,) and G, H, E (R,)."""
+    fp, flam = extra
+    Gf, Hf, Ef, _ = motor_rows(fp.dyn, mass, flam)
+    top = speed_bound(fp.dyn)
+    w = (2 * d[fp.stage] * fp.sigma)[:, None]
+    Gf, Hf, Ef = (np.concatenate([x, y[:, None]], 1) for x, y in ((Gf + w * Hf, w[:, 0]), (Hf, np.ones(len(top))),
+                                                                   (Ef, top)))
+    k = np.repeat(fp.stage, Gf.shape[1])
+    keep = np.isfinite(Ef.ravel())
+    return k[keep], (Gf.ravel()[keep], Hf.ravel()[keep], Ef.ravel()[keep])
+
+
+def reachability_reference(dyn: PathDynamics, mass: float, lam, extra=None) -> np.ndarray | None:
+    """`reachability` in NumPy: each stage's polygon's vertices vectorised (`_vertices`), the passes in Python.
 
     Args:
         dyn: the PathDynamics of a linear resolution.
@@ -488,16 +559,7 @@ def reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> np.ndarray 
         np.ndarray | None: b (N,) 1/s², or None (a stage without a controllable state).
     """
     s, piece = dyn.path.s, dyn.path.points.piece
-    G, H, E, _ = motor_rows(dyn, mass, lam)
-    st = _stages(s, piece)
-    scale = np.maximum(np.max(np.abs(np.concatenate([E[st], E[st + 1]], 1)), axis=1), 1e-300)
-    cap_b = BIG / max(float(np.min(np.diff(s)[st])), 1e-300) ** 2
-    top = np.minimum(speed_bound(dyn), cap_b)
-    G, H, E = (np.concatenate([x, y[:, None]], 1) for x, y in ((G, np.zeros(len(s))), (H, np.ones(len(s))),
-                                                                 (E, top)))
-    Gs, Hs, Es, d = _stage_rows(G, H, E, s, st)
-    Gs, Hs, Es = _boxed(Gs, Hs, Es, 1.0 / max(np.min(d), 1e-300), 1.0 / max(np.min(d), 1e-300) ** 2)
-    tol = 1e-12 * scale
+    st, Gs, Hs, Es, d, tol = _stage_polygons(dyn, mass, lam)
     va, vb = _vertices(Gs, Hs, Es, tol)
     Gs, Hs, Es, va, vb = list(Gs), list(Hs), list(Es), list(va), list(vb)
     if extra is not None:
@@ -536,26 +598,15 @@ def reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> np.ndarray 
 
 def _extra_stage_rows(extra, mass: float, d: np.ndarray, base, tol: np.ndarray) -> dict:
     """{stage k: (G, H, E, vertices a, vertices b)} of the stages with check points: the stage's rows
-    (`base`: lists of (m,) arrays) and each point's, G_p a + H_p (b_i + 2σΔ a) ≤ E_p and its speed bound
-    b_i + 2σΔ a ≤ b_max(p), padded with 0 ≤ 1 to a common length."""
-    fp, flam = extra
-    Gf, Hf, Ef, _ = motor_rows(fp.dyn, mass, flam)
-    top = speed_bound(fp.dyn)
-    w = (2 * d[fp.stage] * fp.sigma)[:, None]
-    Gf, Hf, Ef = (np.concatenate([x, y[:, None]], 1) for x, y in ((Gf + w * Hf, w[:, 0]), (Hf, np.ones(len(top))),
-                                                                   (Ef, top)))
-    stages = np.unique(fp.stage)
-    rows = []
-    for k in stages:
-        on = fp.stage == k
-        rows.append([np.concatenate([base[x][k], M[on].ravel()]) for x, M in enumerate((Gf, Hf, Ef))])
+    (`base`: lists of (m,) arrays) and its points' (`_extra_rows`), padded with 0 ≤ 1 to a common length."""
+    k, flat = _extra_rows(extra, mass, d)
+    stages = np.unique(k)
+    rows = [[np.concatenate([base[x][j], flat[x][k == j]]) for x in range(3)] for j in stages]
     m = max(len(r[0]) for r in rows)
     G, H, E = (np.stack([np.pad(r[x], (0, m - len(r[x])), constant_values=float(x == 2)) for r in rows])
                for x in range(3))
-    fin = np.isfinite(E)
-    G, H, E = np.where(fin, G, 0.0), np.where(fin, H, 0.0), np.where(fin, E, 1.0)
     va, vb = _vertices(G, H, E, tol[stages])
-    return {int(k): (G[n], H[n], E[n], va[n], vb[n]) for n, k in enumerate(stages)}
+    return {int(j): (G[n], H[n], E[n], va[n], vb[n]) for n, j in enumerate(stages)}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -758,7 +809,7 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     Args:
         dyn: the PathDynamics.
         mass: kg, μ.
-        solver: 'reachability' (linear resolutions) or 'grid_lp' (any; None: grid_lp, the faster here).
+        solver: 'reachability' (linear resolutions) or 'grid_lp' (any); None: `default_solver`.
         tol: the relative change of b that ends the loop (the tangent's error at the solution is of its
             square: 1e-7 leaves ~1e-15 of the velocity term).
         max_iter: the most linearisations per round; None: MAX_LINEARISATIONS.
@@ -770,7 +821,7 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     Returns:
         Retiming (infeasible when no motion carries μ).
     """
-    solver = solver or "grid_lp"
+    solver = solver or default_solver(dyn)
     fp = dyn.fine_points() if refine else None
     rows = np.zeros(0, dtype=int) if rows is None or fp is None else np.unique(np.asarray(rows, dtype=int))
     its = 0
@@ -789,6 +840,45 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     info = {"rounds": rounds, "rows": rows, "intervals": int(np.unique(fp.stage[rows]).size),
             "max_excess": float(ex[w]), "s": float(fp.dyn.path.s[w]), "within": bool(ex[w] <= REFINE_TOL)}
     return replace(r, iterations=its, refine=info)
+
+
+def default_solver(dyn: PathDynamics) -> str:
+    """'reachability' for a linear resolution (compiled, linear in the grid points), 'grid_lp' for the LP bound.
+
+    Args:
+        dyn: the PathDynamics.
+
+    Returns:
+        str: the solver's name.
+    """
+    return "grid_lp" if dyn.method == LP_BOUND else "reachability"
+
+
+def certificate(dyn: PathDynamics, r: Retiming) -> dict:
+    """The grid LP's dual certificate (`grid_lp`) of the rows linearised at a law (its check points' rows
+    too), with how far the grid LP's ṡ² lies from the law's (law_gap, relative to its peak: ~0 when the law
+    is the LP's optimum, whichever solver found it).
+
+    Args:
+        dyn: the PathDynamics.
+        r: a feasible Retiming.
+
+    Returns:
+        dict: `grid_lp`'s certificate (primal, dual, gap, sign_ok, binding_rows, largest) and law_gap;
+        {} when the grid LP has no optimum there.
+    """
+    b = r.law.b
+    scale = max(float(np.max(b)), 1e-300)
+    extra = None
+    fp = dyn.fine_points() if r.refine is not None and r.refine["rows"].size else None
+    if fp is not None:
+        sub = fp.subset(r.refine["rows"])
+        k = _stages(r.law.s, r.law.piece)[sub.stage]
+        extra = (sub, _tangent((1 - sub.sigma) * b[k] + sub.sigma * b[k + 1], scale))
+    new, stats = grid_lp(dyn, r.mass, _tangent(b, scale), extra)
+    if new is None:
+        return {}
+    return stats["certificate"] | {"law_gap": float(np.max(np.abs(new - b)) / scale)}
 
 
 def _min_time(dyn: PathDynamics, mass: float, solver: str, tol: float, max_iter: int | None,

@@ -269,10 +269,11 @@ def _refinement_entry(mr: MethodRetime, r: rt.Retiming) -> dict | None:
             "payload_cost_kg": mr.grid_only_mass - mr.best.mass}
 
 
-def _certificate_entry(r: rt.Retiming, names: list[str]) -> dict | None:
-    """The grid LP's dual certificate with its largest dual's point as s and its joint by name."""
-    c = (r.stats or {}).get("certificate")
-    if c is None:
+def _certificate_entry(mr: MethodRetime, r: rt.Retiming, names: list[str]) -> dict | None:
+    """The grid LP's dual certificate at the law (`coopsim.inverse.retime.certificate`) with its largest dual's
+    joint by name."""
+    c = (r.stats or {}).get("certificate") or rt.certificate(mr.dyn, r)
+    if not c:
         return None
     c = dict(c)
     if "largest" in c:
@@ -331,7 +332,7 @@ def retime_summary(study: RetimeStudy) -> dict:
                        "heaviest_load_wall_s": mr.wall_s, "bare_object_retime_wall_s": mr.retime_s,
                        **({} if not use.stats else {kk: v for kk, v in use.stats.items()
                                                     if kk not in ("f", "f_fine", "certificate")})},
-            "dual_certificate": _certificate_entry(use, names),
+            "dual_certificate": _certificate_entry(mr, use, names),
         }
         if k == "min_energy" and study.weights is not None:
             out_methods[k]["energy_weights"] = _weights_entry(study.weights, names)
