@@ -37,6 +37,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     distributions.py the linear redundancy resolutions over all samples in one pass: grasp wrenches,
                     torques, internal wrenches and the load-capacity ratio test
     lp.py           LP vertices at given bases, certified optimal or unbounded (the LP bound's batches)
+    reachability.py TOPP-RA's reachability pass of the retiming (backward controllable sets, greedy forward pass)
     stress.py       section loads of a box object at every sample and cut
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 
