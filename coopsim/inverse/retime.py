@@ -215,7 +215,14 @@ class FinePoints:
     sigma: np.ndarray
 
     def subset(self, idx: np.ndarray) -> "FinePoints":
-        """The points idx (int) only."""
+        """The points idx only.
+
+        Args:
+            idx: (R,) int, indices of the points.
+
+        Returns:
+            FinePoints: R points (their dynamics without check points of their own).
+        """
         d = self.dyn
         pts = d.path.points
         sub = JointPath(replace(pts, s=pts.s[idx], piece=pts.piece[idx], p=pts.p[idx], R=pts.R[idx], d1=pts.d1[idx],
