@@ -213,8 +213,23 @@ class JointPath:
             i = np.flatnonzero(piece[1:] == piece[:-1])
             u = np.arange(1, factor) / factor
             fs = (s[i, None] + u[None, :] * (s[i + 1] - s[i])[:, None]).ravel()
-            self._refined[factor] = self.recipe(fs, np.repeat(piece[i], factor - 1))
+            # from this path's first point, as it started (a redundant arm's self-motion starts there)
+            fine = self.recipe(np.append(s[0], fs), np.append(piece[0], np.repeat(piece[i], factor - 1)))
+            self._refined[factor] = fine.subset(np.arange(1, len(fs) + 1))
         return self._refined[factor]
+
+    def subset(self, idx: np.ndarray) -> "JointPath":
+        """The points idx only (without a recipe).
+
+        Args:
+            idx: (M,) int, indices of the points.
+
+        Returns:
+            JointPath: M points.
+        """
+        p = self.points
+        pts = PathPoints(p.s[idx], p.piece[idx], p.p[idx], p.R[idx], p.d1[idx], p.d2[idx], p.origin)
+        return JointPath(pts, self.q[idx], self.d1[idx], self.d2[idx])
 
 
 def joint_path(model: Model, path: ObjectPath, s: np.ndarray, piece: np.ndarray,

@@ -224,9 +224,7 @@ class FinePoints:
             FinePoints: R points (their dynamics without check points of their own).
         """
         d = self.dyn
-        pts = d.path.points
-        sub = JointPath(replace(pts, s=pts.s[idx], piece=pts.piece[idx], p=pts.p[idx], R=pts.R[idx], d1=pts.d1[idx],
-                                d2=pts.d2[idx]), d.path.q[idx], d.path.d1[idx], d.path.d2[idx])
+        sub = d.path.subset(idx)
         pick = (lambda x, ax: None if x is None else np.take(x, idx, axis=ax))
         dyn = replace(d, path=sub, tau=d.tau[:, :, idx], y=pick(d.y, 2), JT=pick(d.JT, 0), A=pick(d.A, 0),
                       fine_maker=None)

@@ -236,3 +236,22 @@ def test_motors_that_cannot_hold_the_object_and_a_too_short_duration_are_named(c
     weak.tau[0, 0] += 10.0                     # a constant 10 N·m load on every motor at rest
     with pytest.raises(rt.RetimeError, match=r"^motors.stall_torque: joint \d cannot hold the bare object"):
         rt.max_payload(weak, 13.0)
+
+
+def test_the_refined_joint_path_is_the_joint_path_of_the_finer_grid():
+    """`JointPath.refined` (the check points' joint path) against `joint_path` run afresh on the finer grid,
+    on the Panda ceiling carry (redundant arms: the self-motion of the redundancy ODE starts at the first
+    point in both): θ and θ′ at the shared points to 1e-12 (rad, rad per unit s)."""
+    model = load_scenario(SCENARIOS / "robots" / "panda_ceiling_carry.yaml")
+    om = model.inverse.object_motion
+    path = WaypointPath.of(om)
+    args = (model.q0 if om.initial_guess is None else om.initial_guess, om.rest_posture,
+            om.rest_gain * float(om.times[-1] - om.times[0]))
+    s, piece = path_grid(path.knots, 3)
+    fine = joint_path(model, path, s, piece, *args).refined(2)
+    fs, fp = path_grid(path.knots, 6)
+    ref = joint_path(model, path, fs, fp, *args)
+    at = [int(np.flatnonzero(np.isclose(fs, x, rtol=0, atol=1e-12) & (fp == k))[0])
+          for x, k in zip(fine.s, fine.points.piece)]
+    assert len(at) == len(fine.s) == 3 * (len(path.knots) - 1)
+    assert np.max(np.abs(ref.q[at] - fine.q)) <= 1e-12 and np.max(np.abs(ref.d1[at] - fine.d1)) <= 1e-12
