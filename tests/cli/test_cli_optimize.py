@@ -113,7 +113,10 @@ def test_weights_with_the_time_law_are_written_and_carried(workdir):
     assert out.returncode == 0, out.stderr
     e = json.loads(out.stdout)["methods"]["min_energy"]
     ew = e["energy_weights"]
-    assert ew["rounds"][0]["mass_kg"] < e["after"]["mass_kg"] == ew["rounds"][-1]["mass_kg"]
+    assert ew["rounds"][0]["mass_kg"] < e["after"]["mass_kg"]
+    # the study's own search with those weights, on path dynamics of its own (their check points' rows found
+    # afresh): the last round's payload within the search's tolerance (Brent, rtol 1e-10)
+    assert e["after"]["mass_kg"] == pytest.approx(ew["rounds"][-1]["mass_kg"], rel=1e-9)
     data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
     written = [w for arm in data["arms"] for w in arm["energy_weights"]]
     assert written == list(ew["weights"].values())
