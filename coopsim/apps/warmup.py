@@ -143,8 +143,8 @@ def compile_inverse_terms(model) -> None:
 
 def compile_extras(model) -> None:
     """Compile the entries some commands use: inverse kinematics (one arm's, and an object motion's in one pass), the
-    capacity objective, the linear resolutions' pass, the LP vertices, the section loads and the retiming's
-    reachability pass.
+    object's states along a motion, the capacity objective, the linear resolutions' pass, the LP vertices, the
+    section loads and the retiming's reachability pass.
 
     Args:
         model: the warm-up scene's Model.
@@ -153,6 +153,7 @@ def compile_extras(model) -> None:
     still = ObjectMotion(np.array([0.0, 1.0]), np.zeros((2, 3)), np.stack([np.eye(3)] * 2))
     api.object_motion_ik(model, still, np.array([0.0, 1.0]), model.q0, [], np.zeros((model.r, 3)),
                          np.full(model.r, np.inf), 1e-9, max_iter=1)
+    api.object_states(model, still, np.array([0.0, 1.0]))
     z = np.zeros((1, 1, 1))
     min_energy_mass_interval(z, np.zeros((1, 2, 1)), np.ones(1), np.zeros((1, 1)), np.zeros((1, 1)),
                              np.ones(1, bool), np.ones(1, bool), 1e-12)

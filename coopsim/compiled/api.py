@@ -62,13 +62,14 @@ class Compiled(NamedTuple):
 def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles it,
     `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories), the
-    capacity objective, the linear resolutions' pass, the LP vertices, the section loads and the retiming's
-    reachability pass (`inverse`, `capacity`, `optimize`, a trajectory given as object motion: their first use
-    compiles them, a few seconds); "control", the controllers (the first closed-loop run)."""
+    object's states along a motion, the capacity objective, the linear resolutions' pass, the LP vertices, the
+    section loads and the retiming's reachability pass (`inverse`, `capacity`, `optimize`, a trajectory given as
+    object motion: their first use compiles them, a few seconds); "control", the controllers (the first
+    closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
-            "extras": (ik.arm_solve, object_motion.trajectory, capacity.min_energy_mass_interval,
-                       distributions.linear_pass, lp.lp_vertices, stress.section_loads,
-                       reachability.reachability_pass),
+            "extras": (ik.arm_solve, object_motion.trajectory, object_motion.object_states,
+                       capacity.min_energy_mass_interval, distributions.linear_pass, lp.lp_vertices,
+                       stress.section_loads, reachability.reachability_pass),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -840,10 +841,56 @@ class MotionSolution(NamedTuple):
     t_prev: float
 
 
+def motion_struct(model: Model, motion: ObjectMotion, spline: tuple | None = None) -> object_motion.Motion:
+    """The object motion as the kernels take it (`object_motion.Motion`), arrays float64, contiguous, copied.
+
+    Args:
+        model: the Model (the rest posture's default: its initial angles).
+        motion: the object's waypoints, time law ('quintic', 'cubic', 'sampled' or 'linear'), rest posture,
+            gain and pull (rest_pull).
+        spline: a B-spline path's (knots, coefficients (n, 6) [p − p₀ m; φ rad], degree)
+            (`coopsim.inverse.spline_path.spline_arrays`); None: the waypoint path.
+
+    Returns:
+        object_motion.Motion.
+    """
+    law = object_motion.LAWS[motion.time_law]
+    rest = model.q0 if motion.rest_posture is None else motion.rest_posture
+    law_t, law_s, law_rate = ((motion.samples.t, motion.samples.s, motion.samples.rate) if law == object_motion.SAMPLED
+                              else (motion.times[:2], np.zeros(2), np.zeros(2)))
+    knots, ctrl, degree = (np.zeros(0), np.zeros((0, 6)), 0) if spline is None else spline
+    return object_motion.Motion(_f(motion.times).copy(), _f(motion.positions).copy(), _f(motion.rotations).copy(),
+                                _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain),
+                                _f(law_t).copy(), _f(law_s).copy(), _f(law_rate).copy(), _pull(motion),
+                                _f(knots).copy(), _f(ctrl).copy(), int(degree), _f(motion.rotations[0]).copy())
+
+
+def object_states(model: Model, motion: ObjectMotion, t: np.ndarray, spline: tuple | None = None):
+    """The object's state along a prescribed motion at the times t, compiled (`object_motion.object_states`).
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion.
+        t: (n_s,) s, the times (clamped to the waypoints' span).
+        spline: a B-spline path's arrays (`motion_struct`); None: the waypoint path.
+
+    Returns:
+        tuple: p_C (n_s, 3) m relative to the first waypoint's position, R_o (n_s, 3, 3) world ← object,
+        twists [v_C; ω] (n_s, 6) and accelerations [a_C; ω̇] (n_s, 6), world axes (as
+        `coopsim.inverse.trajectory.object_motion_at`).
+    """
+    announce_compile("extras")
+    mo, t = motion_struct(model, motion, spline), _f(t).copy()
+    n_s = len(t)
+    pc, R, tw, ac = np.zeros((n_s, 3)), np.zeros((n_s, 3, 3)), np.zeros((n_s, 6)), np.zeros((n_s, 6))
+    object_motion.object_states(mo, t, object_motion.buffers(model.n_total, 0, model.r), pc, R, tw, ac)
+    return pc, R, tw, ac
+
+
 def object_motion_ik(model: Model, motion: ObjectMotion, t_out: np.ndarray, guess: np.ndarray,
                      redundant: list[int], first: np.ndarray, reach_lim: np.ndarray, plane_tol: float,
                      tol: float = 1e-13, max_iter: int = 50, sing_tol: float = 1e-7, rtol: float = 1e-12,
-                     atol: float = 1e-12) -> MotionSolution:
+                     atol: float = 1e-12, spline: tuple | None = None) -> MotionSolution:
     """Every arm's joint motion along a prescribed object motion, in one compiled pass over the samples.
 
     Square arms by Newton and the differential kinematics, redundant ones by the least-joint-velocity
@@ -863,19 +910,15 @@ def object_motion_ik(model: Model, motion: ObjectMotion, t_out: np.ndarray, gues
         max_iter: cap on the Newton iterations.
         sing_tol: σ_min/σ_max of S J below which an arm counts as singular.
         rtol, atol: DOP853's tolerances for the redundant arms' ODE.
+        spline: a B-spline path's arrays (`motion_struct`; the motion's two waypoints its ends); None: the
+            waypoint path.
 
     Returns:
         MotionSolution: the status, the joint motion and a failure's record.
     """
     P = compiled(model).P
     announce_compile("extras")
-    law = object_motion.LAWS[motion.time_law]
-    rest = model.q0 if motion.rest_posture is None else motion.rest_posture
-    law_t, law_s, law_rate = ((motion.samples.t, motion.samples.s, motion.samples.rate) if law == object_motion.SAMPLED
-                              else (motion.times[:2], np.zeros(2), np.zeros(2)))
-    mo = object_motion.Motion(_f(motion.times).copy(), _f(motion.positions).copy(), _f(motion.rotations).copy(),
-                              _f(motion.positions[0]).copy(), law, _f(rest).copy(), float(motion.rest_gain),
-                              _f(law_t).copy(), _f(law_s).copy(), _f(law_rate).copy(), _pull(motion))
+    mo = motion_struct(model, motion, spline)
     red = np.array(redundant, dtype=np.int64)
     square = np.array([m for m in range(len(P.dof) - 1) if m not in redundant], dtype=np.int64)
     idx = np.array([j for m in redundant for j in range(P.dof[m], P.dof[m + 1])], dtype=np.int64)

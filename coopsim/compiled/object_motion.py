@@ -2,7 +2,8 @@
 one pass over the samples (the reference is `coopsim.inverse.trajectory.object_motion_trajectory`).
 
 Per sample t: the object's pose, twist and acceleration along the time law (a straight line and one
-fixed-axis rotation per segment between waypoints at rest, `object_state`), every arm's grasp target
+fixed-axis rotation per segment between waypoints at rest, or the B-spline path of
+`coopsim.inverse.spline_path` with the time law once over the whole span, `object_state`), every arm's grasp target
 (`grasp_target`), the reach check, then the arm's joint motion:
   * square arms (n_m joints for n_m rows): Newton from the previous sample advanced by θ̇h + θ̈h²/2, then
     the differential kinematics (`coopsim.compiled.ik.solve`); det S J must keep its sign between samples;
@@ -31,13 +32,14 @@ from coopsim.compiled.integrate import (MAX_FACTOR, MIN_FACTOR, SAFETY, dense_co
 from coopsim.compiled.kinematics import arm_jacobian, arm_kinematics
 from coopsim.compiled.linalg import bisect, copy1, lu_solve, singular_ratio
 from coopsim.compiled.manifold import max_abs
-from coopsim.compiled.spatial import axis_rotation, matmul3, rot_log
+from coopsim.compiled.spatial import axis_rotation, cross3, matmul3, rot_log
 from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.core.model import PRISMATIC
 
 OK, OUT_OF_REACH, SINGULAR, NOT_CONVERGED, OFF_PLANE, CROSSES, STEP_COLLAPSED = range(7)
-QUINTIC, CUBIC, SAMPLED = 0, 1, 2
-LAWS = {"quintic": QUINTIC, "cubic": CUBIC, "sampled": SAMPLED}
+QUINTIC, CUBIC, SAMPLED, LINEAR = 0, 1, 2, 3
+LAWS = {"quintic": QUINTIC, "cubic": CUBIC, "sampled": SAMPLED, "linear": LINEAR}
+SMALL_ANGLE = 0.1   # rad: J_l's coefficients from their Taylor series below it (`coopsim.inverse.spline_path`'s)
 
 
 class Motion(NamedTuple):
@@ -48,7 +50,7 @@ class Motion(NamedTuple):
         positions: (w, 3) m, the centre of mass C at the waypoints, world.
         rotations: (w, 3, 3) world ← object, at the waypoints.
         origin: (3,) m, world: the point positions are taken relative to (the first waypoint).
-        law: QUINTIC, CUBIC or SAMPLED.
+        law: QUINTIC, CUBIC, SAMPLED or LINEAR.
         rest: (N,) rad or m, the stacked rest posture of the redundant arms' null-space pull.
         gain: 1/s, the pull's gain.
         law_t: (K,) s, a SAMPLED law's sample times (`coopsim.core.model.SampledTimeLaw`; any two values
@@ -58,6 +60,11 @@ class Motion(NamedTuple):
         pull: 1/s·s, the null-space pull per unit of the path parameter σ (rest_pull 'path': rest_gain × the
             motion's duration; the gain at time t is then pull · σ̇); 0: the constant gain `gain` (rest_pull
             'time').
+        knots: (n + d + 1,) a B-spline path's clamped knot vector on [0, 1] (`coopsim.inverse.spline_path.knots`;
+            empty for a waypoint path).
+        ctrl: (n, 6) its control coefficients [p − origin (m); φ (rad)], world axes ((0, 6) for a waypoint path).
+        degree: its degree d, 1 to 3 (0: a waypoint path, two waypoints otherwise).
+        R0: (3, 3) the orientation φ is relative to, R = Exp(φ) R0 (the first waypoint's).
     """
 
     times: np.ndarray
@@ -71,6 +78,10 @@ class Motion(NamedTuple):
     law_s: np.ndarray
     law_rate: np.ndarray
     pull: float
+    knots: np.ndarray
+    ctrl: np.ndarray
+    degree: int
+    R0: np.ndarray
 
 
 class Buffers(NamedTuple):
@@ -133,12 +144,14 @@ def time_law(law, u):
     """(s, ds/du, d²s/du²) of the normalised time law at u ∈ [0, 1] (`coopsim.inverse.trajectory.time_law`).
 
     Args:
-        law: QUINTIC (s = 10u³ − 15u⁴ + 6u⁵) or CUBIC (s = 3u² − 2u³).
+        law: QUINTIC (s = 10u³ − 15u⁴ + 6u⁵), CUBIC (s = 3u² − 2u³) or LINEAR (s = u).
         u: the normalised time (dimensionless).
 
     Returns:
         tuple[float, float, float]: s, ds/du and d²s/du².
     """
+    if law == LINEAR:
+        return u, 1.0, 0.0
     if law == QUINTIC:
         return (10 * u**3 - 15 * u**4 + 6 * u**5, 30 * u**2 - 60 * u**3 + 30 * u**4,
                 60 * u - 180 * u**2 + 120 * u**3)
@@ -172,11 +185,151 @@ def segment_law(mo, i, t, T):
 
 
 @kernel
+def basis_derivatives(U, d, n, u, N):
+    """The knot span of u and the clamped B-spline basis functions there with their first two derivatives.
+
+    The Cox–de Boor triangle and its derivatives (Piegl & Tiller, The NURBS Book, A2.1 and A2.3):
+    N[k, j] = dᵏB_{span−d+j}/duᵏ (u), k = 0, 1, 2, j = 0 … d (zero for k > d). The span is the i in
+    [d, n) with U[i] <= u < U[i + 1], the last one at u >= U[n] and the first at u < U[d] (the end
+    polynomials extended, as scipy's BSpline).
+
+    Args:
+        U: (n + d + 1,) the knot vector, non-decreasing.
+        d: the degree, 1 to 3.
+        n: the number of control coefficients.
+        u: the parameter.
+        N: (3, 4) written.
+
+    Returns:
+        int: the span.
+    """
+    span = n - 1 if u >= U[n] else (d if u < U[d] else bisect(U, d, n, u))
+    ndu, left, right, a = np.zeros((4, 4)), np.zeros(4), np.zeros(4), np.zeros((2, 4))
+    ndu[0, 0] = 1.0
+    for j in range(1, d + 1):
+        left[j], right[j] = u - U[span + 1 - j], U[span + j] - u
+        saved = 0.0
+        for r in range(j):
+            ndu[j, r] = right[r + 1] + left[j - r]
+            temp = ndu[r, j - 1] / ndu[j, r]
+            ndu[r, j] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j, j] = saved
+    N[:, :] = 0.0
+    for j in range(d + 1):
+        N[0, j] = ndu[j, d]
+    for r in range(d + 1):
+        s1, s2 = 0, 1
+        a[0, 0] = 1.0
+        for k in range(1, min(2, d) + 1):
+            v, rk, pk = 0.0, r - k, d - k
+            if r >= k:
+                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                v = a[s2, 0] * ndu[rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else d - r
+            for j in range(j1, j2 + 1):
+                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
+                v += a[s2, j] * ndu[rk + j, pk]
+            if r <= pk:
+                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                v += a[s2, k] * ndu[r, pk]
+            N[k, r] = v
+            s1, s2 = s2, s1
+    f = float(d)
+    for k in range(1, min(2, d) + 1):
+        for j in range(d + 1):
+            N[k, j] *= f
+        f *= d - k
+    return span
+
+
+@kernel
+def left_jacobian_coefficients(theta):
+    """(A, B, A′/θ, B′/θ) of J_l(φ) = I + A[φ]× + B[φ]×² at θ = |φ| (`coopsim.inverse.spline_path`):
+    A = (1 − cos θ)/θ², B = (θ − sin θ)/θ³ and their θ-derivatives over θ, from their Taylor series below
+    SMALL_ANGLE.
+
+    Args:
+        theta: rad, |φ| >= 0.
+
+    Returns:
+        tuple[float, float, float, float]: A (1/rad²), B (1/rad³), A′/θ (1/rad⁴), B′/θ (1/rad⁵).
+    """
+    if theta < SMALL_ANGLE:
+        t2 = theta * theta
+        return (1 / 2 - t2 / 24 + t2**2 / 720 - t2**3 / 40320, 1 / 6 - t2 / 120 + t2**2 / 5040 - t2**3 / 362880,
+                -1 / 12 + t2 / 180 - t2**2 / 6720 + t2**3 / 453600,
+                -1 / 60 + t2 / 1260 - t2**2 / 60480 + t2**3 / 4989600)
+    s, c = np.sin(theta), np.cos(theta)
+    return ((1 - c) / theta**2, (theta - s) / theta**3, s / theta**3 - 2 * (1 - c) / theta**4,
+            (1 - c) / theta**4 - 3 * (theta - s) / theta**5)
+
+
+@kernel
+def spline_state(mo, s, ds, dds, B):
+    """The object on mo's B-spline path at s with ṡ = ds, s̈ = dds: B.pc, B.Ro, B.tw, B.ac
+    (`coopsim.inverse.spline_path.spline_state`).
+
+    [p − origin, φ] and their s-derivatives from the basis (`basis_derivatives`), R = Exp(φ) R0,
+    ω′ = J_l(φ) φ′, ω″ = J_l(φ) φ″ + A′/θ (φ·φ′) φ × φ′ + B′/θ (φ·φ′) φ × (φ × φ′) + B φ′ × (φ × φ′);
+    v = p′ṡ, a = p″ṡ² + p′s̈, ω = ω′ṡ, ω̇ = ω″ṡ² + ω′s̈.
+
+    Args:
+        mo: the Motion (knots, ctrl, degree, R0).
+        s: the path parameter (in [0, 1]).
+        ds: 1/s, ṡ.
+        dds: 1/s², s̈.
+        B: the Buffers: pc (m, relative to mo.origin), Ro, tw, ac written (world axes); E, v scratch.
+    """
+    d, n = mo.degree, mo.ctrl.shape[0]
+    N, V = np.empty((3, 4)), np.zeros((3, 6))
+    span = basis_derivatives(mo.knots, d, n, s, N)
+    for k in range(3):
+        for j in range(d + 1):
+            for c in range(6):
+                V[k, c] += N[k, j] * mo.ctrl[span - d + j, c]
+    phi = B.v
+    for a in range(3):
+        phi[a] = V[0, 3 + a]
+    angle = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    if angle > 0:
+        ax = np.empty(3)
+        for a in range(3):
+            ax[a] = phi[a] / angle
+        axis_rotation(ax, angle, B.E)
+        matmul3(B.E, mo.R0, B.Ro)
+    else:
+        B.Ro[:, :] = mo.R0
+    A, Bc, a1, b1 = left_jacobian_coefficients(angle)
+    f0, f1, f2 = phi[0], phi[1], phi[2]
+    d0, d1, d2 = V[1, 3], V[1, 4], V[1, 5]
+    pd0, pd1, pd2 = cross3(f0, f1, f2, d0, d1, d2)
+    q0, q1, q2 = cross3(f0, f1, f2, pd0, pd1, pd2)
+    w0, w1, w2 = d0 + A * pd0 + Bc * q0, d1 + A * pd1 + Bc * q1, d2 + A * pd2 + Bc * q2
+    e0, e1, e2 = V[2, 3], V[2, 4], V[2, 5]
+    u0, u1, u2 = cross3(f0, f1, f2, e0, e1, e2)
+    v0, v1, v2 = cross3(f0, f1, f2, u0, u1, u2)
+    dot = f0 * d0 + f1 * d1 + f2 * d2
+    x0, x1, x2 = cross3(d0, d1, d2, pd0, pd1, pd2)
+    dw, ddw = (w0, w1, w2), (e0 + A * u0 + Bc * v0 + a1 * dot * pd0 + b1 * dot * q0 + Bc * x0,
+                             e1 + A * u1 + Bc * v1 + a1 * dot * pd1 + b1 * dot * q1 + Bc * x1,
+                             e2 + A * u2 + Bc * v2 + a1 * dot * pd2 + b1 * dot * q2 + Bc * x2)
+    for a in range(3):
+        B.pc[a] = V[0, a]
+        B.tw[a], B.tw[3 + a] = ds * V[1, a], ds * dw[a]
+        B.ac[a] = ds * ds * V[2, a] + dds * V[1, a]
+        B.ac[3 + a] = ds * ds * ddw[a] + dds * dw[a]
+
+
+@kernel
 def object_state(mo, t, B):
     """The object at time t (clamped to the waypoints): B.pc, B.Ro, B.tw, B.ac.
 
     On segment [t_a, t_b], u = (t − t_a)/T: p = (p_a − origin) + s(u)(p_b − p_a), R = R_a Exp(s(u) φ) with
     φ = log(R_aᵀ R_b), v = (ṡ/T)(p_b − p_a), ω = (ṡ/T) R_a φ, a = (s̈/T²)(p_b − p_a), ω̇ = (s̈/T²) R_a φ.
+    A B-spline path (mo.degree > 0): the time law once over the whole span T, `spline_state` at s(u)
+    with ṡ/T and s̈/T² (`coopsim.inverse.trajectory.object_motion_at`).
 
     Args:
         mo: the Motion.
@@ -187,6 +340,12 @@ def object_state(mo, t, B):
     ts, P, Rs = mo.times, mo.positions, mo.rotations
     w = len(ts)
     t = min(max(t, ts[0]), ts[w - 1])
+    if mo.degree > 0:
+        T = ts[w - 1] - ts[0]
+        s, ds, dds = segment_law(mo, 0, t, T)
+        B.law[0], B.law[1] = ds / T, dds / (T * T)
+        spline_state(mo, s, ds / T, dds / T**2, B)
+        return
     i = w - 2 if t >= ts[w - 2] else bisect(ts, 0, w - 2, t)
     T = ts[i + 1] - ts[i]
     s, ds, dds = segment_law(mo, i, t, T)
@@ -212,6 +371,27 @@ def object_state(mo, t, B):
         B.tw[a], B.tw[3 + a] = fv * dp, fv * wa
         B.ac[a], B.ac[3 + a] = fa * dp, fa * wa
         B.pc[a] = (P[i, a] - mo.origin[a]) + s * dp
+
+
+@entry
+def object_states(mo, t_out, B, pc, R, tw, ac):
+    """The object's state at every time of t_out (`object_state`).
+
+    Args:
+        mo: the Motion.
+        t_out: (n_s,) s, the times.
+        B: the Buffers (`buffers`; scratch).
+        pc: (n_s, 3) written: m, the centre of mass C relative to mo.origin, world axes.
+        R: (n_s, 3, 3) written: world ← object.
+        tw: (n_s, 6) written: [v_C; ω] m/s, rad/s, world axes.
+        ac: (n_s, 6) written: [a_C; ω̇] m/s², rad/s², world axes.
+    """
+    for i in range(len(t_out)):
+        object_state(mo, t_out[i], B)
+        pc[i, :] = B.pc
+        R[i, :, :] = B.Ro
+        tw[i, :] = B.tw
+        ac[i, :] = B.ac
 
 
 @kernel

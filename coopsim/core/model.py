@@ -537,7 +537,8 @@ class ObjectMotion:
         positions: (w, 3) m, the centre of mass C at the waypoints, world axes.
         rotations: (w, 3, 3) world ← object, at the waypoints.
         time_law: 'quintic' (s = 10u³ − 15u⁴ + 6u⁵, zero rate and acceleration at both ends), 'cubic'
-            (s = 3u² − 2u³, zero rate only) or 'sampled' (`samples`, over the whole path).
+            (s = 3u² − 2u³, zero rate only), 'sampled' (`samples`, over the whole path) or 'linear' (s = u,
+            not at rest; not a scenario's law: `coopsim.inverse.free_path.spline_joint_path`'s path in s).
         output_dt: s, the sample interval.
         initial_guess: (n_total,) rad, joint angles that pick the inverse-kinematics branch at the first
             waypoint (None: the scenario's initial angles).

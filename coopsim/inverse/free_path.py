@@ -42,7 +42,7 @@ from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
 from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
-from coopsim.inverse.trajectory import object_motion_trajectory
+from coopsim.inverse.trajectory import object_motion_samples, object_motion_trajectory
 
 FD_STEP = 1e-7            # forward-difference step in the scaled unknowns (× reach m, × 1 rad)
 START_SPREAD = 0.01       # random starts: standard deviation of the scaled offsets
@@ -248,25 +248,41 @@ def weighted(model: Model, res: Resolution) -> Model:
     return replace(model, motors=replace(model.motors, energy_weight=np.asarray(res.weights, dtype=float)))
 
 
-def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: np.ndarray) -> JointPath:
-    """`coopsim.inverse.path.joint_path` of a B-spline motion at the points s.
+def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: np.ndarray,
+                      engine: str = "compiled") -> JointPath:
+    """`coopsim.inverse.path.joint_path` of a B-spline motion at the points s: θ(s), θ′(s), θ″(s).
+
+    engine 'compiled': the compiled object-motion pass (`object_motion_samples`) of the path traversed in
+    unit time at ṡ = 1, s̈ = 0 (times [0, 1], the 'linear' law s = u, sampled at t = s), whose θ̇, θ̈ are
+    then θ′, θ″; its failures quote t = s. 'reference': `joint_path` (NumPy per point; SciPy's DOP853 in
+    s for the redundant arms). Both take the square arms by Newton continuation and the redundant ones
+    by the least-|θ′ − z| ODE in s, so they agree to the solvers' tolerances; the compiled pass also
+    refuses a path on which an arm's det S J changes sign between points.
 
     Args:
         model: the Model.
         motion: the ObjectMotion (two waypoints and a B-spline path; its initial guess, rest posture and
             gain, the gain per unit s being rest_gain × the span, as the time law's s runs over it).
-        s: (N,) the path points, increasing.
+        s: (N,) the path points, increasing, from 0 (the first point starts the IK from the guess).
         piece: (N,) int, zeros.
+        engine: 'compiled' or 'reference'.
 
     Returns:
         JointPath.
 
     Raises:
         TrajectoryError: the inverse kinematics refuses the path.
+        ValueError: an unknown engine.
     """
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
-    span = float(motion.times[-1] - motion.times[0])
-    return joint_path(model, SplineGeometry(motion), s, piece, guess, motion.rest_posture, motion.rest_gain * span)
+    gain = motion.rest_gain * float(motion.times[-1] - motion.times[0])
+    geometry = SplineGeometry(motion)
+    if engine == "reference":
+        return joint_path(model, geometry, s, piece, guess, motion.rest_posture, gain)
+    unit = replace(motion, times=np.array([0.0, 1.0]), time_law="linear", samples=None, rest_gain=gain,
+                   initial_guess=guess)
+    traj = object_motion_samples(model, unit, s, engine=engine)
+    return JointPath(geometry.at(s, piece), traj.q, traj.qd, traj.qdd)
 
 
 def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resolution, mode: str) -> PathEvaluation:

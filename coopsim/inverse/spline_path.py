@@ -121,6 +121,23 @@ def straight_control_points(motion: ObjectMotion, control_points: int) -> PathSp
     return PathSpline(KIND, p0 + xi * (p1 - p0), xi * end_rotation_vector(motion))
 
 
+def spline_arrays(motion: ObjectMotion) -> tuple[np.ndarray, np.ndarray, int]:
+    """The B-spline of a motion's path as arrays: knots, control coefficients [p − p₀, φ] and degree.
+
+    Args:
+        motion: the ObjectMotion (two waypoints and a B-spline `path` of K interior control points).
+
+    Returns:
+        tuple: the knots (K + d + 3,) (`knots`), the coefficients (K + 2, 6) [m relative to the first
+        waypoint's position; rad, φ], world axes, from the first pose to the last, and the degree d.
+    """
+    path = motion.path
+    K, p0 = len(path.positions), motion.positions[0]
+    rel = np.vstack([np.zeros(3), path.positions - p0, motion.positions[-1] - p0])
+    phi = np.vstack([np.zeros(3), path.rotation_vectors, end_rotation_vector(motion)])
+    return knots(K), np.hstack([rel, phi]), degree(K)
+
+
 class BSplinePath:
     """The object path of an ObjectMotion with a B-spline `path`, as functions of s ∈ [0, 1].
 
@@ -136,13 +153,8 @@ class BSplinePath:
     def __init__(self, motion: ObjectMotion):
         from scipy.interpolate import BSpline
 
-        path = motion.path
-        K = len(path.positions)
-        t, d = knots(K), degree(K)
         self.R0, self.origin = motion.rotations[0], motion.positions[0]
-        rel = np.vstack([np.zeros(3), path.positions - self.origin, motion.positions[-1] - self.origin])
-        phi = np.vstack([np.zeros(3), path.rotation_vectors, end_rotation_vector(motion)])
-        both = BSpline(t, np.hstack([rel, phi]), d)                 # [p − p₀, φ]: one evaluation for both
+        both = BSpline(*spline_arrays(motion))                      # [p − p₀, φ]: one evaluation for both
         self._splines = [both] + [both.derivative(k) for k in (1, 2)]
 
     def at(self, s, origin: np.ndarray | None = None) -> PathPoint:

@@ -32,7 +32,7 @@ from coopsim.dynamics.closed_chain import arm_poses, carrier_object
 from coopsim.dynamics.kinematics import (REACH_SLACK, arm_pose, ee_bias_acceleration, ee_jacobian, point_jacobian_rate,
                                          reach_bound, reach_check)
 from coopsim.forward.diagnostics import joint_limit_reason, joint_limit_violation
-from coopsim.inverse.spline_path import spline_state
+from coopsim.inverse.spline_path import spline_arrays, spline_state
 
 
 class TrajectoryError(CoopsimError):
@@ -156,10 +156,11 @@ def time_law(kind: str, u: float) -> tuple[float, float, float]:
     """(s, ds/du, d²s/du²) of the normalised time law on u ∈ [0, 1].
 
     'quintic': s = 10u³ − 15u⁴ + 6u⁵ (rest-to-rest with zero acceleration at the ends); 'cubic':
-    s = 3u² − 2u³ (zero rate at the ends).
+    s = 3u² − 2u³ (zero rate at the ends); 'linear': s = u (not at rest: a path traversed at ṡ = 1,
+    s̈ = 0, `coopsim.inverse.free_path.spline_joint_path`; no scenario's law).
 
     Args:
-        kind: 'quintic' or 'cubic'.
+        kind: 'quintic', 'cubic' or 'linear'.
         u: the normalised time in [0, 1] (dimensionless).
 
     Returns:
@@ -173,6 +174,8 @@ def time_law(kind: str, u: float) -> tuple[float, float, float]:
                 60 * u - 180 * u**2 + 120 * u**3)
     if kind == "cubic":
         return 3 * u**2 - 2 * u**3, 6 * u - 6 * u**2, 6 - 12 * u
+    if kind == "linear":
+        return u, 1.0, 0.0
     raise ValueError(f"unknown time law {kind!r}")
 
 
@@ -421,9 +424,9 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
     Each square arm is solved by continuation: Newton from the previous sample's angles advanced by
     θ̇h + θ̈h²/2 (from `initial_guess` at the first sample), so the branch chosen at the start is kept;
     the redundant arms as `redundant_motion`. engine 'compiled' runs every sample in one compiled pass
-    (`coopsim.compiled.object_motion`), 'reference' the readable NumPy/SciPy path (`redundant_motion` and
-    one compiled Newton solve per sample and arm); both give the same error texts. A motion along a
-    B-spline `path` always takes the reference path (the compiled pass follows waypoint paths only).
+    (`coopsim.compiled.object_motion`, waypoint and B-spline paths), 'reference' the readable NumPy/SciPy
+    path (`redundant_motion` and one compiled Newton solve per sample and arm); both give the same error
+    texts.
 
     Args:
         model: the Model whose arms carry the object.
@@ -440,13 +443,36 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
             leaves the plane of motion, or a joint leaves its range.
         ValueError: an unknown engine.
     """
+    t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
+    return object_motion_samples(model, motion, t_out, plane_tol, engine)
+
+
+def object_motion_samples(model: Model, motion: ObjectMotion, t_out: np.ndarray, plane_tol: float = 1e-9,
+                          engine: str = "compiled") -> JointTrajectory:
+    """`object_motion_trajectory` at the sample times t_out.
+
+    Args:
+        model: the Model whose arms carry the object.
+        motion: the object's waypoints and time law.
+        t_out: (N,) s, the sample times, increasing, within the waypoints' span (the first one starts the
+            inverse kinematics from the motion's initial guess).
+        plane_tol: m or rad, how far a target may leave the plane of motion of a planar scene.
+        engine: 'compiled' or 'reference'.
+
+    Returns:
+        JointTrajectory: t = t_out (N,) s and q, qd, qdd (N, n) rad (or m), stacked arm by arm.
+
+    Raises:
+        TrajectoryError: as `object_motion_trajectory`.
+        ValueError: an unknown engine.
+    """
     if engine not in ("compiled", "reference"):
         raise ValueError(f"unknown engine {engine!r}; expected compiled or reference")
     S = model.rows
     redundant = _check_joint_counts(model, S)
-    t_out = motion.times[0] + output_times(motion.times[-1] - motion.times[0], motion.output_dt)
+    t_out = np.asarray(t_out, dtype=float)
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
-    if engine == "reference" or motion.path is not None:     # the compiled pass knows waypoint paths only
+    if engine == "reference":
         q, qd, qdd = _reference_motion(model, motion, t_out, guess, redundant, plane_tol)
     else:
         q, qd, qdd = _compiled_motion(model, motion, t_out, guess, redundant, plane_tol)
@@ -461,7 +487,9 @@ def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant
     bounds = [reach_bound(arm) for arm in model.arms]
     first = np.array([f for f, _ in bounds])
     reach = np.array([r for _, r in bounds])
-    sol = api.object_motion_ik(model, motion, t_out, guess, redundant, first, reach * (1 + REACH_SLACK), plane_tol)
+    spline = None if motion.path is None else spline_arrays(motion)
+    sol = api.object_motion_ik(model, motion, t_out, guess, redundant, first, reach * (1 + REACH_SLACK), plane_tol,
+                               spline=spline)
     if sol.status == om.OK:
         return sol.q, sol.qd, sol.qdd
     m, (a, _) = sol.arm, sol.values

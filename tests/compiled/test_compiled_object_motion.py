@@ -10,18 +10,24 @@ comes from the same DOP853 steps in both engines (the compiled pass follows scip
 may differ by rounding carried through the steps: allowed 1e-12 rad per rad of |θ| (the integration's
 rtol, which the steps are far inside). θ̇ = (S J)⁻¹ S v and θ̈ inherit that error times at most
 (1 + max |θ̇|)/σ_min (resp. θ̈). Measured: ≤ 4.6e-13 rad, 1e-13 rad/s, 3e-13 rad/s² (the panda carry's
-3 s of the ODE), 30× to 1000× inside."""
+3 s of the ODE), 30× to 1000× inside. B-spline paths (`coopsim.inverse.spline_path`) likewise: the
+compiled object state against scipy's BSpline and the NumPy left Jacobian, the passes on bent splines
+of a planar square pair, a spatial 6R pair and the redundant Panda carry."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from coopsim.core.model import ObjectMotion, SampledTimeLaw
+from coopsim.compiled import api
+from coopsim.compiled.object_motion import SMALL_ANGLE
+from coopsim.core.model import ObjectMotion, PathSpline, SampledTimeLaw
 from coopsim.core.spatial import rpy_to_rot
 from coopsim.dynamics.kinematics import arm_pose, ee_jacobian
 from coopsim.io.robots import robots_folder
-from coopsim.inverse.trajectory import TrajectoryError, object_motion_trajectory
+from coopsim.inverse import spline_path
+from coopsim.inverse.free_path import end_poses
+from coopsim.inverse.trajectory import TrajectoryError, object_motion_at, object_motion_trajectory
 from inverse_cases import model, short_motion
 
 TOL = 1e-13
@@ -179,3 +185,87 @@ def test_compiled_pass_equals_the_reference_with_a_pull_per_unit_path():
     mo = m.inverse.object_motion
     mo = replace(mo, rest_pull="path", time_law="sampled", samples=_trapezoid_law(mo.times), output_dt=0.25)
     _assert_engines_agree(m, mo, ode_tol=1e-11)
+
+
+def bent_spline(motion: ObjectMotion, S: np.ndarray, control_points: int, offset: float, dt: float) -> ObjectMotion:
+    """The straight B-spline between a motion's first and last poses (`spline_path.straight_control_points`)
+    with its control points moved by `offset` × a seeded normal draw in the rows S (m and rad: in the plane
+    of a planar scene), sampled every dt."""
+    ends = end_poses(motion, dt)
+    line = spline_path.straight_control_points(ends, control_points)
+    d = offset * np.random.default_rng(1).normal(0.0, 1.0, (control_points, S.shape[0])) @ S
+    return replace(ends, path=PathSpline(line.kind, line.positions + d[:, :3], line.rotation_vectors + d[:, 3:]))
+
+
+@pytest.mark.parametrize("big", [True, False])
+@pytest.mark.parametrize("K", [1, 2, 5])
+def test_object_state_kernel_equals_the_spline_path(K, big):
+    """The compiled object state (`object_motion.object_states`, de Boor's basis derivatives and the left
+    Jacobian) on a spatial B-spline motion of degree 2, 3, 3 (rotation vectors up to about 1.5 rad, or below
+    SMALL_ANGLE: its Taylor branch) under the linear law s = (t − t₀)/T against `BSplinePath.at` (scipy's
+    BSpline, NumPy's J_l) times the law's rates: both sum d + 1 ≤ 4 basis values × coefficients and build R by
+    Rodrigues' formula, so they differ by rounding of the order of 1e-16 of each quantity's scale (the
+    derivative bases grow as n·d per order): allowed 1e-13 × (1 + its max), measured ≤ 6e-16 of it."""
+    assert SMALL_ANGLE == spline_path.SMALL_ANGLE
+    rng = np.random.default_rng(3)
+    amp = 0.5 if big else 0.015
+    R0, R1 = rpy_to_rot(rng.uniform(-amp, amp, 3)), rpy_to_rot(rng.uniform(-amp, amp, 3))
+    path = PathSpline("bspline", rng.uniform(-0.3, 0.3, (K, 3)), rng.uniform(-2 * amp, 2 * amp, (K, 3)))
+    motion = ObjectMotion(np.array([1.0, 4.0]), np.array([[0.1, 0.2, 0.3], [0.5, -0.1, 0.2]]), np.stack([R0, R1]),
+                          "linear", 0.1, path=path)
+    s = np.linspace(0.0, 1.0, 21)
+    pc, R, tw, ac = api.object_states(model(CARRIES[0]), motion, 1.0 + 3.0 * s, spline_path.spline_arrays(motion))
+    ref = spline_path.BSplinePath(motion).at(s, motion.positions[0])
+    for got, want in [(pc, ref.p), (R, ref.R), (3.0 * tw[:, :3], ref.dp), (3.0 * tw[:, 3:], ref.dw),
+                      (9.0 * ac[:, :3], ref.ddp), (9.0 * ac[:, 3:], ref.ddw)]:
+        assert np.max(np.abs(got - want)) <= 1e-13 * (1 + np.max(np.abs(want)))
+
+
+@pytest.mark.parametrize("law", ["quintic", "linear", "sampled"])
+def test_object_states_equal_object_motion_at(law):
+    """`api.object_states` against the reference `object_motion_at` at 27 times (the ends and the clamped
+    outside included) on a B-spline motion of the paper carry and on its waypoint motion: the same
+    formulas, to 1e-13 × (1 + each quantity's max)."""
+    m = model(CARRIES[0])
+    mo = m.inverse.object_motion
+    for motion in (bent_spline(mo, m.rows, 4, 0.02, 0.25), mo):
+        if law == "sampled":
+            motion = replace(motion, time_law=law, samples=_trapezoid_law(motion.times))
+        else:
+            motion = replace(motion, time_law=law)
+        t = np.concatenate([[-1.0], np.linspace(motion.times[0], motion.times[-1], 25), [motion.times[-1] + 1.0]])
+        spline = None if motion.path is None else spline_path.spline_arrays(motion)
+        got = api.object_states(m, motion, t, spline)
+        want = [np.array(v) for v in zip(*(object_motion_at(motion, x, motion.positions[0]) for x in t))]
+        for a, b in zip(got, want):
+            assert np.max(np.abs(a - b)) <= 1e-13 * (1 + np.max(np.abs(b)))
+
+
+def _first_segment(motion: ObjectMotion) -> ObjectMotion:
+    return replace(motion, times=motion.times[:2], positions=motion.positions[:2], rotations=motion.rotations[:2])
+
+
+# scene → its bent spline: the paper carry's end poses (K = 4, 2 cm and 0.02 rad bends, 0.25 s samples), the UR5
+# pair's short motion (K = 3, 2 mm, 50 ms), the Panda carry's first segment (K = 2, 5 mm, 0.1 s samples)
+SPLINES = {CARRIES[0]: lambda m: bent_spline(m.inverse.object_motion, m.rows, 4, 0.02, 0.25),
+           "robots/ur5_pair_box": lambda m: bent_spline(short_motion(m), m.rows, 3, 0.002, 0.05),
+           CARRIES[2]: lambda m: bent_spline(_first_segment(m.inverse.object_motion), m.rows, 2, 0.005, 0.1)}
+
+
+@pytest.mark.parametrize("name", _robots(list(SPLINES)))
+def test_compiled_pass_equals_the_reference_on_a_bspline_path(name):
+    """The compiled pass follows a bent B-spline (a planar square pair, a spatial 6R pair, the redundant
+    Panda pair) as the reference does, to the tolerances above (measured ≤ 1.3e-15 rad, 1.2e-15 rad/s,
+    3.3e-15 rad/s²)."""
+    m = model(name)
+    _assert_engines_agree(m, SPLINES[name](m))
+
+
+def test_a_spline_out_of_reach_is_reported_alike():
+    """A B-spline of the paper carry bent 0.6 m out of the arms' reach: arm 1's Newton stops on its way out
+    (t = 2.25 s), with the same text from both engines."""
+    m = model(CARRIES[0])
+    motion = bent_spline(m.inverse.object_motion, m.rows, 4, 0.0, 0.25)
+    far = replace(motion.path, positions=motion.path.positions + [0.0, 0.6, 0.0])
+    _same_error(m, replace(motion, path=far), r"^inverse\.object_motion: the path leaves the workspace of arm 'arm1' "
+                r"at t=2\.25 s \(object at \[.*\] m\): no joint angles reach its grasp \(Newton did not converge")
