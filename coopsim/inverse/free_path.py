@@ -551,16 +551,38 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
         return J
 
     bound = [(-b, b) for b in problem.bounds] + [(0.0, None)]
+    iterates = [np.asarray(x0, dtype=float)]
     opt = minimize(lambda z: -z[-1], np.append(x0, mu0 / ref), jac=lambda z: np.append(np.zeros(len(z) - 1), -1.0),
                    method="SLSQP", bounds=bound,
                    constraints=[{"type": "ineq", "fun": lambda z: problem.constraints(*split(z)), "jac": jac}],
-                   options={"maxiter": max_iter, "ftol": 1e-9})
-    x = opt.x[:-1]
+                   options={"maxiter": max_iter, "ftol": 1e-9}, callback=lambda z: iterates.append(z[:-1].copy()))
+    x, message = opt.x[:-1], str(opt.message)
+    if problem.evaluate(x) is None:
+        k = last_accepted(problem, iterates)
+        x = iterates[k]
+        message += f"; its end point is refused by the inverse kinematics: the run ends at iterate {k}"
     cap = problem.capacity(x)
     mass = cap.mass if cap is not None else float("nan")
     return x, StartResult(index, float(mass), float(mu0 if start is not None else np.nan), bool(opt.success),
-                          int(opt.status), str(opt.message), int(opt.nit), problem.evaluations - n0,
-                          time.perf_counter() - t0)
+                          int(opt.status), message, int(opt.nit), problem.evaluations - n0, time.perf_counter() - t0)
+
+
+def last_accepted(problem: FreePathProblem, iterates: list) -> int:
+    """The last of an optimiser run's iterates whose path the inverse kinematics accepts with every arm's
+    manipulability above its margin (the run's start, 0, when none after it is).
+
+    Args:
+        problem: the FreePathProblem.
+        iterates: the run's iterates x (K·k,), its start first (accepted).
+
+    Returns:
+        int: that iterate's index.
+    """
+    for k in range(len(iterates) - 1, 0, -1):
+        e = problem.evaluate(iterates[k])
+        if e is not None and np.min(problem._rows(e)[3]) >= 0.0:
+            return k
+    return 0
 
 
 def _starts(problem: FreePathProblem, count: int, seed: int) -> list[np.ndarray]:

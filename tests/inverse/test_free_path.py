@@ -12,7 +12,7 @@ import pytest
 from coopsim.dynamics.kinematics import arm_pose, ee_jacobian
 from coopsim.io.robots import robots_folder
 from coopsim.inverse.capacity import brute_force_check, method_capacity
-from coopsim.inverse.free_path import FreePathProblem, optimize_path, spline_joint_path
+from coopsim.inverse.free_path import FreePathProblem, last_accepted, optimize_path, spline_joint_path
 from coopsim.inverse.path import path_grid
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.solve import resolution_for
@@ -114,3 +114,18 @@ def test_spline_joint_path_of_the_compiled_pass_equals_joint_path(name):
     assert np.max(np.abs(got.q - ref.q)) <= tol
     for a, b in ((got.d1, ref.d1), (got.d2, ref.d2)):
         assert np.max(np.abs(a - b)) <= tol * (1 + np.max(np.abs(b))) / s_min
+
+
+def test_a_run_ending_on_a_refused_path_ends_at_its_last_accepted_iterate():
+    """Iterates of a run on the one-via-point carry: the straight path, two small offsets, one whose via point
+    leaves the arms' reach (0.5 × 1.25 m in y), one accepted by the inverse kinematics below the manipulability
+    margin (0.4 × 1.25 m in x: the arms near stretched), one out of reach again: the last accepted is the
+    second offset; with none after the start, the start."""
+    m = _one_via_point()
+    problem = FreePathProblem(m, resolution_for(m, "paper"), "payload")
+    iterates = [np.zeros(3), np.array([0.004, -0.006, 0.03]), np.array([0.002, 0.003, -0.02]),
+                np.array([0.0, 0.5, 0.0]), np.array([0.4, 0.0, 0.0]), np.array([0.5, 0.5, 0.0])]
+    assert [problem.evaluate(x) is None for x in iterates] == [False, False, False, True, False, True]
+    assert np.min(problem._rows(problem.evaluate(iterates[4]))[3]) < 0
+    assert last_accepted(problem, iterates) == 2
+    assert last_accepted(problem, iterates[:1] + iterates[3:]) == 0
