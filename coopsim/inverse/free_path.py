@@ -35,6 +35,7 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError
 from coopsim.core.model import Model, ObjectMotion, PathSpline, torque_limits
+from coopsim.core.labels import joint_labels
 from coopsim.forward.diagnostics import manipulability
 from coopsim.inverse.capacity import Capacity, affine_capacity, affine_torques, optimise_weights
 from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
@@ -42,7 +43,7 @@ from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
 from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
-from coopsim.inverse.trajectory import object_motion_samples, object_motion_trajectory
+from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
 
 FD_STEP = 1e-7            # forward-difference step in the scaled unknowns (× reach m, × 1 rad)
 START_SPREAD = 0.01       # random starts: standard deviation of the scaled offsets
@@ -50,6 +51,7 @@ OFFSET_BOUND = 0.5        # |offset| <= this × the arms' mean reach (m) or this
 WEIGHT_ROUNDS = 2         # path / weights rounds with `weights`
 RETIME_ROUNDS = 2         # retimed payloads (path / time law in turn): retime, optimise the path, retime
 INFEASIBLE = -1.0         # every constraint's value where the inverse kinematics refuses the path
+JOINT_MARGIN = 1e-6       # rad (m): how far inside its range a joint's path must stay between samples
 
 
 class PathOptimizationError(CoopsimError):
@@ -197,11 +199,47 @@ def evaluate_motion(model: Model, motion: ObjectMotion, res: Resolution, mode: s
     from coopsim.compiled import api
 
     traj = object_motion_trajectory(model, motion)
+    check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
     terms = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
     prob = inverse_problem(model, traj, model.inverse.payload_position, terms=terms)
     a, b = affine_torques(prob, res, mode)
     lo, hi = torque_limits(model.motors, traj.qd)
     return PathEvaluation(traj.t, prob, a, b, lo, hi, manipulability(model, terms.J))
+
+
+def check_ranges_between(model: Model, x: np.ndarray, q: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> None:
+    """Refuse a joint motion that may leave a joint's range, less JOINT_MARGIN, between its samples.
+
+    The joint ranges are checked at the samples by the inverse kinematics; an optimum pressed against a range
+    there can pass it in between. On each interval [x_i, x_i+1] (h = x_i+1 − x_i) the quintic Hermite
+    interpolant of (θ, θ′, θ″) at its ends (`coopsim.inverse.trajectory.hermite_quintic`) lies within the hull
+    of its Bernstein coefficients θ₀, θ₀ + hθ′₀/5, θ₀ + 2hθ′₀/5 + h²θ″₀/20, θ₁ − 2hθ′₁/5 + h²θ″₁/20,
+    θ₁ − hθ′₁/5, θ₁: those must keep JOINT_MARGIN inside the range (the margin covering the interpolant's
+    O(h⁶) distance from the joint path).
+
+    Args:
+        model: the Model (its joint_range (n, 2), or None: nothing checked).
+        x: (N,) the samples' times (s) or path parameters, increasing.
+        q: (N, n) rad (m), θ at the samples.
+        d1: (N, n) θ′ (per unit of x).
+        d2: (N, n) θ″.
+
+    Raises:
+        TrajectoryError: naming the joint and the interval.
+    """
+    if model.joint_range is None or len(x) < 2:
+        return
+    h = np.diff(np.asarray(x, dtype=float))[:, None]
+    p0, p1, v0, v1, a0, a1 = q[:-1], q[1:], h * d1[:-1], h * d1[1:], h * h * d2[:-1], h * h * d2[1:]
+    b = np.stack([p0, p0 + v0 / 5, p0 + 2 * v0 / 5 + a0 / 20, p1 - 2 * v1 / 5 + a1 / 20, p1 - v1 / 5, p1])
+    lo, hi = model.joint_range.T
+    low, high = b.min(axis=0), b.max(axis=0)
+    bad = np.argwhere((low < lo + JOINT_MARGIN) | (high > hi - JOINT_MARGIN))
+    if len(bad):
+        i, j = bad[0]
+        raise TrajectoryError(f"inverse.optimize: between {x[i]:.6g} and {x[i + 1]:.6g} "
+                              f"{joint_labels(model)[j]} may come within {JOINT_MARGIN:g} of its range "
+                              f"[{lo[j]:.6g}, {hi[j]:.6g}] (its path within [{low[i, j]:.6g}, {high[i, j]:.6g}])")
 
 
 class SplineGeometry:
@@ -309,6 +347,7 @@ def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resoluti
 
     m = weighted(model, res)
     jp = spline_joint_path(m, motion, law.s, law.piece)
+    check_ranges_between(model, law.s, jp.q, jp.d1, jp.d2)
     dyn = path_dynamics(m, jp, res.method, mode)
     b = law.b[:, None]
     qd = jp.d1 * np.sqrt(np.maximum(b, 0.0))

@@ -12,7 +12,9 @@ import pytest
 from coopsim.dynamics.kinematics import arm_pose, ee_jacobian
 from coopsim.io.robots import robots_folder
 from coopsim.inverse.capacity import brute_force_check, method_capacity
-from coopsim.inverse.free_path import FreePathProblem, last_accepted, optimize_path, spline_joint_path
+from coopsim.inverse.free_path import (JOINT_MARGIN, FreePathProblem, check_ranges_between, last_accepted, optimize_path,
+                                      spline_joint_path)
+from coopsim.inverse.trajectory import TrajectoryError, trajectory_at_times, JointTrajectory
 from coopsim.inverse.path import path_grid
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.solve import resolution_for
@@ -129,3 +131,25 @@ def test_a_run_ending_on_a_refused_path_ends_at_its_last_accepted_iterate():
     assert np.min(problem._rows(problem.evaluate(iterates[4]))[3]) < 0
     assert last_accepted(problem, iterates) == 2
     assert last_accepted(problem, iterates[:1] + iterates[3:]) == 0
+
+
+def test_a_joint_passing_its_range_between_samples_is_refused():
+    """θ = sin(2πt) of one joint sampled every 0.2 s (peak 1 at t = 0.25 s, samples at most 0.951): with the
+    range ±1.05 it is accepted (the Bernstein hull, a bound of the interpolant, reaches 1.031 there) and the
+    interpolant on a fine grid stays inside it; with ±0.99, which every sample keeps but the motion passes,
+    refused naming the joint and the interval of the peak."""
+    m = model(CARRY)
+    t = np.linspace(0.0, 1.0, 6)
+    w = 2 * np.pi
+    q, qd, qdd = (np.zeros((6, m.n_total)) for _ in range(3))
+    q[:, 2], qd[:, 2], qdd[:, 2] = np.sin(w * t), w * np.cos(w * t), -w * w * np.sin(w * t)
+    wide = np.tile([-np.inf, np.inf], (m.n_total, 1))
+    wide[2] = [-1.05, 1.05]
+    check_ranges_between(replace(m, joint_range=wide), t, q, qd, qdd)
+    fine = trajectory_at_times(JointTrajectory(t, q, qd, qdd, "object_motion"), np.linspace(0, 1, 1001))[0][:, 2]
+    assert 0.999 < np.max(np.abs(fine)) <= 1.05 - JOINT_MARGIN and np.max(np.abs(q[:, 2])) < 0.99
+    narrow = wide.copy()
+    narrow[2] = [-0.99, 0.99]
+    with pytest.raises(TrajectoryError, match=r"^inverse\.optimize: between 0\.2 and 0\.4 arm 1 .*joint 3 may come "
+                                              r"within 1e-06 of its range \[-0\.99, 0\.99\]"):
+        check_ranges_between(replace(m, joint_range=narrow), t, q, qd, qdd)
