@@ -14,8 +14,9 @@ The capacity is a minimum over samples and motors, so the problem is written in 
 
 with τ(μ) = a + μ b the resolution's torques (`coopsim.inverse.capacity.affine_torques`), every row
 divided by the motor's stall torque. Loop closure, reach, joint ranges and singularity crossings come
-with the closed-chain inverse kinematics of the path (`object_motion_trajectory`): a path it refuses is
-an infeasible point (every constraint −1). SciPy's SLSQP (sequential quadratic programming on dense
+with the closed-chain inverse kinematics of the path (`object_motion_trajectory`), the joint ranges also
+between its samples (`check_ranges_between`): a path it refuses is an infeasible point (every constraint
+−1), and a run that ends on one ends at its last accepted iterate (`last_accepted`). SciPy's SLSQP (sequential quadratic programming on dense
 Jacobians: the problem has tens of unknowns and thousands of rows) solves it from the straight path and
 from random starts (fixed seed); the constraint Jacobian in δ is by forward differences of the whole
 chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the converged one whose
