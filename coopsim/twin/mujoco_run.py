@@ -6,9 +6,11 @@ the same continuous torque τ(t) as the native model (no zero-order hold).
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 import mujoco
 import numpy as np
@@ -57,11 +59,17 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
 
 
     ctrl = getattr(model.torques, "fn", None)
+    shared = None if isinstance(model.torques, TorqueFunction) else shared_table(model.torques)
     if isinstance(ctrl, Controller):             # compiled where it can be (`Controller.fastest`)
         fn = ctrl.fastest
 
         def callback(m, d):
             d.ctrl[ctrl_index] = fn(d.time, d.qpos[qadr], d.qvel[dadr])
+    elif shared is not None:
+        at = shared
+
+        def callback(m, d):
+            d.ctrl[ctrl_index] = at(d.time)
     else:
         def callback(m, d):
             d.ctrl[ctrl_index] = applied_torque(model.torques, d.time, d.qpos[qadr], d.qvel[dadr])
@@ -71,6 +79,39 @@ def _control(model: Model, d: mujoco.MjData, ctrl_index: np.ndarray, qadr: np.nd
         yield
     finally:
         mujoco.set_mjcb_control(None)
+
+
+def shared_table(tables) -> "Callable[[float], np.ndarray] | None":
+    """τ(t) of torque tables that share their times, as one stacked table: `coopsim.core.model.torque_at`'s
+    values to the bit (the same row on a knot, slope·(t − t_j) + τ_j between knots with the same slope, held
+    outside, nan at a nan time), one binary search for all arms instead of one per arm.
+
+    Args:
+        tables: one TorqueTable per arm.
+
+    Returns:
+        Callable[[float], np.ndarray] | None: t (s) ↦ (n_total,) N·m; None when the tables' times differ.
+    """
+    times = tables[0].times
+    if len(times) < 2 or any(not np.array_equal(tab.times, times) for tab in tables[1:]):
+        return None
+    values = np.hstack([tab.values for tab in tables])
+    slopes = (values[1:] - values[:-1]) / (times[1:] - times[:-1])[:, None]
+    knots, first, last = times.tolist(), values[0].copy(), values[-1].copy()
+
+    def at(t: float) -> np.ndarray:
+        if t <= knots[0]:
+            return first.copy()
+        if t >= knots[-1]:
+            return last.copy()
+        if t != t:
+            return np.full(values.shape[1], np.nan)
+        j = bisect.bisect_right(knots, t) - 1
+        if t == knots[j]:
+            return values[j].copy()
+        return slopes[j] * (t - knots[j]) + values[j]
+
+    return at
 
 
 def divides(t_out: np.ndarray, dt: float) -> bool:

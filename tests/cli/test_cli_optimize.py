@@ -17,15 +17,17 @@ CARRY = "scenarios/paper_planar_2x3_carry.yaml"
 
 
 def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
-    """A coarse grid (6 intervals a segment): every method heavier after than before, the exact check at the
+    """A coarse grid (8 intervals a segment): every method heavier after than before, the exact check at the
     grid within 1e-9 of τ_s, the set (scenario, optimize.json, optimize.mcap, 3 figures, with --replay the
     optimum's run log) complete; the optimised scenario loads in `coopsim capacity`, whose min-energy
     payload capacity along the sampled law is the optimum up to the law's excess between grid points
     (within 2 %). The replay of the heaviest load's law (13 s open loop): native within 1e-8 rad of the
     optimised path, the twin within the scenario's thresholds, and its log a run log as `coopsim animate`
-    reads it, naming the scenario it draws."""
-    out = run_cli("optimize", CARRY, "--retime", "--replay", "--intervals", "6", "--json", "--out", "res",
-                  cwd=workdir)
+    reads it, naming the scenario it draws. With --weights: the minimum energy's weights optimised with its
+    law carry more than equal weights, the written scenario carries them arm by arm (so its capacity above is
+    with them), and the replay's resolution is the one with them."""
+    out = run_cli("optimize", CARRY, "--retime", "--replay", "--weights", "--intervals", "8", "--json", "--out",
+                  "res", cwd=workdir)
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout)
     for k, e in s["methods"].items():
@@ -48,6 +50,13 @@ def test_retime_the_paper_carry_and_run_capacity_on_the_result(workdir):
     data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
     assert data["inverse"]["object_motion"]["time_law"] == "sampled"
     assert data["inverse"]["object_motion"]["rest_pull"] == "path"            # the joint path retimed
+    e = s["methods"]["min_energy"]
+    ew = e["energy_weights"]
+    assert ew["rounds"][0]["mass_kg"] < e["after"]["mass_kg"]
+    # the study's own search with those weights, on path dynamics of its own (their check points' rows found
+    # afresh): the last round's payload within the search's tolerance (Brent, rtol 1e-10)
+    assert e["after"]["mass_kg"] == pytest.approx(ew["rounds"][-1]["mass_kg"], rel=1e-9)
+    assert [w for arm in data["arms"] for w in arm["energy_weights"]] == list(ew["weights"].values())
     cap = run_cli("capacity", "res/paper_planar_2x3_carry_retimed.yaml", "--no-optimise", "--json", "--out", "cap",
                   cwd=workdir)
     assert cap.returncode == 0, cap.stderr
@@ -102,29 +111,6 @@ def test_replay_without_an_optimum_or_of_the_lp_bound_is_refused(workdir, args, 
     out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
     assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
     assert not (workdir / "res").exists()
-
-
-def test_weights_with_the_time_law_are_written_and_carried(workdir):
-    """--retime --weights: the minimum energy's weights optimised with its law carry more than equal weights,
-    the written scenario carries them arm by arm, and `coopsim capacity` of it (its own weights, the sampled
-    law) finds the optimum up to the law's excess between grid points (within 2 %, as above)."""
-    out = run_cli("optimize", CARRY, "--retime", "--weights", "--intervals", "6", "--json", "--out", "res",
-                  cwd=workdir)
-    assert out.returncode == 0, out.stderr
-    e = json.loads(out.stdout)["methods"]["min_energy"]
-    ew = e["energy_weights"]
-    assert ew["rounds"][0]["mass_kg"] < e["after"]["mass_kg"]
-    # the study's own search with those weights, on path dynamics of its own (their check points' rows found
-    # afresh): the last round's payload within the search's tolerance (Brent, rtol 1e-10)
-    assert e["after"]["mass_kg"] == pytest.approx(ew["rounds"][-1]["mass_kg"], rel=1e-9)
-    data = yaml.safe_load((workdir / "res" / "paper_planar_2x3_carry_retimed.yaml").read_text())
-    written = [w for arm in data["arms"] for w in arm["energy_weights"]]
-    assert written == list(ew["weights"].values())
-    cap = run_cli("capacity", "res/paper_planar_2x3_carry_retimed.yaml", "--no-optimise", "--json", "--out", "cap",
-                  cwd=workdir)
-    assert cap.returncode == 0, cap.stderr
-    c = json.loads(cap.stdout)["capacity"]["payload"]["min_energy"]["mass_kg"]
-    assert c == pytest.approx(e["after"]["mass_kg"], rel=0.02)
 
 
 def test_weights_of_another_resolution_are_refused(workdir):

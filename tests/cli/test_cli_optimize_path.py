@@ -28,7 +28,7 @@ def test_optimize_path_writes_one_set(workdir):
     written scenario loads as any scenario (its capacity: tests/report/test_path_report.py); both optima are
     replayed in the one set (native within 1e-8 rad, the twin within the thresholds: the figures in
     tests/report/test_path_report.py), each with its run log."""
-    out = run_cli("optimize", _scenario(workdir), "--retime", "--intervals", "10", "--path", "--method", "paper",
+    out = run_cli("optimize", _scenario(workdir), "--retime", "--intervals", "6", "--path", "--method", "paper",
                   "--replay", "--json", "--out", "res", cwd=workdir)
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
