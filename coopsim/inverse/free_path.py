@@ -30,6 +30,7 @@ the optimum's trajectory), each round started from the last, so the capacity nev
 from __future__ import annotations
 
 import time
+from functools import partial
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -307,7 +308,8 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
         engine: 'compiled' or 'reference'.
 
     Returns:
-        JointPath.
+        JointPath: with its recipe (this function on the same motion), so that the retiming's check points
+        between the grid points (`JointPath.refined`) are computed as the grid was.
 
     Raises:
         TrajectoryError: the inverse kinematics refuses the path.
@@ -321,7 +323,8 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
     unit = replace(motion, times=np.array([0.0, 1.0]), time_law="linear", samples=None, rest_gain=gain,
                    initial_guess=guess)
     traj = object_motion_samples(model, unit, s, engine=engine)
-    return JointPath(geometry.at(s, piece), traj.q, traj.qd, traj.qdd)
+    return JointPath(geometry.at(s, piece), traj.q, traj.qd, traj.qdd,
+                     partial(spline_joint_path, model, motion, engine=engine))     # its check points' recipe
 
 
 def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resolution, mode: str) -> PathEvaluation:

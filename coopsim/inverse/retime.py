@@ -326,9 +326,10 @@ def retimed_motion(motion: ObjectMotion, law: TimeLaw, output_dt: float | None =
 
     The waypoints stay; their times become the law's times at the knots, and the time law is 'sampled'
     (`coopsim.core.model.SampledTimeLaw`, the grid points' t, s and ṡ), starting at the first
-    waypoint's time. The redundant arms' null-space pull becomes one per unit path (rest_pull 'path', gain
-    rest_gain × the motion's duration per unit s, as `coopsim.inverse.path.joint_path` was given it), so the
-    motion's joint path is the retimed one whatever the law.
+    waypoint's time. The redundant arms' null-space pull becomes one per unit path (rest_pull 'path') of
+    rest_gain × the given motion's duration per unit s, as `coopsim.inverse.path.joint_path` was given it
+    (rest_gain scaled by the old duration over the law's), so the motion's joint path is the retimed one
+    whatever the law.
 
     Args:
         motion: the ObjectMotion whose waypoints make the path.
@@ -343,8 +344,9 @@ def retimed_motion(motion: ObjectMotion, law: TimeLaw, output_dt: float | None =
     s[-1], rate[[0, -1]] = 1.0, 0.0
     starts = np.concatenate([[0], np.flatnonzero(np.diff(law.piece)) + 1])
     times = np.append(law.t[starts], law.t[-1]) + motion.times[0]
+    gain = motion.rest_gain * float(motion.times[-1] - motion.times[0]) / float(times[-1] - times[0])
     return replace(motion, times=times, time_law="sampled", samples=SampledTimeLaw(t, s, rate), rest_pull="path",
-                   output_dt=motion.output_dt if output_dt is None else output_dt)
+                   rest_gain=gain, output_dt=motion.output_dt if output_dt is None else output_dt)
 
 
 def time_of(s: np.ndarray, piece: np.ndarray, b: np.ndarray) -> TimeLaw:

@@ -451,14 +451,15 @@ def optimised_scenario(data: dict, motion: ObjectMotion) -> dict:
 
     Returns:
         dict: a copy; inverse.object_motion's waypoints carry the new times, time_law 'sampled',
-        rest_pull (the motion's: 'path' for a retimed one) and time_law_samples {t, s, rate}.
+        rest_pull and rest_gain (the motion's: 'path', and the gain that keeps the pull per unit path, for a
+        retimed one) and time_law_samples {t, s, rate}.
     """
     out = copy.deepcopy(data)
     om = out["inverse"]["object_motion"]
     for wp, t in zip(om["waypoints"], motion.times):
         wp["time"] = float(t)
     om["time_law"] = "sampled"
-    om["rest_pull"] = motion.rest_pull
+    om["rest_pull"], om["rest_gain"] = motion.rest_pull, float(motion.rest_gain)
     om["time_law_samples"] = {"t": [float(x) for x in motion.samples.t], "s": [float(x) for x in motion.samples.s],
                               "rate": [float(x) for x in motion.samples.rate]}
     return out

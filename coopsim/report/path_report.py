@@ -348,7 +348,7 @@ def path_scenario(data: dict, motion: ObjectMotion) -> dict:
     om.pop("time_law_samples", None)
     if motion.time_law == "sampled":
         om["time_law"] = "sampled"
-        om["rest_pull"] = motion.rest_pull
+        om["rest_pull"], om["rest_gain"] = motion.rest_pull, float(motion.rest_gain)
         om["time_law_samples"] = {"t": [float(x) for x in motion.samples.t], "s": [float(x) for x in motion.samples.s],
                                   "rate": [float(x) for x in motion.samples.rate]}
     return out

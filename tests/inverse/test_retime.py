@@ -16,7 +16,7 @@ from coopsim.inverse.path import WaypointPath, joint_path, path_grid
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.replay import replay
 from coopsim.inverse.solve import resolution_for, resolve
-from coopsim.inverse.trajectory import object_motion_trajectory
+from coopsim.inverse.trajectory import object_motion_samples, object_motion_trajectory
 from coopsim.io.scenario import load_scenario
 from coopsim.report.inverse_report import capacity_study
 from coopsim.report.optimize_report import fine_check
@@ -255,3 +255,32 @@ def test_the_refined_joint_path_is_the_joint_path_of_the_finer_grid():
           for x, k in zip(fine.s, fine.points.piece)]
     assert len(at) == len(fine.s) == 3 * (len(path.knots) - 1)
     assert np.max(np.abs(ref.q[at] - fine.q)) <= 1e-12 and np.max(np.abs(ref.d1[at] - fine.d1)) <= 1e-12
+
+
+@pytest.mark.skipif(not (SCENARIOS / "robots" / "panda_ceiling_carry.yaml").exists(), reason="no Panda scene")
+def test_a_faster_retimed_law_keeps_the_redundant_arms_on_the_retimed_joint_path():
+    """The Panda carry's bare minimum-time law (0.78 s, the motion's 3 s): the retimed motion's pull per unit
+    path (rest_pull 'path', rest_gain scaled by 3 s over the law's duration) keeps the redundant arms on the
+    joint path that was retimed (gain rest_gain × 3 s per unit s) at the law's grid times, to 1e-9 rad (two
+    DOP853 runs at rtol 1e-12, one in s and one in t); with the scenario's rest_gain unscaled they leave it."""
+    from coopsim.io.robots import robots_folder
+
+    if robots_folder() is None:
+        pytest.skip("example-robot-data is not installed")
+    model = load_scenario(SCENARIOS / "robots" / "panda_ceiling_carry.yaml")
+    mo = model.inverse.object_motion
+    span = float(mo.times[-1] - mo.times[0])
+    path = WaypointPath.of(mo)
+    s, piece = path_grid(path.knots, 4)
+    jp = joint_path(model, path, s, piece, mo.initial_guess, mo.rest_posture, mo.rest_gain * span)
+    r = rt.retime(rt.path_dynamics(model, jp, "paper", "payload"), 0.0)
+    motion = rt.retimed_motion(mo, r.law)
+    assert motion.rest_pull == "path" and r.duration < 0.5 * span
+    on = np.flatnonzero(np.concatenate([[True], np.diff(r.law.t) > 0]))
+
+    def off_path(m):
+        traj = object_motion_samples(model, m, m.times[0] + r.law.t[on])
+        return float(np.max(np.abs(traj.q - jp.q[on])))
+
+    assert off_path(motion) <= 1e-9
+    assert off_path(replace(motion, rest_gain=mo.rest_gain)) > 1e-6
