@@ -44,6 +44,7 @@ from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
+from coopsim.inverse.retime_weights import with_weights
 from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
 from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
 
@@ -285,7 +286,7 @@ def weighted(model: Model, res: Resolution) -> Model:
     Returns:
         Model: a copy with motors.energy_weight = res.weights.
     """
-    return replace(model, motors=replace(model.motors, energy_weight=np.asarray(res.weights, dtype=float)))
+    return with_weights(model, res.weights)
 
 
 def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: np.ndarray,
