@@ -22,7 +22,7 @@ from coopsim.report.closed_replay import (
     replay_entry,
 )
 from coopsim.report.optimize_report import retime_study
-from coopsim.report.optimum_replay import optimum_replay
+from coopsim.report.optimum_replay import optimum_replay, replay_summary
 from helpers import SCENARIOS
 
 pytestmark = pytest.mark.skipif(robots_folder() is None,
@@ -57,7 +57,10 @@ def test_the_feedback_is_pd_about_the_optimised_path_on_top_of_the_optimum(panda
     """τ − τ_opt at the native samples is Kp (θ_r − θ) + Kd (θ̇_r − θ̇) with θ_r the optimised joint path (not
     the loaded plant's own IK: its frame sits at the composite centre, millimetres away) to 1e-9 of τ_s;
     the gains are ω² and 2ω times each joint's inertia (ω = 10 rad/s), the feedback a small share (≤ 1e-4
-    τ_s), and the total torque within its lines (this law meets them at its grid points: ≤ 1e-9 τ_s)."""
+    τ_s), and the total torque over its lines by no more than the feedforward itself at the replay's samples
+    (the law meets the lines at its grid and check points; the samples fall between them: its open-loop
+    replay's excess, here ~8e-6 τ_s on this 10-interval grid) plus the feedback's peak, with 10 % for the
+    twin's own stage times; no sample saturated."""
     model, rep, cr = panda
     kp, kd, _ = feedback_gains(model, rep.traj.q[0])
     assert np.allclose(kd, 0.2 * kp, rtol=1e-12) and np.all(kp > 0)
@@ -66,7 +69,9 @@ def test_the_feedback_is_pd_about_the_optimised_path_on_top_of_the_optimum(panda
     assert np.max(np.abs(cr.tau - cr.feedforward - pd) / stall) <= 1e-9
     s = closed_summary(cr, rep.traj)
     assert 0 < s["feedback"]["peak_rel_stall"] <= 1e-4
-    assert s["within_lines"] and s["saturation_events"] == 0
+    open_excess = max(replay_summary(rep)["native"]["max_line_excess"], 0.0)
+    assert max(s["line_excess"].values()) <= 1.1 * (open_excess + s["feedback"]["peak_rel_stall"])
+    assert s["saturation_events"] == 0
 
 
 def test_the_replay_entry_holds_the_closed_loop_where_asked_or_needed(panda, monkeypatch):
