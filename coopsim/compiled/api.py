@@ -298,7 +298,7 @@ def _f(x) -> np.ndarray:
 
 def _pull(motion) -> float:
     """The Motion's pull per unit path parameter: rest_gain × the duration for rest_pull 'path', else 0."""
-    return 0.0 if motion.rest_pull == "time" else float(motion.rest_gain * (motion.times[-1] - motion.times[0]))
+    return 0.0 if motion.rest_pull == "time" else motion.path_gain
 
 
 def _w(x, dtype=np.float64) -> np.ndarray:

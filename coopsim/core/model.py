@@ -566,6 +566,13 @@ class ObjectMotion:
     path: PathSpline | None = None
     rest_pull: str = "time"
 
+    @property
+    def path_gain(self) -> float:
+        """The redundant arms' null-space pull per unit of the path parameter σ ∈ [0, 1]: rest_gain × the
+        motion's duration (what rest_pull 'path' applies as rest_gain·T·σ̇, and the gain of the joint path
+        in σ, `coopsim.inverse.path.joint_path`)."""
+        return self.rest_gain * float(self.times[-1] - self.times[0])
+
 
 @dataclass(frozen=True)
 class OptimizeSettings:

@@ -317,7 +317,7 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
         ValueError: an unknown engine.
     """
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
-    gain = motion.rest_gain * float(motion.times[-1] - motion.times[0])
+    gain = motion.path_gain
     geometry = SplineGeometry(motion)
     if engine == "reference":
         return joint_path(model, geometry, s, piece, guess, motion.rest_posture, gain)

@@ -344,7 +344,7 @@ def retimed_motion(motion: ObjectMotion, law: TimeLaw, output_dt: float | None =
     s[-1], rate[[0, -1]] = 1.0, 0.0
     starts = np.concatenate([[0], np.flatnonzero(np.diff(law.piece)) + 1])
     times = np.append(law.t[starts], law.t[-1]) + motion.times[0]
-    gain = motion.rest_gain * float(motion.times[-1] - motion.times[0]) / float(times[-1] - times[0])
+    gain = motion.path_gain / float(times[-1] - times[0])
     return replace(motion, times=times, time_law="sampled", samples=SampledTimeLaw(t, s, rate), rest_pull="path",
                    rest_gain=gain, output_dt=motion.output_dt if output_dt is None else output_dt)
 

@@ -239,8 +239,8 @@ def pull_gain(motion: ObjectMotion, t: float) -> tuple[float, float]:
     """
     if motion.rest_pull == "time":
         return motion.rest_gain, 0.0
-    i, T, _, ds, dds = segment_at(motion, t)
-    k = motion.rest_gain * float(motion.times[-1] - motion.times[0]) / (len(motion.times) - 1)
+    _, T, _, ds, dds = segment_at(motion, t)
+    k = motion.path_gain / (len(motion.times) - 1)
     return k * ds / T, k * dds / T**2
 
 
@@ -620,8 +620,9 @@ def redundant_rates(arm: ArmModel, S: np.ndarray, q: np.ndarray, twist: np.ndarr
     A⁺ = Aᵀ(AAᵀ)⁻¹ — the joint velocity nearest z (least |θ̇ − z|) among those that move the end-effector
     as prescribed, i.e. least |θ̇| plus a null-space pull toward the rest posture that does not move the
     end-effector. Written θ̇ = z + Aᵀλ, AAᵀλ = b − Az (b = S v_EE). Its exact time derivative:
-    θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = ġ (θ_rest − θ) − gain θ̇ (ġ = gain_rate), AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ (so A θ̈ = S a_EE − Ȧθ̇, the
-    differential kinematics of the square arms); Ȧ = S J̇ (`point_jacobian_rate`).
+    θ̈ = ż + Ȧᵀλ + Aᵀλ̇, ż = ġ (θ_rest − θ) − gain θ̇ (ġ = gain_rate), AAᵀλ̇ = ḃ − Ȧθ̇ − Aż − AȦᵀλ
+    (so A θ̈ = S a_EE − Ȧθ̇, the differential kinematics of the square arms); Ȧ = S J̇
+    (`point_jacobian_rate`).
 
     Args:
         arm: the ArmModel (n joints).

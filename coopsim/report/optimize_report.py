@@ -139,9 +139,9 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
     _report(progress, "ik", 0.0)
     s, piece = path_grid(path.knots, intervals)
     guess = model.q0 if motion.initial_guess is None else motion.initial_guess
-    jp = joint_path(model, path, s, piece, guess, motion.rest_posture, _path_gain(motion))
+    jp = joint_path(model, path, s, piece, guess, motion.rest_posture, motion.path_gain)
     fs, fpiece = path_grid(path.knots, FINE * intervals)
-    fine = joint_path(model, path, fs, fpiece, guess, motion.rest_posture, _path_gain(motion))
+    fine = joint_path(model, path, fs, fpiece, guess, motion.rest_posture, motion.path_gain)
     _report(progress, "ik", 1.0)
     out, wl = {}, None
     field = "--duration" if duration is not None else "inverse.object_motion.waypoints"
@@ -161,11 +161,6 @@ def retime_study(model: Model, duration: float | None = None, payload: float | N
         raise rt.RetimeError(f"--method {method}: no time law carries the load within {T_max:g} s")
     new = rt.retimed_motion(motion, law.law)
     return RetimeStudy(model, mode, T_max, payload, method, path, jp, out, before, new, intervals, wl)
-
-
-def _path_gain(motion: ObjectMotion) -> float:
-    """The redundant arms' null-space pull per unit s: rest_gain over the motion's duration."""
-    return motion.rest_gain * float(motion.times[-1] - motion.times[0])
 
 
 def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float, payload: float | None, field: str):

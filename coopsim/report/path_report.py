@@ -124,7 +124,7 @@ def own_path_retimed(model: Model, res, mode: str, duration: float) -> float:
     s, piece = path_grid(path.knots, per)
     m = weighted(model, res)
     guess = model.q0 if om.initial_guess is None else om.initial_guess
-    jp = joint_path(m, path, s, piece, guess, om.rest_posture, om.rest_gain * span)
+    jp = joint_path(m, path, s, piece, guess, om.rest_posture, om.path_gain)
     return rt.max_payload(rt.path_dynamics(m, jp, res.method, mode), duration)[0]
 
 
