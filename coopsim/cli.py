@@ -397,15 +397,15 @@ def _cmd_optimize(args) -> int:
             raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
                                         f"{best.message}); nothing written")
         free_rep = path_replay(free, progress=bar) if args.replay and free is not None else None
-        entries = {id(r): replay_entry(model, r, args.closed_loop) for r in (rep, free_rep) if r is not None}
+        rep_entry, free_entry = (None if r is None else replay_entry(model, r, args.closed_loop) for r in (rep, free_rep))
         bar.close()
         summary = retime_summary(study) if study is not None else {"scenario": model.name}
         if free is not None:
             summary["path"] = path_summary(free)
-        if free_rep is not None:
-            summary["path"]["replay"] = entries[id(free_rep)]
-        if rep is not None:
-            summary["replay"] = entries[id(rep)]
+        if free_entry is not None:
+            summary["path"]["replay"] = free_entry
+        if rep_entry is not None:
+            summary["replay"] = rep_entry
         data = load_yaml(Path(args.scenario))
         if args.set:
             data = apply_overrides(data, _overrides(args), where=f"{args.scenario}: --set")
