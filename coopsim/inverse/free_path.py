@@ -295,7 +295,7 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
 
     engine 'compiled': the compiled object-motion pass (`object_motion_samples`) of the path traversed in
     unit time at ṡ = 1, s̈ = 0 (times [0, 1], the 'linear' law s = u, sampled at t = s), whose θ̇, θ̈ are
-    then θ′, θ″; its failures quote t = s. 'reference': `joint_path` (NumPy per point; SciPy's DOP853 in
+    then θ′, θ″; its failures quote the path parameter s. 'reference': `joint_path` (NumPy per point; SciPy's DOP853 in
     s for the redundant arms). Both take the square arms by Newton continuation and the redundant ones
     by the least-|θ′ − z| ODE in s, so they agree to the solvers' tolerances; the compiled pass also
     refuses a path on which an arm's det S J changes sign between points.
@@ -323,7 +323,7 @@ def spline_joint_path(model: Model, motion: ObjectMotion, s: np.ndarray, piece: 
         return joint_path(model, geometry, s, piece, guess, motion.rest_posture, gain)
     unit = replace(motion, times=np.array([0.0, 1.0]), time_law="linear", samples=None, rest_gain=gain,
                    initial_guess=guess)
-    traj = object_motion_samples(model, unit, s, engine=engine)
+    traj = object_motion_samples(model, unit, s, engine=engine, parameter="s")
     return JointPath(geometry.at(s, piece), traj.q, traj.qd, traj.qdd,
                      partial(spline_joint_path, model, motion, engine=engine))     # its check points' recipe
 

@@ -448,7 +448,7 @@ def object_motion_trajectory(model: Model, motion: ObjectMotion, plane_tol: floa
 
 
 def object_motion_samples(model: Model, motion: ObjectMotion, t_out: np.ndarray, plane_tol: float = 1e-9,
-                          engine: str = "compiled") -> JointTrajectory:
+                          engine: str = "compiled", parameter: str = "t") -> JointTrajectory:
     """`object_motion_trajectory` at the sample times t_out.
 
     Args:
@@ -458,16 +458,21 @@ def object_motion_samples(model: Model, motion: ObjectMotion, t_out: np.ndarray,
             inverse kinematics from the motion's initial guess).
         plane_tol: m or rad, how far a target may leave the plane of motion of a planar scene.
         engine: 'compiled' or 'reference'.
+        parameter: what the failure texts call a sample's coordinate: 't' (the time, "t=0.5 s"), or 's'
+            (a path parameter, "s=0.5": a path traversed in unit time, `coopsim.inverse.free_path.
+            spline_joint_path`; compiled engine only, the reference one's path route being `joint_path`).
 
     Returns:
         JointTrajectory: t = t_out (N,) s and q, qd, qdd (N, n) rad (or m), stacked arm by arm.
 
     Raises:
         TrajectoryError: as `object_motion_trajectory`.
-        ValueError: an unknown engine.
+        ValueError: an unknown engine or parameter.
     """
     if engine not in ("compiled", "reference"):
         raise ValueError(f"unknown engine {engine!r}; expected compiled or reference")
+    if parameter not in ("t", "s") or (parameter == "s" and engine == "reference"):
+        raise ValueError(f"parameter {parameter!r} with engine {engine!r}; expected 't', or 's' with 'compiled'")
     S = model.rows
     redundant = _check_joint_counts(model, S)
     t_out = np.asarray(t_out, dtype=float)
@@ -475,12 +480,12 @@ def object_motion_samples(model: Model, motion: ObjectMotion, t_out: np.ndarray,
     if engine == "reference":
         q, qd, qdd = _reference_motion(model, motion, t_out, guess, redundant, plane_tol)
     else:
-        q, qd, qdd = _compiled_motion(model, motion, t_out, guess, redundant, plane_tol)
-    _check_joint_limits(model, t_out, q)
+        q, qd, qdd = _compiled_motion(model, motion, t_out, guess, redundant, plane_tol, parameter)
+    _check_joint_limits(model, t_out, q, parameter)
     return JointTrajectory(t_out, q, qd, qdd, "object_motion")
 
 
-def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant, plane_tol):
+def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant, plane_tol, parameter="t"):
     """(θ, θ̇, θ̈) of every arm by `coopsim.compiled.api.object_motion_ik`, a failure raised as the reference's."""
     from coopsim.compiled import api, object_motion as om
 
@@ -497,30 +502,37 @@ def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant
               om.SINGULAR: "singular_redundant" if m in redundant else "singular"}.get(sol.status)
     if reason is None:
         reason = "integration"
-    raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev)
+    raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev, parameter=parameter)
+
+
+def _at(parameter: str, t: float) -> str:
+    """A sample's coordinate as the failure texts quote it: 't=0.5 s' (a time) or 's=0.5' (a path parameter)."""
+    return f"t={t:.6g} s" if parameter == "t" else f"s={t:.6g}"
 
 
 def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.0, reach: float = 0.0,
-             t_prev: float = 0.0, detail: str = "") -> TrajectoryError:
+             t_prev: float = 0.0, detail: str = "", parameter: str = "t") -> TrajectoryError:
     """The TrajectoryError of a failed sample of arm m at time t (p_C: the object's world position): the one
     wording of both engines. reason: 'reach' (value: the grasp's distance), 'newton' (value: max |S e|
-    left, or detail: the solver's own words), 'singular' / 'singular_redundant' (value: σ_min/σ_max), 'plane' (value: the full pose error),
-    'crosses' (between t_prev and t), 'integration' (the redundant arms' ODE stopped)."""
+    left, or detail: the solver's own words), 'singular' / 'singular_redundant' (value: σ_min/σ_max), 'plane'
+    (value: the full pose error), 'crosses' (between t_prev and t), 'integration' (the redundant arms' ODE
+    stopped). parameter: 't' (t is a time) or 's' (a path parameter: `object_motion_samples`)."""
     name = model.arms[m].name
-    where = f"at t={t:.6g} s (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
+    at, before = _at(parameter, t), _at(parameter, t_prev)
+    where = f"at {at} (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
     leaves = f"inverse.object_motion: the path leaves the workspace of arm {name!r} {where}: "
     text = {"reach": lambda: leaves + f"its grasp is {value:.4g} m from the first joint, reach {reach:.4g} m",
             "newton": lambda: leaves + f"no joint angles reach its grasp ({detail or newton_failure(value, 50)})",
             "singular": lambda: f"inverse.object_motion: arm {name!r} meets a singularity {where}: singular "
                                 f"Jacobian (σ_min/σ_max = {value:.2g})",
-            "singular_redundant": lambda: f"inverse.object_motion: arm {name!r} meets a singularity at t={t:.6g} s: "
+            "singular_redundant": lambda: f"inverse.object_motion: arm {name!r} meets a singularity at {at}: "
                                           f"singular Jacobian (σ_min/σ_max = {value:.2g})",
-            "plane": lambda: f"inverse.object_motion: at t={t:.6g} s the grasp of arm {name!r} leaves the plane of "
+            "plane": lambda: f"inverse.object_motion: at {at} the grasp of arm {name!r} leaves the plane of "
                              f"motion by {value:.3g} (m or rad)",
             "integration": lambda: f"inverse.object_motion: the redundancy resolution's integration failed at "
-                                   f"t={t:.6g} s (step size collapsed)",
-            "crosses": lambda: f"inverse.object_motion: arm {name!r} crosses a singularity between t={t_prev:.6g} s "
-                               f"and t={t:.6g} s (det S J changes sign)"}[reason]()
+                                   f"{at} (step size collapsed)",
+            "crosses": lambda: f"inverse.object_motion: arm {name!r} crosses a singularity between {before} "
+                               f"and {at} (det S J changes sign)"}[reason]()
     return TrajectoryError(text)
 
 
@@ -601,11 +613,11 @@ def _check_joint_counts(model: Model, S: np.ndarray) -> list[int]:
     return [m for m, arm in enumerate(model.arms) if arm.n > S.shape[0]]
 
 
-def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray):
+def _check_joint_limits(model: Model, t: np.ndarray, q: np.ndarray, parameter: str = "t"):
     hit = joint_limit_violation(model, q)
     if hit is not None:
         i, j = hit
-        raise TrajectoryError(f"inverse.object_motion: at t={t[i]:.6g} s {joint_limit_reason(model, j, q[i, j])}")
+        raise TrajectoryError(f"inverse.object_motion: at {_at(parameter, t[i])} {joint_limit_reason(model, j, q[i, j])}")
 
 
 # ------------------------------------------------------------------------------------------------

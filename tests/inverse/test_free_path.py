@@ -118,6 +118,18 @@ def test_spline_joint_path_of_the_compiled_pass_equals_joint_path(name):
         assert np.max(np.abs(a - b)) <= tol * (1 + np.max(np.abs(b))) / s_min
 
 
+def test_a_refused_free_path_names_the_path_parameter():
+    """A via point out of the arms' reach (0.5 × 1.25 m in y): the compiled pass in unit time refuses the path
+    at a path parameter, and its text quotes it as s (no time: the path has no time law yet)."""
+    m = _one_via_point()
+    motion = FreePathProblem(m, resolution_for(m, "paper"), "payload").motion_of(np.array([0.0, 0.5, 0.0]))
+    s, piece = path_grid(np.array([0.0, 1.0]), 40)
+    with pytest.raises(TrajectoryError, match=r"^inverse\.object_motion: the path leaves the workspace of arm .* "
+                                              r"at s=0\.\d+ \(object at \[") as e:
+        spline_joint_path(m, motion, s, piece)
+    assert "t=" not in str(e.value)
+
+
 def test_a_run_ending_on_a_refused_path_ends_at_its_last_accepted_iterate():
     """Iterates of a run on the one-via-point carry: the straight path, two small offsets, one whose via point
     leaves the arms' reach (0.5 × 1.25 m in y), one accepted by the inverse kinematics below the manipulability
