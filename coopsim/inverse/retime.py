@@ -67,6 +67,7 @@ BIG = 1e12                      # the box |a|, b <= BIG·scale keeping a stage's
 FINE = 10                       # the check grid's intervals per grid interval (the rows added between grid points)
 REFINE_TOL = 1e-9               # the excess over a line (relative to τ_s) at a check point that adds its interval's rows
 MAX_REFINE = 8                  # the most rounds of rows added between grid points per minimum-time solve
+NEAR = 1e-6                     # the first bracket width, relative, of a heaviest-load search from a mass carried (at_least)
 
 
 class RetimeError(CoopsimError):
@@ -1004,14 +1005,18 @@ def _static_problem(dyn: PathDynamics):
 
 
 def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10,
-                field: str = "--duration", names: list[str] | None = None, refine: bool = True):
+                field: str = "--duration", names: list[str] | None = None, refine: bool = True,
+                at_least: float | None = None):
     """The heaviest carried mass whose minimum time is within `duration`, and its Retiming.
 
     The minimum time grows with μ; the bracket [nominal mass, μ_hi] is grown (×4 from twice the nominal
     mass or 1 kg, never past the static capacity) until T(μ_hi) > duration, then Brent's method on
     T(μ) − duration (an infeasible μ counts as infinitely slow). The heaviest μ found feasible is kept.
     With `refine` every solve starts with the rows of every check point any earlier solve added
-    (`retime`), so that later solves rarely need a second round.
+    (`retime`), so that later solves rarely need a second round. With `at_least` (a mass known to be
+    carried within the duration, e.g. the refined law's heaviest when the grid's rows alone are asked) the
+    bracket starts there instead, its width grown from NEAR × μ by ×16: a few solves where the answer
+    lies close above it.
 
     Args:
         dyn: the PathDynamics.
@@ -1021,6 +1026,8 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
         field: the input that set the duration, for the message when even the nominal load is too slow.
         names: (n,) the joints' labels, for the message when the motors cannot hold the nominal load.
         refine: as `retime` (the rows between the grid points).
+        at_least: kg, a mass carried within the duration (the search starts from it; one not carried
+            there is ignored), or None.
 
     Returns:
         tuple: (mass kg, Retiming at it, the minimum-time solves made).
@@ -1033,12 +1040,21 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
     top = static_capacity(dyn)
     if not top > lo:
         raise RetimeError(hold_failure(dyn, names))
-    first = retime(dyn, lo, solver, refine=refine)
+    count = [0]
+    first = None
+    if at_least is not None and lo < at_least < top:
+        count[0] += 1
+        first = retime(dyn, float(at_least), solver, refine=refine)
+        if not first.feasible or first.duration > duration:
+            first = None
+    near = first is not None
+    if first is None:
+        count[0] += 1
+        first = retime(dyn, lo, solver, refine=refine)
     if not first.feasible or first.duration > duration:
         raise RetimeError(f"{field}: no motion carries the bare object along the path within {duration:g} s "
                           f"(its minimum time is {first.duration:.6g} s)")
     best = {"r": first, "rows": None if first.refine is None else first.refine["rows"]}
-    count = [1]
 
     def excess(mu):
         count[0] += 1
@@ -1050,11 +1066,12 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
         return (r.duration if r.feasible else np.inf) - duration
 
     cap_top = top * (1 - 1e-12) if np.isfinite(top) else np.inf
-    hi = min(max(2 * lo, 1.0), cap_top)
+    base = first.mass
+    hi = min(base * (1 + NEAR) if near else max(2 * lo, 1.0), cap_top)
     while excess(hi) <= 0:
         if hi >= cap_top:
             return best["r"].mass, best["r"], count[0]
-        hi = min(4 * hi, cap_top)
+        hi = min(base + 16 * (hi - base) if near else 4 * hi, cap_top)
     brentq(lambda mu: min(excess(mu), 1e300), best["r"].mass, hi, xtol=rtol * hi, rtol=4 * np.finfo(float).eps)
     return best["r"].mass, best["r"], count[0]
 

@@ -171,7 +171,7 @@ def _method_retime(model: Model, jp, fine, method: str, mode: str, T_max: float,
     t1 = time.perf_counter()
     mass, best, evals = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model))
     t2 = time.perf_counter()
-    grid_only = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model), refine=False)[0]
+    grid_only = rt.max_payload(dyn, T_max, field=field, names=joint_labels(model), refine=False, at_least=mass)[0]
     chosen = None
     if payload is not None:
         chosen = rt.retime(dyn, float(payload))

@@ -162,6 +162,23 @@ def test_between_grid_points_only_the_rest_intervals_exceed_their_lines(carry):
                 assert np.min(np.abs(fc["s"] - path.knots)) <= 1.0 / (len(path.knots) - 1) / n
 
 
+def test_a_search_started_from_a_carried_mass_finds_the_same_heaviest_load(carry):
+    """The grid rows' heaviest load (refine=False) searched from the refined law's heaviest (at_least, a mass
+    those rows carry too: they are a subset): the same mass as the search from the nominal load within the
+    searches' tolerance (1e-10 relative each, so 3e-10 allowed), in fewer solves; a mass not carried within
+    the duration as at_least is ignored (the search from the nominal load)."""
+    model, path, jp = carry
+    fine = joint_path(model, path, *path_grid(path.knots, 10 * INTERVALS), model.inverse.object_motion.initial_guess)
+    dyn = rt.path_dynamics(model, jp, "min_energy", "payload", fine=rt.path_dynamics(model, fine, "min_energy",
+                                                                                      "payload"))
+    refined = rt.max_payload(dyn, 13.0)[0]
+    plain, _, n_plain = rt.max_payload(dyn, 13.0, refine=False)
+    near, r, n_near = rt.max_payload(dyn, 13.0, refine=False, at_least=refined)
+    assert refined < plain and r.duration <= 13.0
+    assert near == pytest.approx(plain, rel=3e-10) and n_near < n_plain
+    assert rt.max_payload(dyn, 13.0, refine=False, at_least=2 * plain)[0] == pytest.approx(plain, rel=3e-10)
+
+
 REFINED = {"paper": 38.0, "nonsqueezing": 38.0, "min_energy": 190.0, "lp": 300.0}   # kg, near each heaviest load
 
 
