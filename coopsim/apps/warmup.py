@@ -144,7 +144,7 @@ def compile_inverse_terms(model) -> None:
 def compile_extras(model) -> None:
     """Compile the entries some commands use: inverse kinematics (one arm's, and an object motion's in one pass), the
     object's states along a motion, the capacity objective, the linear resolutions' pass, the LP vertices, the
-    section loads and the retiming's reachability pass.
+    section loads, the retiming's reachability pass and the LP bound's (with its small-LP solver).
 
     Args:
         model: the warm-up scene's Model.
@@ -167,6 +167,10 @@ def compile_extras(model) -> None:
                     np.zeros((1, 2), np.int8), (1e-12, 1e-10, 1e-9))
     api.reachability_pass(np.ones(3), np.ones(3), np.ones(3), np.array([0, 3]), np.ones(1), np.ones(1),
                           np.zeros(1, np.int64), np.ones(1, bool), np.ones(1, bool), 2)
+    api.dense_lp_solve(np.ones((1, 1)), np.ones(1), np.ones(1), np.ones(1))
+    api.lp_reachability_pass(np.ones(3), np.ones(3), np.ones(3), np.full(3, -1), np.ones((3, 1)), np.array([0, 3]),
+                             np.full(1, 2), np.ones(1), np.ones(1), np.ones((1, 3)), np.ones(3), np.zeros(1, np.int64),
+                             np.ones(1, bool), np.ones(1, bool), 2)
     one = np.ones((1, 3))
     api.section_loads(1.0, np.eye(3)[None], np.zeros((1, 6)), np.zeros((1, 6)), model.gravity, np.zeros((1, r, 6)),
                       model.rows, model.object.grasp_pos, 0, np.ones(1), one, one, one, np.ones((r, 1)), np.ones(4))

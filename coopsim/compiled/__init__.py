@@ -38,6 +38,7 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
                     torques, internal wrenches and the load-capacity ratio test
     lp.py           LP vertices at given bases, certified optimal or unbounded (the LP bound's batches)
     reachability.py TOPP-RA's reachability pass of the retiming (backward controllable sets, greedy forward pass)
+    dense_lp.py     small dense LPs (a dual simplex) and the LP bound's reachability pass on them
     stress.py       section loads of a box object at every sample and cut
     api.py          the Python entry points (batches on threads, parameter sets) and error reporting
 

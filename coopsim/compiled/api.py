@@ -19,8 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coopsim.compiled import (capacity, closed_chain, control, distributions, ik, integrate, lp, manifold,
-                              object_motion, reachability, sample, stress)
+from coopsim.compiled import (capacity, closed_chain, control, dense_lp, distributions, ik, integrate, lp,
+                              manifold, object_motion, reachability, sample, stress)
 from coopsim.compiled.packing import PROJECTION_MAX_ITER, PackedModel, Workspace, pack, tabulated_torques, workspace
 from coopsim.compiled.structs import Struct, to_struct
 from coopsim.core.errors import ConstraintError
@@ -63,13 +63,14 @@ def _group_entries(group: str) -> tuple:
     """The entries of a compile group: "base", what every native command uses (the first run compiles it,
     `coopsim.apps.warmup.warm_up`); "extras", inverse kinematics (one arm, and object-motion trajectories), the
     object's states along a motion, the capacity objective, the linear resolutions' pass, the LP vertices, the
-    section loads and the retiming's reachability pass (`inverse`, `capacity`, `optimize`, a trajectory given as
-    object motion: their first use compiles them, a few seconds); "control", the controllers (the first
-    closed-loop run)."""
+    section loads, the retiming's reachability pass and the LP bound's (with its small-LP solver) (`inverse`,
+    `capacity`, `optimize`, a trajectory given as object motion: their first use compiles them, a few
+    seconds); "control", the controllers (the first closed-loop run)."""
     return {"base": (integrate.run, sample.evaluate, sample.inverse_terms, manifold.consistent),
             "extras": (ik.arm_solve, object_motion.trajectory, object_motion.object_states,
                        capacity.min_energy_mass_interval, distributions.linear_pass, lp.lp_vertices,
-                       stress.section_loads, reachability.reachability_pass),
+                       stress.section_loads, reachability.reachability_pass, dense_lp.dense_lp,
+                       dense_lp.lp_reachability_pass),
             "control": (control.commands, control.evaluate)}[group]
 
 
@@ -698,6 +699,62 @@ def reachability_pass(G, H, E, off, d, tol, start, end_at, start_at, N: int) -> 
                                             _w(start, np.int64), _w(end_at, np.bool_), _w(start_at, np.bool_),
                                             b, lo, hi)
     return None if status else b
+
+
+LP_STATUS = {dense_lp.OPTIMAL: "optimal", dense_lp.INFEASIBLE: "infeasible",
+             dense_lp.NOT_SOLVED: "not solved (step limit or singular basis)"}
+
+
+def dense_lp_solve(M, h, c, cap) -> tuple[int, np.ndarray]:
+    """max cᵀx subject to M x ≤ h and |x_j| ≤ cap_j, by the compiled dual simplex (`dense_lp.dense_lp`).
+
+    Args:
+        M: (m, n) the rows.
+        h: (m,) their bounds (+inf: no row).
+        c: (n,) the objective.
+        cap: (n,) the box (finite, > 0).
+
+    Returns:
+        tuple: status (0 optimal, 1 infeasible, 2 not solved: `LP_STATUS`) and x (n,).
+    """
+    announce_compile("extras")
+    x = np.zeros(np.shape(M)[1])
+    status = dense_lp.dense_lp(_w(M), _w(h), _w(c), _w(cap), x)
+    return int(status), x
+
+
+def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, start, end_at, start_at,
+                         N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """The LP bound's reachability passes over stage polyhedra in (a, b, z), compiled
+    (`dense_lp.lp_reachability_pass`).
+
+    Args:
+        g, h, e: (R,) the stages' rows g a + h b + W z ≤ e, flat, stage after stage.
+        slot: (R,) int, the stage's point whose z each row's W multiplies (−1: none).
+        W: (R, nz) those coefficients.
+        off: (K + 1,) int, the stages' row offsets.
+        nslot: (K,) int, the points carrying z per stage (its two grid points first).
+        d: (K,) the intervals' lengths.
+        tol: (K,) each stage's feasibility tolerance.
+        caps: (K, 3) the first box around a, b and each z per stage (grown where it binds).
+        cap_max: (3,) the largest box.
+        start: (K,) int, the grid point each stage starts at.
+        end_at: (K,) bool, the stage's end point ends a piece.
+        start_at: (K,) bool, its start point starts a piece.
+        N: the grid points.
+
+    Returns:
+        tuple: status (0, 1 no controllable state, 2 a stage LP not solved: `LP_STATUS`), b (N,) 1/s²,
+        a (K,) 1/s² and z (K, 2, nz) the null-space coordinates at the stages' two grid points.
+    """
+    announce_compile("extras")
+    K, nz = len(d), np.shape(W)[1]
+    b, lo, hi, a, z = np.empty(N), np.empty(N), np.empty(N), np.empty(K), np.empty((K, 2, nz))
+    status = dense_lp.lp_reachability_pass(_w(g), _w(h), _w(e), _w(slot, np.int64), _w(W), _w(off, np.int64),
+                                           _w(nslot, np.int64), _w(d), _w(tol), _w(caps), _w(cap_max),
+                                           _w(start, np.int64), _w(end_at, np.bool_), _w(start_at, np.bool_),
+                                           b, lo, hi, a, z)
+    return int(status), b, a, z
 
 
 def section_loads(mass: float, R_o, twist, acc, gravity, F_e, rows, grasp_pos, axis: int, frac, K_diag, c_o, ps_o,

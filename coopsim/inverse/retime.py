@@ -30,12 +30,13 @@ bound: its own grasp wrenches, free); `retime` solves, checks the law exactly at
 (`fine_excess`), adds the rows of every check point of each interval holding one that exceeds by more
 than REFINE_TOL (their velocity terms by the tangent at b̄ there), and solves again, until none does.
 
-Two solvers of the same discrete problem: `reachability` (TOPP-RA: a backward pass of controllable
-sets and a greedy forward pass, each stage a two-variable LP solved exactly by its vertices, compiled;
-cost linear in the grid points) for the linear resolutions (their default), and `grid_lp` (one sparse
-LP over the whole grid, maximising Σ b, HiGHS; its simplex grows faster than linearly) for any of them
-and for the LP bound (its default: the grasp wrenches make it more than two variables a stage); `certificate`
-gives the grid LP's dual certificate at a law found either way. The time is
+Two solvers of the same discrete problem: 'reachability' (TOPP-RA: a backward pass of controllable
+sets and a greedy forward pass, compiled, cost linear in the grid points; for a linear resolution each
+stage a two-variable LP solved exactly by its vertices, `reachability`; for the LP bound a small LP in
+(a, b) and its points' grasp wrenches, solved by a dense dual simplex, `lp_reachability`), and `grid_lp`
+(one sparse LP over the whole grid, maximising Σ b, HiGHS; its simplex grows faster than linearly);
+`default_solver` picks reachability except for the LP bound's large stages; `certificate` gives the grid
+LP's dual certificate at a law found either way. The time is
 Σ 2Δ_i/(√b_i + √b_{i+1}). Where the feasible profiles have a pointwise largest one the two give it (the
 paper carry: to 1e-9); with this discretisation they need not, and then the greedy forward pass can be
 slower than the grid LP's law (both within the lines, as `check_time_law` shows). Neither minimises the
@@ -761,6 +762,169 @@ def _lp_equalities(src, mass, pt, i, k, sig, d, nv, off, rk):
 
 
 # ------------------------------------------------------------------------------------------------
+# The LP bound by reachability: each stage a polyhedron in (a, b, z)
+# ------------------------------------------------------------------------------------------------
+
+NULL_TOL = 1e-10                # singular values below this times a point's largest count as zero (null spaces)
+LP_STAGE_MAX = 40               # the most unknowns of an LP-bound stage LP for the reachability pass (`default_solver`)
+LP_BOX = 1e2                    # a stage LP's first box: this times b̄'s peak (/Δ for a), the wrenches' size (z)
+
+
+def grasp_null_space(dyn: PathDynamics) -> tuple[np.ndarray, np.ndarray] | None:
+    """The grasp wrenches meeting the LP bound's equalities at each point: f = A⁺ ȳ + N z, ȳ = [y; −τ_arms,passive]
+    the right-hand sides of [A; J_passiveᵀ] f (the object wrench and the passive torques), N the null space of
+    that matrix less the directions that move no active motor (Jᵀ_active N z = 0: they change no row).
+
+    Args:
+        dyn: the PathDynamics of 'lp' (N points).
+
+    Returns:
+        tuple | None: A⁺ (N, rk, q) and N (N, rk, nz) (orthonormal columns); None when either rank differs
+        between the points.
+    """
+    Aeq = np.concatenate([dyn.A, dyn.JT[:, ~dyn.active, :]], 1)               # (N, q, rk)
+    U, S, Vt = np.linalg.svd(Aeq)
+    rank = np.sum(S > NULL_TOL * S[:, :1], axis=1)
+    if np.any(rank != rank[0]):
+        return None
+    r = int(rank[0])
+    plus = np.einsum("nji,nj,nkj->nik", Vt[:, :r, :], 1.0 / S[:, :r], U[:, :, :r])
+    null = np.swapaxes(Vt[:, r:, :], 1, 2)                                     # (N, rk, nz0)
+    j = dyn.active & np.isfinite(dyn.stall)
+    W = dyn.JT[:, j, :] @ null
+    if null.shape[2] == 0 or W.shape[1] == 0:
+        return plus, null[:, :, :0]
+    _, S2, V2t = np.linalg.svd(W)
+    rank2 = np.sum(S2 > NULL_TOL * np.maximum(S2[:, :1], 1e-300), axis=1)
+    if np.any(rank2 != rank2[0]):
+        return None
+    return plus, null @ np.swapaxes(V2t[:, :int(rank2[0]), :], 1, 2)
+
+
+def _lp_point_rows(dyn: PathDynamics, mass: float, lam, ns):
+    """Each point's rows g a + h b + W z ≤ e of the LP bound (the motor lines with f = F(a, b) + N z, then the
+    speed bound): g, h, e (N, m), W (N, m, nz), F (3, N, rk) (f's constant, a and b parts) and N; None when
+    the equalities cannot be met for every (a, b) (`grasp_null_space`)."""
+    plus, null = ns
+    pas = ~dyn.active
+    Y = dyn.y[0] + mass * dyn.y[1]                                              # (3, N, k)
+    T = dyn.tau[0] + mass * dyn.tau[1]                                          # (3, N, n)
+    rhs = np.concatenate([Y, -T[:, :, pas]], 2)                                 # (3, N, q)
+    F = np.einsum("niq,xnq->xni", plus, rhs)
+    Aeq = np.concatenate([dyn.A, dyn.JT[:, pas, :]], 1)
+    miss = np.max(np.abs(np.einsum("nqi,xni->xnq", Aeq, F) - rhs), initial=0.0)
+    if not miss <= 1e-9 * max(float(np.max(np.abs(rhs), initial=0.0)), 1e-300):
+        return None
+    eff = replace(dyn, tau=np.stack([T + np.einsum("nji,xni->xnj", dyn.JT, F), np.zeros_like(T)]), fine_maker=None)
+    G, H, E, j = motor_rows(eff, 0.0, lam)
+    Wj = dyn.JT[:, j, :] @ null
+    N, nz = len(G), null.shape[2]
+    g = np.concatenate([G, np.zeros((N, 1))], 1)
+    h = np.concatenate([H, np.ones((N, 1))], 1)
+    e = np.concatenate([E, speed_bound(dyn)[:, None]], 1)
+    W = np.concatenate([Wj, -Wj, np.zeros((N, 1, nz))], 1)
+    return g, h, e, W, F, null
+
+
+def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np.ndarray | None, dict]:
+    """ṡ² (N,) of the LP bound's time-optimal law for the linearised rows by TOPP-RA's passes, each stage the
+    polyhedron of its interval's unknowns (a, b) and the grasp wrenches of its points, free
+    (`coopsim.compiled.dense_lp.lp_reachability_pass`); the same discrete problem as `grid_lp`.
+
+    The equalities A f = y(a, b, μ) and Jᵀ_passive f = −τ_arms,passive are met exactly by f = F(a, b) + N z
+    (`grasp_null_space`), so a stage has 2 + nz·(2 + its check points) unknowns and only the rows: the
+    motor lines and speed bound at its two grid points (at the end b + 2Δa) and at each of its check points
+    of `extra` (b + 2σΔa), b ≥ 0 at both ends. Backward: K_i = [min b, max b] over the polyhedron cut by
+    b + 2Δa ∈ K_{i+1} (two small LPs, compiled dual simplex); forward from b_0 = 0: the largest a at b_i
+    that stays in K_{i+1} (one small LP), its z giving the grasp wrenches. Where the equalities' rank differs
+    between the points, or a small LP is not solved (its step limit), the stage problem is left to `grid_lp`
+    (stats['fallback'] says why).
+
+    Args:
+        dyn: the PathDynamics of 'lp'.
+        mass: kg, μ.
+        lam: (λ₀, λ₁) (N,) the tangent of √b.
+        extra: (FinePoints, (λ₀, λ₁) (P,)) the check points' rows, or None.
+
+    Returns:
+        tuple: b (N,) 1/s² or None (a stage without a controllable state), and the statistics: the grasp
+        wrenches f (K, 2, rk) at both ends of every interval (as `grid_lp`'s).
+    """
+    from coopsim.compiled import api
+
+    s, piece = dyn.path.s, dyn.path.points.piece
+    N = len(s)
+    st = _stages(s, piece)
+    K, d = len(st), s[st + 1] - s[st]
+    if "null" not in dyn._fine:
+        dyn._fine["null"] = grasp_null_space(dyn)
+    ns = dyn._fine["null"]
+    rows = None if ns is None else _lp_point_rows(dyn, mass, lam, ns)
+    more = None
+    if rows is not None and extra is not None:
+        fp, flam = extra
+        fns = grasp_null_space(fp.dyn)
+        more = None if fns is None or fns[1].shape[2] != ns[1].shape[2] else _lp_point_rows(fp.dyn, mass, flam, fns)
+        if more is None:
+            rows = None
+    if rows is None:
+        b, stats = grid_lp(dyn, mass, lam, extra)
+        return b, stats | {"fallback": "the grasp equalities' rank differs between the points: grid LP"}
+    g, h, e, W, F, null = rows
+    m, nz = g.shape[1], W.shape[2]
+    dd = d[:, None]
+    i0, i1 = st, st + 1
+    zero, one = np.zeros((K, 1)), np.ones((K, 1))
+    Gs = np.concatenate([g[i0], g[i1] + 2 * dd * h[i1], zero, -2 * dd], 1)
+    Hs = np.concatenate([h[i0], h[i1], -one, -one], 1)
+    Es = np.concatenate([e[i0], e[i1], zero, zero], 1)
+    Ws = np.concatenate([W[i0], W[i1], np.zeros((K, 2, nz))], 1)
+    slot = np.broadcast_to(np.concatenate([np.zeros(m, int), np.ones(m, int), [-1, -1]]), Gs.shape)
+    who = np.repeat(np.arange(K), Gs.shape[1])
+    flat = [Gs.ravel(), Hs.ravel(), Es.ravel(), slot.ravel(), Ws.reshape(-1, nz)]
+    nslot = np.full(K, 2)
+    if more is not None:
+        gf, hf, ef, Wf, _, _ = more
+        k = fp.stage
+        order = np.argsort(k, kind="stable")
+        local = np.empty(len(k), int)
+        local[order] = np.arange(len(k)) - np.searchsorted(k[order], k[order], side="left")
+        w = (2 * d[k] * fp.sigma)[:, None]
+        xs = [gf + w * hf, hf, ef, np.broadcast_to((2 + local)[:, None], gf.shape), Wf]
+        flat = [np.concatenate([x, y.reshape(-1, nz) if n == 4 else y.ravel()])
+                for n, (x, y) in enumerate(zip(flat, xs))]
+        who = np.concatenate([who, np.repeat(k, m)])
+        nslot += np.bincount(k, minlength=K)
+    order = np.argsort(who, kind="stable")
+    flat = [x[order] for x in flat]
+    off = np.concatenate([[0], np.cumsum(np.bincount(who, minlength=K))])
+    end_at = (piece[st + 1] != piece[np.minimum(st + 2, N - 1)]) | (st + 1 == N - 1)
+    start_at = (st == 0) | (piece[np.maximum(st - 1, 0)] != piece[st])
+    motor = np.concatenate([e[i0, :-1], e[i1, :-1]], 1)
+    tol = 1e-12 * np.maximum(np.max(np.abs(motor), axis=1, initial=0.0), 1e-300)
+    dmin = max(float(np.min(d)), 1e-300)
+    lam1 = lam[1][lam[1] > 0]
+    sb = float(np.max((0.5 / lam1) ** 2)) if lam1.size else 1.0              # b̄'s peak (the tangent's point)
+    fs = float(np.max(np.abs(F[0]) + sb * np.abs(F[2]) + sb / dmin * np.abs(F[1]), initial=0.0))
+    first = np.array([LP_BOX * sb / dmin, LP_BOX * sb, LP_BOX * max(fs, 1.0)])
+    top = np.array([BIG / dmin, BIG / dmin ** 2, BIG * max(fs, 1.0)])
+    caps = np.broadcast_to(np.minimum(first, top), (K, 3))
+    status, b, a, z = api.lp_reachability_pass(*flat, off, nslot, d, tol, caps, top, st, end_at, start_at, N)
+    if status == 1:
+        return None, {}
+    if status != 0:
+        b, stats = grid_lp(dyn, mass, lam, extra)
+        return b, stats | {"fallback": f"compiled stage LP {api.LP_STATUS[status]}: grid LP"}
+    for p in np.unique(piece):
+        b[np.flatnonzero(piece == p)[[0, -1]]] = 0.0
+    f = np.empty((K, 2, null.shape[1]))
+    for side, pt in ((0, i0), (1, i1)):
+        f[:, side] = F[0, pt] + a[:, None] * F[1, pt] + b[pt, None] * F[2, pt] + np.einsum("kiz,kz->ki", null[pt],
+                                                                                            z[:, side])
+    return b, {"f": f}
+
+
+# ------------------------------------------------------------------------------------------------
 # Solving: the linearisation loop, the minimum time, the maximum payload
 # ------------------------------------------------------------------------------------------------
 
@@ -817,7 +981,7 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
     Args:
         dyn: the PathDynamics.
         mass: kg, μ.
-        solver: 'reachability' (linear resolutions) or 'grid_lp' (any); None: `default_solver`.
+        solver: 'reachability' or 'grid_lp'; None: `default_solver`.
         tol: the relative change of b that ends the loop (the tangent's error at the solution is of its
             square: 1e-7 leaves ~1e-15 of the velocity term).
         max_iter: the most linearisations per round; None: MAX_LINEARISATIONS.
@@ -851,7 +1015,11 @@ def retime(dyn: PathDynamics, mass: float, solver: str | None = None, tol: float
 
 
 def default_solver(dyn: PathDynamics) -> str:
-    """'reachability' for a linear resolution (compiled, linear in the grid points), 'grid_lp' for the LP bound.
+    """'reachability' for a linear resolution (compiled, linear in the grid points); for the LP bound
+    'reachability' (`lp_reachability`) where its largest stage LP has at most LP_STAGE_MAX unknowns —
+    2 + nz·(2 + the check points of one interval), nz the grasp wrenches' free coordinates a point
+    (`grasp_null_space`): the dense simplex's steps cost O(n³) in them, so on larger stages (the spatial
+    pairs: nz = 6, 68 unknowns) the sparse grid LP is the faster — else 'grid_lp'.
 
     Args:
         dyn: the PathDynamics.
@@ -859,7 +1027,15 @@ def default_solver(dyn: PathDynamics) -> str:
     Returns:
         str: the solver's name.
     """
-    return "grid_lp" if dyn.method == LP_BOUND else "reachability"
+    if dyn.method != LP_BOUND:
+        return "reachability"
+    if "null" not in dyn._fine:
+        dyn._fine["null"] = grasp_null_space(dyn)
+    if dyn._fine["null"] is None:
+        return "grid_lp"
+    fp = dyn.fine_points()
+    inside = 0 if fp is None else int(np.max(np.bincount(fp.stage), initial=0))
+    return "reachability" if 2 + dyn._fine["null"][1].shape[2] * (2 + inside) <= LP_STAGE_MAX else "grid_lp"
 
 
 def certificate(dyn: PathDynamics, r: Retiming) -> dict:
@@ -906,6 +1082,8 @@ def _min_time(dyn: PathDynamics, mass: float, solver: str, tol: float, max_iter:
             more = (extra, (np.zeros(len(sig)), np.zeros(len(sig))) if fb is None else _tangent(fb, scale))
         if solver == "grid_lp":
             return grid_lp(dyn, mass, lam, more)
+        if dyn.method == LP_BOUND:
+            return lp_reachability(dyn, mass, lam, more)
         return reachability(dyn, mass, lam, more), {}
 
     if start is None:

@@ -60,10 +60,12 @@ def test_torques_are_affine_in_a_b_and_mass_as_the_inverse_dynamics_rerun(carry,
 
 
 def test_reachability_and_the_grid_lp_find_the_same_law(carry):
-    """The two solvers of the discrete problem (TOPP-RA by vertex enumeration, one HiGHS LP over the grid)
-    agree on the minimum time to 1e-9 and on ṡ² to 1e-7 of its peak, for each linear resolution."""
+    """The two solvers of the discrete problem (TOPP-RA by vertex enumeration, or for the LP bound by small
+    LPs over each stage's (a, b, grasp wrenches) with the compiled dual simplex; one HiGHS LP over the grid)
+    agree on the minimum time to 1e-9 and on ṡ² to 1e-7 of its peak, for each linear resolution and the LP
+    bound."""
     model, _, jp = carry
-    for method in ("paper", "min_energy"):
+    for method in ("paper", "min_energy", "lp"):
         dyn = rt.path_dynamics(model, jp, method, "payload")
         r1, r2 = rt.retime(dyn, 20.0, "reachability"), rt.retime(dyn, 20.0, "grid_lp")
         assert r1.converged and r2.converged
@@ -199,7 +201,8 @@ def test_with_the_check_points_rows_the_law_meets_eq_36_between_the_grid_points(
     point of the 10× finer grid the torques recomputed from scratch — the inverse dynamics rerun on a model
     carrying the payload at θ̇ = θ′√b, θ̈ = θ′a + θ″b with the law's a and b there (b linear, a constant on
     the interval), the LP bound's best distribution by one linprog per point on that rerun's grasp matrix —
-    are within their lines to 1e-9 τ_s, and the minimum time is no shorter (the rows only remove laws)."""
+    are within their lines to 1e-9 τ_s, and the minimum time is no shorter (the rows only remove laws).
+    Both solvers (the LP bound's reachability: the check points' wrenches free per point in its stage LPs)."""
     model, _, _ = carry
     (_, _, g), (fs, fp, fine) = short
     dyn = rt.path_dynamics(model, g, method, "payload", fine=fine)       # its check points: the finer grid's
@@ -209,7 +212,7 @@ def test_with_the_check_points_rows_the_law_meets_eq_36_between_the_grid_points(
     assert ex0 > (1e-7 if method in ("min_energy", "lp") else -1.0)
     heavy = cap.payload_model(model, model.inverse.payload_position, mass)
     ts, active = model.motors.stall_torque, ~model.motors.passive.astype(bool)
-    for solver in ("grid_lp",) + (("reachability",) if method != "lp" else ()):
+    for solver in ("grid_lp", "reachability"):
         r = rt.retime(dyn, mass, solver)
         assert r.refine["within"] and (r.refine["rows"].size > 0) == (ex0 > rt.REFINE_TOL)
         assert r.duration >= coarse.duration * (1 - 1e-12)
@@ -240,6 +243,24 @@ def _best_distribution_excess(prob, lo, hi, ts, active, i):
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * (rk + 1), method="highs")
     assert res.status == 0
     return float(res.x[-1])
+
+
+def test_the_lp_bound_heaviest_payload_by_reachability_is_the_grid_lp(carry, short):
+    """8 intervals a segment with the check points of the 10× finer grid: the LP bound's bare-object minimum
+    time and heaviest payload within 13 s by the reachability pass (its stage LPs compiled) and by the grid
+    LP (HiGHS) agree to 1e-9 relative — the same discrete problem, whose largest ṡ² profile both reach up
+    to their feasibility tolerances (1e-12 of a stage's row scale; HiGHS's 1e-7 on rows of O(10) N·m, on ṡ²
+    of O(0.1)) and Brent's 1e-10 on the mass; measured ≤ 1e-14 — and each law meets its lines at every check
+    point (refine['within'])."""
+    model, _, _ = carry
+    (_, _, g), (_, _, fine) = short
+    dyn = rt.path_dynamics(model, g, "lp", "payload", fine=fine)
+    bare = [rt.retime(dyn, 0.0, x) for x in ("reachability", "grid_lp")]
+    assert bare[0].duration == pytest.approx(bare[1].duration, rel=1e-9)
+    heavy = [rt.max_payload(dyn, 13.0, x) for x in ("reachability", "grid_lp")]
+    assert heavy[0][0] == pytest.approx(heavy[1][0], rel=1e-9)
+    assert all(h[1].refine["within"] and h[1].solver == x for h, x in zip(heavy, ("reachability", "grid_lp")))
+    assert rt.default_solver(dyn) == "reachability"      # 2 + 3·(2 + 9) = 35 unknowns a stage at most
 
 
 def test_motors_that_cannot_hold_the_object_and_a_too_short_duration_are_named(carry):
