@@ -745,16 +745,18 @@ def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, st
 
     Returns:
         tuple: status (0, 1 no controllable state, 2 a stage LP not solved: `LP_STATUS`), b (N,) 1/s²,
-        a (K,) 1/s² and z (K, 2, nz) the null-space coordinates at the stages' two grid points.
+        a (K,) 1/s², z (K, 2, nz) the null-space coordinates at the stages' two grid points, and the counts
+        (4,) [stage LPs solved, simplex steps, cold starts, box growths].
     """
     announce_compile("extras")
     K, nz = len(d), np.shape(W)[1]
     b, lo, hi, a, z = np.empty(N), np.empty(N), np.empty(N), np.empty(K), np.empty((K, 2, nz))
+    count = np.zeros(4, np.int64)
     status = dense_lp.lp_reachability_pass(_w(g), _w(h), _w(e), _w(slot, np.int64), _w(W), _w(off, np.int64),
                                            _w(nslot, np.int64), _w(d), _w(tol), _w(caps), _w(cap_max),
                                            _w(start, np.int64), _w(end_at, np.bool_), _w(start_at, np.bool_),
-                                           b, lo, hi, a, z)
-    return int(status), b, a, z
+                                           b, lo, hi, a, z, count)
+    return int(status), b, a, z, count
 
 
 def section_loads(mass: float, R_o, twist, acc, gravity, F_e, rows, grasp_pos, axis: int, frac, K_diag, c_o, ps_o,

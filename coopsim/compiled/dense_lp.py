@@ -70,7 +70,7 @@ def dual_feasible(M, h, n, c, B, x, LU, piv, w):
 
 
 @kernel
-def dual_simplex(M, h, m, n, c, B, in_basis, x, LU, piv, w, y, max_steps):
+def dual_simplex(M, h, m, n, c, B, in_basis, x, LU, piv, w, y, max_steps, count):
     """max cᵀx subject to M[:m, :n] x ≤ h[:m] from the dual-feasible basis B (n,) (module docstring).
 
     The entering row is the most violated one until two steps in a row leave the multipliers where they
@@ -91,6 +91,7 @@ def dual_simplex(M, h, m, n, c, B, in_basis, x, LU, piv, w, y, max_steps):
         x: (≥ n,) written: the final basis' vertex.
         LU, piv, w, y: (≥ n, ≥ n), (≥ n,) int64, (≥ n,), (≥ n,) scratch.
         max_steps: the most simplex steps.
+        count: (≥ 1,) int64, the steps taken added to count[0].
 
     Returns:
         int: OPTIMAL, INFEASIBLE or NOT_SOLVED.
@@ -101,6 +102,8 @@ def dual_simplex(M, h, m, n, c, B, in_basis, x, LU, piv, w, y, max_steps):
         in_basis[B[q]] = 1
     degenerate = 0
     for step in range(max_steps + 1):
+        if step > 0:
+            count[0] += 1
         if not _factor(M, h, n, B, x, LU, piv):
             return NOT_SOLVED
         r, worst = -1, 0.0
@@ -193,7 +196,8 @@ def dense_lp(M, h, c, cap, x):
         B[j] = k if c[j] >= 0.0 else k + 1
         k += 2
     LU, piv, w, y = np.empty((n, n)), np.empty(n, np.int64), np.empty(n), np.empty(n)
-    return dual_simplex(A, b, k, n, c, B, np.zeros(k, np.int8), x, LU, piv, w, y, 50 + 10 * (k + n))
+    return dual_simplex(A, b, k, n, c, B, np.zeros(k, np.int8), x, LU, piv, w, y, 50 + 10 * (k + n),
+                        np.zeros(1, np.int64))
 
 
 @kernel
@@ -287,32 +291,94 @@ def _off_the_box(M, rhs, m, n, c, B, in_basis, x, LU, piv, d, t, fix_b, ymax):
 
 
 @kernel
+def _slot_rows(M, slot, r0, r1, base, nz, p, B, at, Q, v):
+    """Into B[at:at + nz], nz rows of point p among the stage rows r0 … r1 − 1 (M's rows base + r − r0) whose
+    z_p coefficients are independent (greedy Gram–Schmidt; Q (≥ nz, ≥ nz) and v (≥ nz,) scratch). With z_p's
+    columns square and nonsingular there, any multipliers of those rows are 0 in a basis where the other
+    rows carry no z_p. Returns False when fewer than nz are found."""
+    got = 0
+    col = 2 + nz * p
+    for r in range(r0, r1):
+        if got == nz:
+            break
+        if slot[r] != p:
+            continue
+        k = base + r - r0
+        norm = 0.0
+        for j in range(nz):
+            v[j] = M[k, col + j]
+            norm += v[j] * v[j]
+        if not norm > 0.0:
+            continue
+        for q in range(got):
+            dot = 0.0
+            for j in range(nz):
+                dot += Q[q, j] * v[j]
+            for j in range(nz):
+                v[j] -= dot * Q[q, j]
+        res = 0.0
+        for j in range(nz):
+            res += v[j] * v[j]
+        if res > 1e-12 * norm:
+            res = np.sqrt(res)
+            for j in range(nz):
+                Q[got, j] = v[j] / res
+            B[at + got] = k
+            got += 1
+    return got == nz
+
+
+@kernel
+def _extend(saved, m_prev, n_prev, m, n, nz, ns, slot, r0, r1, M, B, Q, v):
+    """B from the basis `saved` of an LP of the same kind with n_prev ≤ n columns (`_stage_rows`' layout: its
+    box rows kept, its stage rows moved to this stage's, a row past this stage's: False), and for each point
+    it did not have, nz of that point's rows (`_slot_rows`)."""
+    base_prev, base = 6 + 2 * (n_prev - 2), 6 + 2 * (n - 2)
+    for q in range(n_prev):
+        row = saved[q]
+        if row >= base_prev:
+            row += base - base_prev
+        if row >= m:
+            return False
+        B[q] = row
+    for p in range((n_prev - 2) // nz if nz > 0 else 0, ns):
+        if not _slot_rows(M, slot, r0, r1, base, nz, p, B, 2 + nz * p, Q, v):
+            return False
+    return True
+
+
+@kernel
 def _stage_lp(g, h, e, slot, W, r0, r1, nz, ns, d, fix_b, b_fix, strip_lo, strip_hi, caps, cap_max, clean,
-              c, M, rhs, B, saved, shape, in_basis, x, LU, piv, w, y):
+              c, M, rhs, B, saved, shape, in_basis, x, LU, piv, w, y, count):
     """One stage LP (`_stage_rows`), max cᵀx by `dual_simplex`, in a box grown GROW× from caps (a, b, z) up
     to cap_max until no side of the box in the final basis has a positive multiplier (then its optimum is
     the LP's without the box: its multipliers are dual feasible there; b's lower side b ≥ 0 is a row of the
     problem) or, infeasible, the box is the largest. With `clean`, the vertex is then moved off the box's
     sides in the basis (`_off_the_box`), so that the wrenches' coordinates are those of a vertex of the
-    problem's own rows. Each solve starts from the
-    basis `saved` of the last LP of the same kind where it had the same rows and is dual feasible here, else
-    from the box (the side of c_j's sign); `saved` and `shape` (m, n) updated on success. Returns the
-    status."""
+    problem's own rows. Each solve starts from the basis `saved` of the last LP of the same kind (`_extend`:
+    its rows, and for points it did not have nz of their own rows) where it is dual feasible here, else from
+    the box's sides for a and b (the side of c_j's sign) and nz rows of each point (`_slot_rows`; the
+    multipliers of those are 0, so dual feasible); `saved` and `shape` (m, n) updated on success; count (4,) adds
+    [LPs solved, simplex steps, cold starts, box growths]. Returns the status."""
     ca, cb, cz = caps[0], caps[1], caps[2]
     while True:
         m, n = _stage_rows(g, h, e, slot, W, r0, r1, nz, ns, d, fix_b, b_fix, strip_lo, strip_hi, ca, cb, cz, M,
                            rhs)
-        warm = shape[0] == m and shape[1] == n
-        if warm:
-            for q in range(n):
-                B[q] = saved[q]
-            warm = dual_feasible(M, rhs, n, c, B, x, LU, piv, w)
+        warm = False
+        if 2 <= shape[1] <= n:
+            warm = _extend(saved, shape[0], shape[1], m, n, nz, ns, slot, r0, r1, M, B, LU, w)
+            if warm:
+                warm = dual_feasible(M, rhs, n, c, B, x, LU, piv, w)
+        count[0] += 1
         if not warm:
+            count[2] += 1
             B[0] = 0 if c[0] >= 0.0 else 1
             B[1] = 2 if c[1] >= 0.0 else 3
-            for j in range(2, n):
-                B[j] = 6 + 2 * (j - 2) + (0 if c[j] >= 0.0 else 1)
-        status = dual_simplex(M, rhs, m, n, c, B, in_basis, x, LU, piv, w, y, 50 + 10 * (m + n))
+            for p in range(ns):
+                if not _slot_rows(M, slot, r0, r1, 6 + 2 * (n - 2), nz, p, B, 2 + nz * p, LU, w):
+                    for j in range(2 + nz * p, 2 + nz * (p + 1)):
+                        B[j] = 6 + 2 * (j - 2) + (0 if c[j] >= 0.0 else 1)
+        status = dual_simplex(M, rhs, m, n, c, B, in_basis, x, LU, piv, w, y, 50 + 10 * (m + n), count[1:])
         last = ca >= cap_max[0] and cb >= cap_max[1] and cz >= cap_max[2]
         if status == OPTIMAL:
             for q in range(n):
@@ -334,12 +400,13 @@ def _stage_lp(g, h, e, slot, W, r0, r1, nz, ns, d, fix_b, b_fix, strip_lo, strip
                 return status
         elif status == NOT_SOLVED or last:
             return status
+        count[3] += 1
         ca, cb, cz = min(ca * GROW, cap_max[0]), min(cb * GROW, cap_max[1]), min(cz * GROW, cap_max[2])
 
 
 @entry
 def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, start, end_at, start_at,
-                         b, lo, hi, a, z):
+                         b, lo, hi, a, z, count):
     """The backward and forward passes over K stages (module docstring); b, lo, hi (N,), a (K,), z (K, 2, nz)
     written.
 
@@ -360,6 +427,7 @@ def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, st
         b, lo, hi: (N,) out, ṡ² and the controllable sets' bounds.
         a: (K,) out, s̈ per stage.
         z: (K, 2, nz) out, the null-space coordinates at the stage's two grid points in its forward LP.
+        count: (4,) int64 out, [stage LPs solved, simplex steps, cold starts, box growths].
 
     Returns:
         int: 0, INFEASIBLE, or NOT_SOLVED (a stage LP not solved).
@@ -378,6 +446,7 @@ def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, st
     w, y = np.empty(n_max), np.empty(n_max)
     c = np.zeros(n_max)
     bounds = np.empty(2)
+    count[:] = 0
     lo[:] = 0.0
     hi[:] = 0.0
     b[:] = 0.0
@@ -394,7 +463,7 @@ def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, st
                 slack = (0.0, tol[k], 10.0 * tol[k])[attempt]
                 status = _stage_lp(g, h, e, slot, W, off[k], off[k + 1], nz, nslot[k], d[k], False, 0.0,
                                    lo[i + 1] - slack, hi[i + 1] + slack, caps[k], cap_max, False, c, M, rhs,
-                                   B, saved[side], shape[side], in_basis, x, LU, piv, w, y)
+                                   B, saved[side], shape[side], in_basis, x, LU, piv, w, y, count)
                 if status != INFEASIBLE:
                     break
             if status != OPTIMAL:
@@ -416,7 +485,7 @@ def lp_reachability_pass(g, h, e, slot, W, off, nslot, d, tol, caps, cap_max, st
             slack = (0.0, tol[k], 10.0 * tol[k], np.inf)[attempt]
             status = _stage_lp(g, h, e, slot, W, off[k], off[k + 1], nz, nslot[k], d[k], True, b[i], -np.inf,
                                hi[i + 1] + slack, caps[k], cap_max, True, c, M, rhs, B, saved[2], shape[2],
-                               in_basis, x, LU, piv, w, y)
+                               in_basis, x, LU, piv, w, y, count)
             if status != INFEASIBLE:
                 break
         if status != OPTIMAL:

@@ -848,7 +848,8 @@ def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np
 
     Returns:
         tuple: b (N,) 1/s² or None (a stage without a controllable state), and the statistics: the grasp
-        wrenches f (K, 2, rk) at both ends of every interval (as `grid_lp`'s).
+        wrenches f (K, 2, rk) at both ends of every interval (as `grid_lp`'s), the stage LPs solved, their
+        simplex steps, cold starts and box growths.
     """
     from coopsim.compiled import api
 
@@ -909,9 +910,10 @@ def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np
     first = np.array([LP_BOX * sb / dmin, LP_BOX * sb, LP_BOX * max(fs, 1.0)])
     top = np.array([BIG / dmin, BIG / dmin ** 2, BIG * max(fs, 1.0)])
     caps = np.broadcast_to(np.minimum(first, top), (K, 3))
-    status, b, a, z = api.lp_reachability_pass(*flat, off, nslot, d, tol, caps, top, st, end_at, start_at, N)
+    status, b, a, z, count = api.lp_reachability_pass(*flat, off, nslot, d, tol, caps, top, st, end_at, start_at, N)
+    counts = dict(zip(("stage_lps", "simplex_steps", "cold_starts", "box_growths"), (int(x) for x in count)))
     if status == 1:
-        return None, {}
+        return None, counts
     if status != 0:
         b, stats = grid_lp(dyn, mass, lam, extra)
         return b, stats | {"fallback": f"compiled stage LP {api.LP_STATUS[status]}: grid LP"}
@@ -921,7 +923,7 @@ def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np
     for side, pt in ((0, i0), (1, i1)):
         f[:, side] = F[0, pt] + a[:, None] * F[1, pt] + b[pt, None] * F[2, pt] + np.einsum("kiz,kz->ki", null[pt],
                                                                                             z[:, side])
-    return b, {"f": f}
+    return b, counts | {"f": f}
 
 
 # ------------------------------------------------------------------------------------------------
