@@ -5,10 +5,11 @@
 simplex method in its active-set form: a basis is n rows B with M_B nonsingular and y = M_B⁻ᵀ c ≥ 0 (dual
 feasible); its vertex x = M_B⁻¹ h_B. Each step enters the most violated row r (relative to its norm), the
 multipliers move along w = M_B⁻ᵀ M_rᵀ, and the row of B whose multiplier reaches 0 first leaves (the ratio
-test; ties: the smallest row index); no w_a > 0: the LP is infeasible (a nonnegative combination of the
-rows B and r is a contradiction). M_B is factorised again at each step (LU with partial pivoting,
-`coopsim.compiled.lp._lu`), so no error accumulates over the steps. Started from the rows of a box around
-the variables (one of ±x_j ≤ cap_j per column, on the side of c_j's sign), which is dual feasible.
+test; ties: the smallest row index); no w_a > 0 and Σ w_a h_B,a > h_r: the LP is infeasible (a
+nonnegative combination of the rows B and r is a contradiction). M_B is factorised again at each step (LU with partial pivoting,
+`coopsim.compiled.lp._lu`), so no error accumulates over the steps. `dense_lp` starts from the rows of a
+box around the variables (one of ±x_j ≤ cap_j per column, on the side of c_j's sign), which is dual
+feasible; the stage LPs from the previous stage's basis (`_stage_lp`).
 
 `lp_reachability_pass`: TOPP-RA's passes where each stage k is the polyhedron
 {g a + h b + W z ≤ e} in (a, b, z): (a, b) = (s̈ on the interval, ṡ² at its start) and z the null-space
@@ -20,8 +21,7 @@ start of a piece (infeasible if min b > tol_k there). Forward from b = 0: the la
 b_i + 2Δa ≤ hi_{i+1} (one LP; where b_i lies off K_i by rounding and that has no solution, with the strip's
 side moved out by tol_k, 10 tol_k, then without it), clipped to hi_{i+1} and raised to reach lo_{i+1}, as
 `coopsim.compiled.reachability.reachability_pass` does; its z is the vertex's (off by tol_k/(2Δ) in a at
-most where clipped). Cost per stage: a few simplex steps of
-O(n³ + m n) each, so linear in the stages.
+most where clipped). Cost per stage: a few simplex steps of O(n³ + m n) each, so linear in the stages.
 """
 
 import numpy as np
