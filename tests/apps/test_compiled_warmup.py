@@ -7,6 +7,7 @@ import pytest
 
 from coopsim.compiled import api, object_motion
 from coopsim.apps import warmup
+from coopsim.compiled.dense_lp import dense_lp, lp_reachability_pass
 from coopsim.compiled.distributions import linear_pass
 from coopsim.compiled.lp import lp_vertices
 from coopsim.compiled.stress import section_loads
@@ -37,8 +38,10 @@ def test_object_motion_passes_use_the_warm_up_signature():
     assert len(object_motion.trajectory._cache._cache_file._load_index()) == 1
 
 
-@pytest.mark.parametrize("entry", [linear_pass, lp_vertices, section_loads], ids=lambda e: e.__name__)
+@pytest.mark.parametrize("entry", [linear_pass, lp_vertices, section_loads, dense_lp, lp_reachability_pass],
+                         ids=lambda e: e.__name__)
 def test_an_inverse_entry_has_one_signature(entry):
-    """Every caller reaches the linear resolutions' pass, the LP vertices and the section loads through `api`,
-    which passes writable contiguous arrays: the warm-up's compile is the only one."""
+    """Every caller reaches the linear resolutions' pass, the LP vertices, the section loads, the small-LP
+    solver and the LP bound's reachability pass through `api`, which passes writable contiguous arrays: the
+    warm-up's compile is the only one."""
     assert len(entry._cache._cache_file._load_index()) == 1

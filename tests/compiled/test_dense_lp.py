@@ -111,3 +111,14 @@ def test_a_load_the_motors_cannot_carry_is_infeasible_in_both(carry):
     got, _ = rt.lp_reachability(weak, 0.0, lam)
     ref, _ = rt.grid_lp(weak, 0.0, lam)
     assert got is None and ref is None
+
+
+def test_a_stage_lp_not_solved_leaves_the_solve_to_the_grid_lp(carry, monkeypatch):
+    """The pass reporting a stage LP not solved (its step limit): the law is the grid LP's, and stats say why."""
+    _, dyn = carry
+    lam = (np.zeros(len(dyn.path.s)), np.zeros(len(dyn.path.s)))
+    real = api.lp_reachability_pass
+    monkeypatch.setattr(api, "lp_reachability_pass", lambda *a: (2,) + tuple(real(*a)[1:]))
+    got, stats = rt.lp_reachability(dyn, 100.0, lam)
+    ref, _ = rt.grid_lp(dyn, 100.0, lam)
+    assert np.array_equal(got, ref) and "not solved" in stats["fallback"] and stats["status"] == 0
