@@ -837,8 +837,8 @@ def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np
     of `extra` (b + 2σΔa), b ≥ 0 at both ends. Backward: K_i = [min b, max b] over the polyhedron cut by
     b + 2Δa ∈ K_{i+1} (two small LPs, compiled dual simplex); forward from b_0 = 0: the largest a at b_i
     that stays in K_{i+1} (one small LP), its z giving the grasp wrenches. Where the equalities' rank differs
-    between the points, or a small LP is not solved (its step limit), the stage problem is left to `grid_lp`
-    (stats['fallback'] says why).
+    between the points or they cannot be met for every (a, b), or a small LP is not solved (its step limit),
+    the problem is left to `grid_lp` (stats['fallback'] says why).
 
     Args:
         dyn: the PathDynamics of 'lp'.
@@ -870,7 +870,8 @@ def lp_reachability(dyn: PathDynamics, mass: float, lam, extra=None) -> tuple[np
             rows = None
     if rows is None:
         b, stats = grid_lp(dyn, mass, lam, extra)
-        return b, stats | {"fallback": "the grasp equalities' rank differs between the points: grid LP"}
+        return b, stats | {"fallback": "the grasp equalities' rank differs between the points, or they miss some "
+                                       "(a, b): grid LP"}
     g, h, e, W, F, null = rows
     m, nz = g.shape[1], W.shape[2]
     dd = d[:, None]
@@ -942,7 +943,7 @@ class Retiming:
         iterations: the linearisations solved (all rounds).
         solver: 'reachability' or 'grid_lp'.
         f: (K, 2, rk) [N; N·m] the LP bound's grasp wrenches at both ends of every interval, or None.
-        stats: the last LP's statistics (grid_lp) or {}.
+        stats: the last solve's statistics (grid_lp's; the LP bound's reachability pass: its counts) or {}.
         refine: the rows between the grid points (`retime`), or None (no check points): rounds (solves
             after the first), rows (int (R,), the check points whose rows the law meets, indices into
             `PathDynamics.fine_points`), intervals (how many intervals carry them), max_excess (the
