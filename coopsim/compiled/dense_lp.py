@@ -54,7 +54,22 @@ def _factor(M, h, n, B, x, LU, piv):
 
 @kernel
 def dual_feasible(M, h, n, c, B, x, LU, piv, w):
-    """Whether the basis B is nonsingular with multipliers M_B⁻ᵀ c ≥ −PIVOT_TOL·max|·| (a warm start)."""
+    """Whether the basis B is nonsingular with multipliers M_B⁻ᵀ c ≥ −PIVOT_TOL·max|·| (a warm start for
+    `dual_simplex`).
+
+    Args:
+        M: (≥ m, ≥ n) the rows.
+        h: (≥ m,) their bounds.
+        n: the columns.
+        c: (≥ n,) the objective.
+        B: (≥ n,) int64 the basis (row indices).
+        x: (≥ n,) written: the basis' vertex M_B⁻¹ h_B.
+        LU, piv: (≥ n, ≥ n), (≥ n,) int64, written: M_B's factors.
+        w: (≥ n,) written: the multipliers M_B⁻ᵀ c.
+
+    Returns:
+        bool: True where B is nonsingular and its multipliers are nonnegative (to the tolerance).
+    """
     if not _factor(M, h, n, B, x, LU, piv):
         return False
     for q in range(n):
