@@ -356,7 +356,8 @@ def _cmd_optimize(args) -> int:
     from coopsim.report.inverse_report import json_safe
     from coopsim.report.optimize_report import (format_retime_summary, optimised_scenario, retime_metadata,
                                                 retime_series, retime_study, retime_summary, with_energy_weights)
-    from coopsim.report.closed_replay import format_replay_entry, replay_entry
+    from coopsim.report.closed_replay import (closed_metadata, closed_replay_of, closed_series, format_replay_entry,
+                                              replay_entry)
     from coopsim.report.optimum_replay import optimum_replay, path_replay, replay_run_log
 
     if not (args.retime or args.path):
@@ -397,7 +398,10 @@ def _cmd_optimize(args) -> int:
             raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
                                         f"{best.message}); nothing written")
         free_rep = path_replay(free, progress=bar) if args.replay and free is not None else None
-        rep_entry, free_entry = (None if r is None else replay_entry(model, r, args.closed_loop) for r in (rep, free_rep))
+        rep_closed, free_closed = (None if r is None else closed_replay_of(model, r, args.closed_loop)
+                                   for r in (rep, free_rep))
+        rep_entry, free_entry = (None if r is None else replay_entry(r, c) for r, c in
+                                 ((rep, rep_closed), (free_rep, free_closed)))
         bar.close()
         summary = retime_summary(study) if study is not None else {"scenario": model.name}
         if free is not None:
@@ -426,7 +430,9 @@ def _cmd_optimize(args) -> int:
                        f"{args.method} resolution{', its energy weights' if args.weights else ''})")
         meta = {"scenario": {"file": _display_path(args.scenario), "sha256": file_sha256(args.scenario)}
                 | ({"overrides": list(args.set)} if args.set else {})}
-        run_files = {r.log: replay_run_log(r, dict(meta)) for r in (rep, free_rep) if r is not None}
+        run_files = {r.log: replay_run_log(r, dict(meta) | ({} if c is None else closed_metadata(c)),
+                                           () if c is None else closed_series(c))
+                     for r, c in ((rep, rep_closed), (free_rep, free_closed)) if r is not None}
         meta |= retime_metadata(summary) if study is not None else {}
         meta |= path_metadata(summary["path"]) if free is not None else {}
         streams = (retime_series(study) if study is not None else []) + (path_series(free) if free is not None else [])
@@ -541,11 +547,14 @@ def _cmd_animate(args) -> int:
     if source.suffix.lower() == ".mcap":
         if overrides:
             raise CoopsimError("--set: a log is drawn as it was run; give the scenario instead to run it with --set")
-        motion = motion_from_log(source, scenario=args.scenario)
+        motion = motion_from_log(source, scenario=args.scenario, closed_loop=args.closed_loop)
         out = Path(args.out or source.parent / f"{motion.model.name}.gif")
     else:
         if args.scenario is not None:
             raise CoopsimError("--scenario: only with a LOG.mcap source (the source is already a scenario)")
+        if args.closed_loop:
+            raise CoopsimError("--closed-loop: draws the closed loop of an optimum's run log (LOG.mcap of "
+                               "`coopsim optimize --replay`), not a scenario")
 
         def before_run():
             _announce_compile()
@@ -847,6 +856,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH); default: NAME.gif in out/NAME/ "
                         "(scenario) or beside the log")
     p.add_argument("--scenario", default=None, help="with a LOG.mcap: the scenario file to draw it with")
+    p.add_argument("--closed-loop", action="store_true",
+                   help="with the run log of `coopsim optimize --replay` (optimum_run.mcap): draw its closed-loop "
+                        "replay (the /closed_loop/ topics) in place of the open loop")
     p.add_argument("--fps", type=float, default=20.0, help="frames per second of the video (default: 20)")
     p.add_argument("--speed", type=float, default=1.0,
                    help="simulated seconds per second of video (default: 1, real time)")

@@ -37,13 +37,23 @@ _RUN_LOG_SERIES = {"joint_state": {"angle": ("n",), "rate": ("n",)}, "object": {
 
 _RUN_LOG_CONSTRAINT = {"/native": "residual_pos", "/mujoco": "weld_violation"}
 
+# the topics' prefix of a second pair of runs in one log: the closed-loop replay of an optimum
+# (`coopsim optimize --replay`, `coopsim.report.closed_replay`), /closed_loop/native/… and /closed_loop/mujoco/…
+CLOSED_LOOP = "/closed_loop"
+
+
+def has_closed_loop(log: LogData) -> bool:
+    """Whether a run log holds a closed-loop pair of runs (topics under CLOSED_LOOP)."""
+    return any(t.startswith(CLOSED_LOOP + "/") for t in log.topics)
+
 
 def read_run_log(path: str | Path) -> LogData:
     """A `coopsim run` log (`read_mcap`), checked to hold what its comparison plots draw.
 
     That is the native model's joint_state (angle, rate (N, n)), object (position (N, 3), twist (N, 6))
     and constraint (residual_pos (N,)) series, N >= 1 finite sample times, and the twin's (weld_violation)
-    if any of its series is there.
+    if any of its series is there; and the same of the closed-loop pair (CLOSED_LOOP/native/…, its twin's
+    CLOSED_LOOP/mujoco/…) when the log has any topic under CLOSED_LOOP, with the same joint count.
 
     Args:
         path: the MCAP file.
@@ -61,8 +71,11 @@ def read_run_log(path: str | Path) -> LogData:
         raise UnreadableLogError(f"{path}: not a coopsim run log: {reason}")
 
     n = None
-    for prefix, constraint in _RUN_LOG_CONSTRAINT.items():
-        if prefix == "/mujoco" and not any(t.startswith(prefix + "/") for t in log.topics):
+    pairs = [(p, p, c) for p, c in _RUN_LOG_CONSTRAINT.items()]
+    if has_closed_loop(log):
+        pairs += [(CLOSED_LOOP + p, p, c) for p, c in _RUN_LOG_CONSTRAINT.items()]
+    for prefix, model, constraint in pairs:
+        if model == "/mujoco" and not any(t.startswith(prefix + "/") for t in log.topics):
             continue
         for name, fields in _RUN_LOG_SERIES.items():
             topic = f"{prefix}/{name}"

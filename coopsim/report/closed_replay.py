@@ -21,6 +21,10 @@ the feedforward replaces it), native and twin, from the same state. The gains:
 `saturate` is the scenario's (default off, so that the total torque's excess over its lines is reported,
 not hidden). The scenario's other control fields (distribution, squeeze, mass_scale, grasp gains, its
 torque tables) do not apply: the feedforward is the optimum's, on the loaded model.
+
+Both closed-loop runs go into the optimum's run log beside the open loop's (`closed_series`: the topics
+under `coopsim.io.log.CLOSED_LOOP`, read back by `coopsim.io.log.read_run_log` and drawn by
+`coopsim animate LOG --closed-loop`).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from coopsim.core.spatial import orientation_error, rots_to_quats
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.dynamics.gibbs_appell import mass_matrix
 from coopsim.forward.simulate import SimResult, simulate
+from coopsim.io.log import CLOSED_LOOP, control_series, simulation_series, twin_series
 from coopsim.inverse.problem import inverse_problem
 from coopsim.report.optimum_replay import OptimumReplay, format_replay_summary, replay_summary
 from coopsim.twin.compare import Comparison, compare
@@ -60,6 +65,8 @@ class ClosedReplay:
         reference: (p (N, 3) m, quaternions (N, 4) [w, x, y, z]) of the loaded object along the optimised
             joint path (its forward kinematics).
         saturation_events: (sample, joint) pairs the motor lines clipped (native), with `saturate`.
+        control: the joint_pd law evaluated along each run (`coopsim.control.controller.record`: reference,
+            angle error, command, applied torque), native and twin.
     """
 
     why: str
@@ -74,6 +81,7 @@ class ClosedReplay:
     twin_tau: np.ndarray
     reference: tuple
     saturation_events: int
+    control: tuple = ()
 
 
 def closed_loop_reason(model: Model, rep: OptimumReplay, asked: bool = False) -> str | None:
@@ -144,10 +152,11 @@ def closed_loop_replay(model: Model, rep: OptimumReplay, why: str) -> ClosedRepl
     twin_model = _in_the_loop(rep.twin_model, settings, traj)
     twin = run_twin(twin_model, native.initial.q, native.initial.qd, native.t)
     cmd = record(native_model.torques.fn, native.t, native.q, native.qd)
+    twin_cmd = record(twin_model.torques.fn, twin.t, twin.q, twin.qd)
     ff = np.array([torque_at(rep.native.sim.model.torques, t) for t in native.t])
     prob = inverse_problem(rep.native.sim.model, traj)
     return ClosedReplay(why, where, kp, kd, native, twin, compare(native, twin), ff, cmd.tau, twin.tau,
-                        (prob.p_C, rots_to_quats(prob.R_o)), cmd.saturation_events)
+                        (prob.p_C, rots_to_quats(prob.R_o)), cmd.saturation_events, (cmd, twin_cmd))
 
 
 def _in_the_loop(model: Model, settings: ControlSettings, traj) -> Model:
@@ -221,9 +230,8 @@ def format_closed_summary(s: dict) -> str:
             f"{max(s['line_excess'].values()):.2e} τ_s)")
 
 
-def replay_entry(model: Model, rep: OptimumReplay, asked: bool = False) -> dict:
-    """optimize.json's "replay" entry of an optimum: the open loop (`replay_summary`), and where
-    `closed_loop_reason` says so its "closed_loop" (`closed_summary`).
+def closed_replay_of(model: Model, rep: OptimumReplay, asked: bool = False) -> ClosedReplay | None:
+    """The closed-loop replay of an optimum where `closed_loop_reason` says so, else None.
 
     Args:
         model: the scenario's Model.
@@ -231,13 +239,53 @@ def replay_entry(model: Model, rep: OptimumReplay, asked: bool = False) -> dict:
         asked: --closed-loop given.
 
     Returns:
+        ClosedReplay | None.
+    """
+    why = closed_loop_reason(model, rep, asked)
+    return None if why is None else closed_loop_replay(model, rep, why)
+
+
+def replay_entry(rep: OptimumReplay, closed: ClosedReplay | None = None) -> dict:
+    """optimize.json's "replay" entry of an optimum: the open loop (`replay_summary`), and with a closed loop
+    its "closed_loop" (`closed_summary`, with "topics": its runs' prefixes in the run log).
+
+    Args:
+        rep: the open-loop OptimumReplay.
+        closed: its ClosedReplay (`closed_replay_of`), or None.
+
+    Returns:
         dict: the entry.
     """
     out = replay_summary(rep)
-    why = closed_loop_reason(model, rep, asked)
-    if why is not None:
-        out["closed_loop"] = closed_summary(closed_loop_replay(model, rep, why), rep.traj)
+    if closed is not None:
+        out["closed_loop"] = closed_summary(closed, rep.traj) | {
+            "topics": {"native": CLOSED_LOOP + "/native", "twin": CLOSED_LOOP + "/mujoco"}}
     return out
+
+
+def closed_series(cr: ClosedReplay) -> list:
+    """The closed-loop runs' series for the optimum's run log (`replay_run_log`'s extra series).
+
+    Args:
+        cr: the ClosedReplay.
+
+    Returns:
+        list: CLOSED_LOOP/native/… (`coopsim.io.log.simulation_series` of the native loop: joint state with the
+        applied torques, object, wrenches, constraint), CLOSED_LOOP/mujoco/… (`twin_series`), and each one's
+        /control (`coopsim.io.log.control_series`, joint_pd: the optimised joint path as reference, the angle
+        error, the command τ_opt + PD and the applied torque), at each run's sample times.
+    """
+    native, twin = CLOSED_LOOP + "/native", CLOSED_LOOP + "/mujoco"
+    out = simulation_series(cr.native, native) + twin_series(cr.twin, twin)
+    return out + [control_series(rec, res.t, prefix, "joint_pd")
+                  for rec, res, prefix in zip(cr.control, (cr.native, cr.twin), (native, twin))]
+
+
+def closed_metadata(cr: ClosedReplay) -> dict:
+    """The run log's "closed_loop" metadata record: why, the law, the gains and their source, the topics."""
+    return {"closed_loop": {"why": cr.why, "law": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd)", "gains": cr.gains,
+                            "kp": cr.kp, "kd": cr.kd, "native": CLOSED_LOOP + "/native",
+                            "twin": CLOSED_LOOP + "/mujoco", "twin_vs_native_passed": cr.comparison.passed}}
 
 
 def format_replay_entry(s: dict) -> str:

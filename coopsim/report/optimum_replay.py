@@ -199,16 +199,18 @@ def replay_summary(rep: OptimumReplay) -> dict:
     }
 
 
-def replay_run_log(rep: OptimumReplay, metadata: dict | None = None) -> tuple[list, dict]:
+def replay_run_log(rep: OptimumReplay, metadata: dict | None = None, extra_series=()) -> tuple[list, dict]:
     """(streams, metadata) of the replay's run log, as `coopsim run` writes one (`coopsim.io.log.run_log`).
 
     Args:
         rep: the OptimumReplay.
         metadata: `run_metadata`'s extra (e.g. {"scenario": {"file": …, "sha256": …}}, which `coopsim animate`
             takes the geometry from).
+        extra_series: more series after the open loop's (the closed-loop replay's,
+            `coopsim.report.closed_replay.closed_series`).
 
     Returns:
-        tuple[list, dict]: the native and twin series, /tf and /scene, and the metadata records (the loaded
+        tuple[list, dict]: the native and twin series, `extra_series`, /tf and /scene, and the metadata records (the loaded
         forward model's, with the twin's settings as it ran), with record "payload": mass_kg, mode, source
         and position_m (the point payload's, object frame from the scenario object's centre of mass; null
         when scaled), which `coopsim animate` draws on the scenario's object.
@@ -218,7 +220,8 @@ def replay_run_log(rep: OptimumReplay, metadata: dict | None = None) -> tuple[li
     pos = model.inverse.payload_position if rep.mode == "payload" else None
     payload = {"mass_kg": rep.mass, "mode": rep.mode, "source": rep.source,
                "position_m": None if pos is None else np.asarray(pos, dtype=float)}
-    return run_log(replace(model, mujoco=cv.mujoco), cv.native, cv.twin, (), dict(metadata or {}) | {"payload": payload})
+    return run_log(replace(model, mujoco=cv.mujoco), cv.native, cv.twin, extra_series,
+                   dict(metadata or {}) | {"payload": payload})
 
 
 def format_replay_summary(s: dict) -> str:

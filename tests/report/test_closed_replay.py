@@ -5,25 +5,34 @@ measured against the optimised joint path (the closed-chain IK, independent of b
 feedback torque against the PD law evaluated here from the run's own states, the twin against the native
 closed loop on the scenario's thresholds."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from coopsim.apps.animate import RenderUnavailable, motion_from_log, probe_renderer
+from coopsim.io.log import CLOSED_LOOP, file_sha256, read_run_log
+from coopsim.io.mcap_codec import UnreadableLogError, write_mcap
 from coopsim.io.robots import robots_folder
 from coopsim.io.scenario import load_scenario
 from coopsim.report import closed_replay
 from coopsim.report.closed_replay import (
     closed_loop_reason,
     closed_loop_replay,
+    closed_metadata,
+    closed_replay_of,
+    closed_series,
     closed_summary,
     feedback_gains,
     format_replay_entry,
     replay_entry,
 )
 from coopsim.report.optimize_report import retime_study
-from coopsim.report.optimum_replay import optimum_replay, replay_summary
-from helpers import SCENARIOS
+from coopsim.report.optimum_replay import optimum_replay, replay_run_log, replay_summary
+from helpers import SCENARIOS, run_cli
+
+PANDA = SCENARIOS / "robots" / "panda_ceiling_carry.yaml"
 
 pytestmark = pytest.mark.skipif(robots_folder() is None,
                                 reason="example-robot-data is not installed: pip install 'coopsim[robots]'")
@@ -31,7 +40,7 @@ pytestmark = pytest.mark.skipif(robots_folder() is None,
 
 @pytest.fixture(scope="module")
 def panda():
-    model = load_scenario(SCENARIOS / "robots" / "panda_ceiling_carry.yaml")
+    model = load_scenario(PANDA)
     study = retime_study(model, duration=1.5, intervals=10, methods=("paper",), method="paper")
     rep = optimum_replay(study)
     return model, rep, closed_loop_replay(model, rep, closed_loop_reason(model, rep))
@@ -79,6 +88,109 @@ def test_the_replay_entry_holds_the_closed_loop_where_asked_or_needed(panda, mon
     itself is the fixture's, not run again)."""
     model, rep, cr = panda
     monkeypatch.setattr(closed_replay, "closed_loop_replay", lambda m, r, why: replace(cr, why=why))
-    e = replay_entry(model, rep)
+    e = replay_entry(rep, closed_replay_of(model, rep))
     assert e["open_loop"] and e["closed_loop"]["why"] == "open loop outside the thresholds"
+    assert e["closed_loop"]["topics"] == {"native": "/closed_loop/native", "twin": "/closed_loop/mujoco"}
     assert "closed loop (open loop outside the thresholds)" in format_replay_entry(e)
+    assert "closed_loop" not in replay_entry(rep)
+
+
+@pytest.fixture(scope="module")
+def closed_log(panda, tmp_path_factory):
+    """The optimum's run log as `coopsim optimize --replay` writes it with its closed loop (open loop, the
+    closed-loop series and record), naming the scenario file by its absolute path and sha256."""
+    model, rep, cr = panda
+    meta = {"scenario": {"file": str(PANDA), "sha256": file_sha256(PANDA)}} | closed_metadata(cr)
+    streams, records = replay_run_log(rep, meta, closed_series(cr))
+    return write_mcap(tmp_path_factory.mktemp("closed_log") / "optimum_run.mcap", streams, records), streams, records
+
+
+def test_the_run_log_holds_both_closed_loops_as_they_ran(panda, closed_log):
+    """The run log read back (`read_run_log`, which checks the closed-loop pair like the open loop's) holds the
+    open loop under /native and /mujoco as before and the closed loop under /closed_loop/native and
+    /closed_loop/mujoco: sample times, joint angles, rates, applied torques (the ClosedReplay's, i.e. the
+    feedforward plus the PD law), object pose, the controller's reference (the optimised joint path) and
+    angle error, exactly (the codec stores float64 as its repr); its record names the gains."""
+    model, rep, cr = panda
+    log = read_run_log(closed_log[0])
+    js = log.topics["/native/joint_state"]
+    assert np.array_equal(js["angle"], rep.native.sim.q)
+    for side, res, tau, rec in (("native", cr.native, cr.tau, cr.control[0]), ("mujoco", cr.twin, cr.twin_tau,
+                                                                               cr.control[1])):
+        js, ob, ctl = (log.topics[f"{CLOSED_LOOP}/{side}/{k}"] for k in ("joint_state", "object", "control"))
+        assert np.array_equal(js["t"], res.t) and np.array_equal(js["angle"], res.q), side
+        assert np.array_equal(js["rate"], res.qd) and np.array_equal(js["torque"], tau), side
+        assert np.array_equal(ob["position"], res.object_pos), side
+        assert np.array_equal(ctl["reference_angle"], rec.q_ref) and np.array_equal(ctl["torque"], rec.tau), side
+    assert np.array_equal(cr.control[0].tau, cr.tau)
+    # the logged reference is the optimised joint path (independent of the runs) and the error is q_r - q
+    ctl = log.topics[f"{CLOSED_LOOP}/native/control"]
+    assert np.max(np.abs(ctl["reference_angle"] - rep.traj.q)) <= 1e-12
+    assert np.max(np.abs(ctl["angle_error"] - (rep.traj.q - cr.native.q))) <= 1e-12
+    rec = log.metadata["closed_loop"]
+    assert rec["why"] == cr.why and np.array_equal(json.loads(rec["kp"]), cr.kp)
+
+
+def test_a_closed_loop_pair_missing_a_series_is_not_a_run_log(closed_log, tmp_path):
+    """The reader checks the closed-loop pair as it checks the open loop's: without
+    /closed_loop/mujoco/constraint the log is refused, naming that topic."""
+    _, streams, records = closed_log
+    path = write_mcap(tmp_path / "cut.mcap", [s for s in streams if s.topic != f"{CLOSED_LOOP}/mujoco/constraint"],
+                      records)
+    with pytest.raises(UnreadableLogError, match="no /closed_loop/mujoco/constraint series"):
+        read_run_log(path)
+
+
+def test_animate_draws_the_closed_loop(panda, closed_log, tmp_path):
+    """`motion_from_log(closed_loop=True)` takes the closed loop's angles (not the open loop's, which differ
+    by the open loop's drift), and `coopsim animate LOG --closed-loop` renders it (where OpenGL starts);
+    on a log without a closed loop --closed-loop is one line and exit 2."""
+    model, rep, cr = panda
+    m = motion_from_log(closed_log[0], closed_loop=True)
+    assert np.array_equal(m.q_native, cr.native.q) and np.array_equal(m.q_twin, cr.twin.q)
+    assert m.source.startswith("closed loop of log") and m.payload.mass == rep.mass
+    assert np.max(np.abs(motion_from_log(closed_log[0]).q_native - cr.native.q)) > 0
+    bare = write_mcap(tmp_path / "open.mcap", *replay_run_log(rep, {"scenario": {"file": str(PANDA),
+                                                                                 "sha256": file_sha256(PANDA)}}))
+    try:
+        probe_renderer()
+    except RenderUnavailable as exc:
+        pytest.skip(f"no offscreen OpenGL: {exc}")
+    out = run_cli("animate", closed_log[0], "--closed-loop", "--duration", "0.2", "--fps", "10", "--width", "96",
+                  "--height", "72", "--out", "a.gif", "--json", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    assert report["frames"] == 3 and report["source"].startswith("closed loop of log"), report
+    qn, qt = m.at(np.array([0.0, 0.1, 0.2]))
+    assert report["max_angle_difference_rad"] == pytest.approx(float(np.max(np.abs(qn - qt))), rel=1e-9), report
+    bad = run_cli("animate", bare, "--closed-loop", "--out", "b.gif", cwd=tmp_path)
+    assert bad.returncode == 2 and "no /closed_loop/native/joint_state" in bad.stderr, bad.stderr
+
+
+def test_optimize_writes_the_closed_loop_into_the_optimum_run_log(panda, workdir, monkeypatch):
+    """`coopsim optimize --retime --replay --closed-loop` (the fixture's replays standing in for the runs, which
+    are the fixture's own test above): the set as without the closed loop, optimize.json's closed_loop naming
+    its topics, and optimum_run.mcap holding the open loop and the closed loop that entry reports, its
+    largest joint error against the optimised path the entry's."""
+    from coopsim.report import optimum_replay as optimum
+
+    model, rep, cr = panda
+    monkeypatch.setattr(optimum, "optimum_replay", lambda study, progress=None: rep)
+    monkeypatch.setattr(closed_replay, "closed_loop_replay", lambda m, r, why: replace(cr, why=why))
+    out = run_cli("optimize", "scenarios/robots/panda_ceiling_carry.yaml", "--retime", "--duration", "1.5",
+                  "--intervals", "4", "--method", "paper", "--replay", "--closed-loop", "--json", "--out", "res",
+                  cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    entry = json.loads(out.stdout)["replay"]["closed_loop"]
+    assert entry["why"] == "asked" and entry["topics"]["native"] == "/closed_loop/native"
+    assert sorted(p.name for p in (workdir / "res").iterdir()) == sorted(
+        ["optimize.json", "optimize.mcap", "optimize_motors.png", "optimize_payload_time.png",
+         "optimize_phase_plane.png", "panda_ceiling_carry_retimed.yaml", "optimum_run.mcap"])
+    log = read_run_log(workdir / "res" / "optimum_run.mcap")
+    assert np.array_equal(log.topics["/native/joint_state"]["angle"], rep.native.sim.q)
+    for side, res in (("native", cr.native), ("mujoco", cr.twin)):
+        q = log.topics[f"{CLOSED_LOOP}/{side}/joint_state"]["angle"]
+        assert np.array_equal(q, res.q), side
+    err = np.max(np.abs(log.topics[f"{CLOSED_LOOP}/mujoco/joint_state"]["angle"] - rep.traj.q))
+    assert err == entry["twin"]["max_angle_error_rad"]
+    assert log.metadata["closed_loop"]["why"] == "asked"

@@ -17,7 +17,7 @@ import numpy as np
 
 from coopsim.core.errors import CoopsimError, one_line
 from coopsim.core.model import Model
-from coopsim.io.log import file_sha256, log_model, log_overrides
+from coopsim.io.log import CLOSED_LOOP, file_sha256, log_model, log_overrides
 from coopsim.io.mcap_codec import read_mcap
 from coopsim.io.scenario import load_scenario
 from coopsim.twin.harness import cross_validate
@@ -99,8 +99,11 @@ def _read_log(log_path: Path):
         raise CoopsimError(f"{log_path}: not a readable coopsim MCAP log ({one_line(exc, 120)})") from None
 
 
-def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, log=None) -> Motion:
-    """The joint angles of a `coopsim run` log (/native/joint_state and /mujoco/joint_state).
+def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, log=None,
+                    closed_loop: bool = False) -> Motion:
+    """The joint angles of a `coopsim run` log (/native/joint_state and /mujoco/joint_state), or of the
+    closed-loop replay an optimum's run log also holds (CLOSED_LOOP/native/joint_state and
+    CLOSED_LOOP/mujoco/joint_state, `coopsim optimize --replay`).
 
     The log holds the joint angles but not the model's geometry: that comes from the scenario file named in
     its metadata (found relative to the current folder or a folder above the log, and checked against the
@@ -111,10 +114,11 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
         scenario: the scenario file to draw the log with, in place of the one the log names (no sha256
             check); None: the log's.
         log: the file already read (`LogData`); None: read `log_path`.
+        closed_loop: draw the closed-loop pair of runs (topics under CLOSED_LOOP) in place of the open loop.
 
     Returns:
         Motion: the log's sample times and both models' angles on them (None for a model whose topic is
-            missing), source "log PATH".
+            missing), source "log PATH" ("closed loop of log PATH" with closed_loop).
 
     Raises:
         CoopsimError: the log is missing or unreadable, holds neither joint-state topic or no samples, names no
@@ -126,10 +130,12 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
         if not log_path.is_file():
             raise CoopsimError(f"{log_path}: log file not found")
         log = _read_log(log_path)
-    states = {k: log.topics.get(f"/{k}/joint_state") for k in ("native", "mujoco")}
+    pre = CLOSED_LOOP if closed_loop else ""
+    states = {k: log.topics.get(f"{pre}/{k}/joint_state") for k in ("native", "mujoco")}
     if all(s is None for s in states.values()):
-        raise CoopsimError(f"{log_path}: no /native/joint_state or /mujoco/joint_state topic "
-                           f"(animate takes the log of `coopsim run`)")
+        raise CoopsimError(f"{log_path}: no {pre}/native/joint_state or {pre}/mujoco/joint_state topic "
+                           + ("(--closed-loop takes the run log of `coopsim optimize --replay` with a closed loop)"
+                              if closed_loop else "(animate takes the log of `coopsim run`)"))
     model = log_model(log_path, log, scenario)
     n = model.n_total
     t = None
@@ -139,14 +145,16 @@ def motion_from_log(log_path: str | Path, scenario: str | Path | None = None, lo
             q[k] = None
             continue
         if s["angle"].ndim != 2 or s["angle"].shape[1] != n:
-            raise CoopsimError(f"{log_path}: /{k}/joint_state has {s['angle'].shape[-1]} joints, the scenario "
+            raise CoopsimError(f"{log_path}: {pre}/{k}/joint_state has {s['angle'].shape[-1]} joints, the scenario "
                                f"{model.name} {n}")
         if t is not None and (len(s["t"]) != len(t) or np.any(s["t"] != t)):
-            raise CoopsimError(f"{log_path}: /native and /mujoco joint states are sampled at different times")
+            raise CoopsimError(f"{log_path}: {pre}/native and {pre}/mujoco joint states are sampled at different "
+                               f"times")
         t, q[k] = s["t"], s["angle"]
     if len(t) == 0:
         raise CoopsimError(f"{log_path}: the joint states hold no samples")
-    return Motion(model, t, q["native"], q["mujoco"], f"log {log_path}", log_payload(log))
+    return Motion(model, t, q["native"], q["mujoco"], f"{'closed loop of ' if closed_loop else ''}log {log_path}",
+                  log_payload(log))
 
 
 def log_payload(log) -> Payload | None:
