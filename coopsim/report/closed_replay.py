@@ -16,7 +16,14 @@ the feedforward replaces it), native and twin, from the same state. The gains:
   * otherwise Kp = ω² I_jj, Kd = 2ζω I_jj, I_jj the diagonal of each arm's joint-space inertia
     (`coopsim.dynamics.gibbs_appell.mass_matrix`) at the first sample — a computed-torque law with the
     inertia frozen and diagonal — with ω², 2ζω the scenario's computed_torque object gains (object_kp,
-    object_kd, linear) when it has that law, else ω = 10 rad/s, ζ = 1 (DEFAULT_OMEGA).
+    object_kd, linear) when it has that law, else ζ = 1 and ω the first of OMEGAS (10, 30 rad/s) whose
+    native closed loop stays within the scenario's validation.max_angle_error of the optimised path (the
+    last where none does; each try is reported). A frozen diagonal law ignores the gravity stiffness and
+    the closed chain's coupling: a pair hanging from the ceiling with a heavy load (the UR5 pair) grows
+    under ω = 10 rad/s as its open loop does, only slower. Stiffer is not better where the loop is stable
+    (the error is then the feedforward's between the law's grid points), and the native run takes fixed
+    steps of one sample: the diagonal law's fastest closed-chain mode is faster than ω, and at 50 rad/s
+    on 20 ms samples (the Panda carry) the fixed-step native loop diverges; hence no third try.
 
 `saturate` is the scenario's (default off, so that the total torque's excess over its lines is reported,
 not hidden). The scenario's other control fields (distribution, squeeze, mass_scale, grasp gains, its
@@ -45,7 +52,8 @@ from coopsim.report.optimum_replay import OptimumReplay, format_replay_summary, 
 from coopsim.twin.compare import Comparison, compare
 from coopsim.twin.mujoco_run import TwinResult, run_twin
 
-DEFAULT_OMEGA = 10.0      # rad/s, the default law's natural frequency (critically damped)
+OMEGAS = (10.0, 30.0)   # rad/s, the default law's natural frequencies (critically damped), tried in turn
+DEFAULT_OMEGA = OMEGAS[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +75,8 @@ class ClosedReplay:
         saturation_events: (sample, joint) pairs the motor lines clipped (native), with `saturate`.
         control: the joint_pd law evaluated along each run (`coopsim.control.controller.record`: reference,
             angle error, command, applied torque), native and twin.
+        tries: ((ω rad/s, the native closed loop's largest joint error rad), …) of the default law's tries
+            in order, the last the one kept; empty with the scenario's gains.
     """
 
     why: str
@@ -82,6 +92,7 @@ class ClosedReplay:
     reference: tuple
     saturation_events: int
     control: tuple = ()
+    tries: tuple = ()
 
 
 def closed_loop_reason(model: Model, rep: OptimumReplay, asked: bool = False) -> str | None:
@@ -106,12 +117,13 @@ def closed_loop_reason(model: Model, rep: OptimumReplay, asked: bool = False) ->
     return None
 
 
-def feedback_gains(model: Model, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+def feedback_gains(model: Model, q0: np.ndarray, omega: float = DEFAULT_OMEGA) -> tuple[np.ndarray, np.ndarray, str]:
     """The feedback gains of the closed-loop replay (module docstring).
 
     Args:
         model: the scenario's Model (its control section, its arms).
         q0: (n,) rad, the first sample of the optimised joint path (where the inertia is frozen).
+        omega: rad/s, the default law's natural frequency (without a control: section).
 
     Returns:
         tuple: kp (n,) N·m/rad, kd (n,) N·m·s/rad, and a sentence saying where they come from.
@@ -124,8 +136,8 @@ def feedback_gains(model: Model, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray
         w2, zw = float(c.object_kp[0]), float(c.object_kd[0])
         where = f"the scenario's computed_torque object gains ({w2:g}/s², {zw:g}/s) per unit joint inertia"
     else:
-        w2, zw = DEFAULT_OMEGA**2, 2.0 * DEFAULT_OMEGA
-        where = f"ω = {DEFAULT_OMEGA:g} rad/s, ζ = 1 per unit joint inertia (no control: section)"
+        w2, zw = omega**2, 2.0 * omega
+        where = f"ω = {omega:g} rad/s, ζ = 1 per unit joint inertia (no control: section)"
     return w2 * inertia, zw * inertia, f"Kp = ω² I_jj, Kd = 2ζω I_jj, I_jj each arm's inertia diagonal at the " \
                                        f"first sample: {where}"
 
@@ -140,10 +152,23 @@ def closed_loop_replay(model: Model, rep: OptimumReplay, why: str) -> ClosedRepl
         why: `closed_loop_reason`'s answer.
 
     Returns:
-        ClosedReplay.
+        ClosedReplay (without a control: section: the first of OMEGAS whose native loop holds
+        validation.max_angle_error, else the last; `tries` lists them).
     """
+    if model.control is not None:
+        return _closed_run(model, rep, why, *feedback_gains(model, rep.traj.q[0]))
+    tries = []
+    for omega in OMEGAS:
+        cr = _closed_run(model, rep, why, *feedback_gains(model, rep.traj.q[0], omega))
+        tries.append((omega, float(np.max(np.abs(cr.native.q - rep.traj.q)))))
+        if tries[-1][1] <= model.validation.max_angle_error:
+            break
+    return replace(cr, tries=tuple(tries))
+
+
+def _closed_run(model: Model, rep: OptimumReplay, why: str, kp, kd, where: str) -> ClosedReplay:
+    """One closed-loop replay with the gains kp, kd (n,) (`closed_loop_replay`)."""
     traj = rep.traj
-    kp, kd, where = feedback_gains(model, traj.q[0])
     settings = ControlSettings("joint_pd", kp, kd, compensation="none", distribution=rep.method,
                                reference="object_motion", saturate=model.control is not None and model.control.saturate)
     native_model = _in_the_loop(rep.native.sim.model, settings, traj)
@@ -191,7 +216,8 @@ def closed_summary(cr: ClosedReplay, traj) -> dict:
         optimised path (joint angle max and final, object position and orientation max), the feedback
         torque's share (its peak relative to τ_s and its RMS over the total's), the total torque's largest
         excess over its line relative to τ_s (native and twin) and whether it is within (≤ 1e-9), the
-        saturation events, and the twin against the native closed loop (the scenario's thresholds).
+        saturation events, the twin against the native closed loop (the scenario's thresholds), and with the
+        default law "omega_tries": each ω tried and its native loop's largest joint error.
     """
     motors = cr.native.model.motors
     active = ~motors.passive & np.isfinite(motors.stall_torque)
@@ -208,7 +234,8 @@ def closed_summary(cr: ClosedReplay, traj) -> dict:
         "line_excess": excess, "within_lines": bool(max(excess.values()) <= 1e-9),
         "saturation_events": cr.saturation_events,
         "twin_vs_native": {"passed": cr.comparison.passed, "agreement": cr.comparison.as_dict()},
-    }
+    } | ({"omega_tries": [{"omega_rad_s": w, "native_max_angle_error_rad": e} for w, e in cr.tries]}
+         if cr.tries else {})
 
 
 def format_closed_summary(s: dict) -> str:
@@ -285,7 +312,8 @@ def closed_metadata(cr: ClosedReplay) -> dict:
     """The run log's "closed_loop" metadata record: why, the law, the gains and their source, the topics."""
     return {"closed_loop": {"why": cr.why, "law": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd)", "gains": cr.gains,
                             "kp": cr.kp, "kd": cr.kd, "native": CLOSED_LOOP + "/native",
-                            "twin": CLOSED_LOOP + "/mujoco", "twin_vs_native_passed": cr.comparison.passed}}
+                            "twin": CLOSED_LOOP + "/mujoco", "twin_vs_native_passed": cr.comparison.passed,
+                            "omega_tries": [list(t) for t in cr.tries]}}
 
 
 def format_replay_entry(s: dict) -> str:

@@ -95,6 +95,24 @@ def test_the_replay_entry_holds_the_closed_loop_where_asked_or_needed(panda, mon
     assert "closed_loop" not in replay_entry(rep)
 
 
+def test_the_default_law_stiffens_while_the_native_loop_leaves_the_threshold(panda):
+    """Without a control: section ω = 10 rad/s is tried first (the fixture holds the scenario's 1e-6 rad with
+    it: one try); with the threshold set below its error the replay tries ω = 30 rad/s next, with 9× the
+    gains (Kp ∝ ω², Kd ∝ ω), and keeps it (the last of OMEGAS) though on this stable loop it holds no
+    closer (the error is the feedforward's between grid points, not a growth), each try's largest native
+    joint error reported as measured here from the kept run."""
+    model, rep, cr = panda
+    assert [w for w, _ in cr.tries] == [10.0] and cr.tries[0][1] <= model.validation.max_angle_error
+    tight = replace(model, validation=replace(model.validation, max_angle_error=cr.tries[0][1] / 2))
+    cr2 = closed_loop_replay(tight, rep, "asked")
+    assert [w for w, _ in cr2.tries] == list(closed_replay.OMEGAS) == [10.0, 30.0]
+    assert cr2.tries[0][1] == pytest.approx(cr.tries[0][1], rel=1e-9)
+    err = float(np.max(np.abs(cr2.native.q - rep.traj.q)))
+    assert err == cr2.tries[-1][1] > tight.validation.max_angle_error
+    assert np.allclose(cr2.kp, 9 * cr.kp, rtol=1e-12) and np.allclose(cr2.kd, 3 * cr.kd, rtol=1e-12)
+    assert closed_summary(cr2, rep.traj)["omega_tries"][-1] == {"omega_rad_s": 30.0, "native_max_angle_error_rad": err}
+
+
 @pytest.fixture(scope="module")
 def closed_log(panda, tmp_path_factory):
     """The optimum's run log as `coopsim optimize --replay` writes it with its closed loop (open loop, the
