@@ -24,6 +24,8 @@ Python and no allocation per evaluation, and is what the commands use. Stages, i
     schur.py        the constraint solve in O(r) (block diagonal plus the carrier's coupling), for
                     three arms or more
     manifold.py     loop-closure residual Φ, projection of positions and rates
+    object_state.py a prescribed object motion's pose, twist and acceleration at a time (waypoints under a
+                    time law, or a B-spline path): the object-motion IK's and the computed-torque reference's
     control/        controllers in the loop: the record, references, the distributions of the inverse
                     dynamics and squeeze, the laws (joint PD, object-space computed torque, grasp
                     feedback, saturation)

@@ -47,9 +47,9 @@ from coopsim.control.laws import (
 )
 from coopsim.core.errors import ConstraintError, CoopsimError
 from coopsim.core.model import COMPENSATIONS, COMPILED_DISTRIBUTIONS, LAWS, REFERENCES, Model, TorqueFeedback, torque_at
-from coopsim.core.spatial import rot_log
 from coopsim.forward.diagnostics import describe_state, run_warning
 from coopsim.inverse.problem import SampleFailureWarning, inverse_problem, torques_of
+from coopsim.inverse.spline_path import spline_arrays
 from coopsim.inverse.trajectory import JointTrajectory, object_motion_at, object_motion_trajectory, trajectory_at
 
 # The compiled engine's modules and the distributions are imported in the methods that use them
@@ -345,7 +345,7 @@ class Controller:
             tr = self.trajectory
             fields.update(tr_t=tr.t, tr_q=tr.q, tr_qd=tr.qd, tr_qdd=tr.qdd)
         else:
-            fields.update(_packed_motion(self.plant.inverse.object_motion))
+            fields.update(_packed_motion(self.plant, self.plant.inverse.object_motion))
         res = self.resolution
         return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights,
                               vmass=res.masses, vinertia=res.inertias, stall=m.motors.stall_torque,
@@ -465,18 +465,15 @@ class Controller:
         return Command(q_ref, qd_ref, q_ref - q, e, ed, raw, tau)
 
 
-def _packed_motion(motion) -> dict:
-    """The object motion's arrays for `coopsim.compiled.control` (per segment the rotation axis, angle
-    and R_a φ of `coopsim.inverse.trajectory.object_motion_at`)."""
-    from coopsim.compiled.control import LAW_CUBIC, LAW_QUINTIC
+def _packed_motion(model: Model, motion) -> dict:
+    """The object motion's fields for `coopsim.compiled.control` (`coopsim.compiled.api.motion_struct`, the
+    object-motion IK's own packing: waypoints under any time law, or a B-spline path)."""
+    from coopsim.compiled.api import motion_struct
 
-    R = motion.rotations
-    phi = np.array([rot_log(Ra.T @ Rb) for Ra, Rb in zip(R[:-1], R[1:])])
-    angle = np.linalg.norm(phi, axis=1)
-    axis = phi / np.where(angle > 0, angle, 1.0)[:, None]
-    return dict(om_t=motion.times, om_p=motion.positions, om_R=R, om_axis=axis, om_angle=angle,
-                om_w=np.einsum("sij,sj->si", R[:-1], phi),
-                time_law={"quintic": LAW_QUINTIC, "cubic": LAW_CUBIC}[motion.time_law])
+    mo = motion_struct(model, motion, None if motion.path is None else spline_arrays(motion))
+    return dict(om_t=mo.times, om_p=mo.positions, om_R=mo.rotations, om_origin=mo.origin, time_law=mo.law,
+                om_law_t=mo.law_t, om_law_s=mo.law_s, om_law_rate=mo.law_rate, om_knots=mo.knots, om_ctrl=mo.ctrl,
+                om_degree=mo.degree, om_R0=mo.R0)
 
 
 def _controller_model(model: Model, mass_scale: float) -> Model:

@@ -612,9 +612,6 @@ def _control(sec: Section | None, joints: "_Joints", inverse: InverseSettings,
     if reference == "object_motion" and inverse.object_motion is None:
         sec.fail("reference" if law == "joint_pd" else "law",
                  "tracking an object motion needs the inverse.object_motion section")
-    if reference == "object_motion" and inverse.object_motion.path is not None:
-        sec.fail("reference" if law == "joint_pd" else "law",
-                 "tracking an object motion with a path (inverse.object_motion.path) is not supported")
     sec.done()
     return ControlSettings(law, kp, kd, saturate=saturate, **opts)
 

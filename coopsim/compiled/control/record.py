@@ -11,13 +11,14 @@ import numpy as np
 from numba import njit
 from numba.experimental import structref
 
+from coopsim.compiled.object_state import CUBIC, QUINTIC
 from coopsim.compiled.structs import _F, _I, StructType, _f1, _f2, _f3, _i1
 
 JOINT_PD, COMPUTED_TORQUE = 0, 1
 COMP_NONE, COMP_GRAVITY, COMP_BIAS = 0, 1, 2
 REF_SETPOINT, REF_TRAJECTORY = 0, 1
 DIST_PAPER, DIST_NONSQUEEZING, DIST_MIN_ENERGY = 0, 1, 2
-LAW_QUINTIC, LAW_CUBIC = 0, 1
+LAW_QUINTIC, LAW_CUBIC = QUINTIC, CUBIC          # the object motion's law codes (`coopsim.compiled.object_state`)
 CONTROL_SINGULAR = 8      # a failure code of the time loop (after integrate's and manifold's)
 
 
@@ -36,7 +37,8 @@ class PackedControl(NamedTuple):
         distribution: DIST_PAPER, DIST_NONSQUEEZING or DIST_MIN_ENERGY, the inverse dynamics' distribution
             of the object's wrench.
         saturate: 1 to clip the torques to the motor lines of eq. 36, 0 not to.
-        time_law: LAW_QUINTIC or LAW_CUBIC, the object motion's time law.
+        time_law: the object motion's time law, `coopsim.compiled.object_state`'s code (QUINTIC, CUBIC, SAMPLED,
+            LINEAR).
         kp, kd: (N,) joint PD gains, N·m/rad and N·m·s/rad (N/m and N·s/m on a prismatic joint).
         q_set: (N,) rad or m, the joint set-point.
         tr_t: (M,) s, the joint trajectory's times, read at tr_t[0] + t.
@@ -46,9 +48,10 @@ class PackedControl(NamedTuple):
         om_t: (w,) s, the object motion's waypoint times, read at om_t[0] + t.
         om_p: (w, 3) m, the waypoint positions of C, world.
         om_R: (w, 3, 3) the waypoint orientations of the object frame, world axes.
-        om_axis: (w−1, 3) per segment the unit rotation axis (object axes of the segment start).
-        om_angle: (w−1,) rad, per segment the rotation angle.
-        om_w: (w−1, 3) rad, per segment R_a φ, the segment's rotation vector in world axes.
+        om_origin, om_law_t, om_law_s, om_law_rate, om_knots, om_ctrl, om_degree, om_R0: the rest of the object
+            motion as `coopsim.compiled.object_state.Motion` holds it (origin = the first waypoint's position;
+            a sampled time law's samples; a B-spline path's knots, coefficients, degree (0: waypoints) and
+            reference orientation), read by `coopsim.compiled.control.references.object_reference`.
         squeeze: N, the computed torque's squeeze force (0: none).
         gkp: (2,) grasp-error stiffness [linear N/m, angular N·m/rad] (`grasp_feedback`).
         gkd: (2,) grasp-error damping [linear N·s/m, angular N·m·s/rad].
@@ -85,6 +88,8 @@ class PackedControl(NamedTuple):
         G: (k, k) scratch: A MA, or an arm's S J_m.
         xk: (k,) scratch.
         R3, R3b: (3, 3) scratch.
+        ob_pc, ob_v: (3,), ob_tw, ob_ac: (6,), ob_law: (2,), ob_Ro, ob_E: (3, 3) scratch of the object motion's
+            state (`coopsim.compiled.object_state.Buffers`).
     """
 
     law: int
@@ -105,9 +110,14 @@ class PackedControl(NamedTuple):
     om_t: np.ndarray
     om_p: np.ndarray
     om_R: np.ndarray
-    om_axis: np.ndarray
-    om_angle: np.ndarray
-    om_w: np.ndarray
+    om_origin: np.ndarray
+    om_law_t: np.ndarray
+    om_law_s: np.ndarray
+    om_law_rate: np.ndarray
+    om_knots: np.ndarray
+    om_ctrl: np.ndarray
+    om_degree: int
+    om_R0: np.ndarray
     squeeze: float
     gkp: np.ndarray
     gkd: np.ndarray
@@ -149,11 +159,18 @@ class PackedControl(NamedTuple):
     xk: np.ndarray
     R3: np.ndarray
     R3b: np.ndarray
+    ob_pc: np.ndarray
+    ob_v: np.ndarray
+    ob_tw: np.ndarray
+    ob_ac: np.ndarray
+    ob_law: np.ndarray
+    ob_Ro: np.ndarray
+    ob_E: np.ndarray
 
 
 _TYPES = {"law": _I, "compensation": _I, "reference": _I, "distribution": _I, "saturate": _I, "time_law": _I,
           "squeeze": _F, "count": _i1, "tr_q": _f2, "tr_qd": _f2, "tr_qdd": _f2, "om_p": _f2, "om_R": _f3,
-          "om_axis": _f2, "om_w": _f2, "vinertia": _f3, "A": _f2, "JT": _f2, "kkt": _f2, "MA": _f2, "G": _f2,
+          "om_ctrl": _f2, "om_degree": _I, "om_R0": _f2, "ob_Ro": _f2, "ob_E": _f2, "vinertia": _f3, "A": _f2, "JT": _f2, "kkt": _f2, "MA": _f2, "G": _f2,
           "R3": _f2, "R3b": _f2, "Mb": _f2, "gerr": _f2}
 CONTROL_T = StructType([(name, _TYPES.get(name, _f1)) for name in PackedControl._fields])
 
@@ -179,9 +196,14 @@ def _new_control(r):
     s.om_t = r.om_t
     s.om_p = r.om_p
     s.om_R = r.om_R
-    s.om_axis = r.om_axis
-    s.om_angle = r.om_angle
-    s.om_w = r.om_w
+    s.om_origin = r.om_origin
+    s.om_law_t = r.om_law_t
+    s.om_law_s = r.om_law_s
+    s.om_law_rate = r.om_law_rate
+    s.om_knots = r.om_knots
+    s.om_ctrl = r.om_ctrl
+    s.om_degree = r.om_degree
+    s.om_R0 = r.om_R0
     s.squeeze = r.squeeze
     s.gkp = r.gkp
     s.gkd = r.gkd
@@ -223,6 +245,13 @@ def _new_control(r):
     s.xk = r.xk
     s.R3 = r.R3
     s.R3b = r.R3b
+    s.ob_pc = r.ob_pc
+    s.ob_v = r.ob_v
+    s.ob_tw = r.ob_tw
+    s.ob_ac = r.ob_ac
+    s.ob_law = r.ob_law
+    s.ob_Ro = r.ob_Ro
+    s.ob_E = r.ob_E
     return s
 
 
@@ -260,7 +289,8 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> Packed
     base = dict(law=law, compensation=COMP_NONE, reference=REF_SETPOINT, distribution=DIST_PAPER, saturate=0,
                 time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=np.array([0.0, 1.0]), tr_q=z((2, N)),
                 tr_qd=z((2, N)), tr_qdd=z((2, N)), okp=z(2), okd=z(2), om_t=np.array([0.0, 1.0]), om_p=z((2, 3)),
-                om_R=np.tile(np.eye(3), (2, 1, 1)), om_axis=z((1, 3)), om_angle=z(1), om_w=z((1, 3)), squeeze=0.0,
+                om_R=np.tile(np.eye(3), (2, 1, 1)), om_origin=z(3), om_law_t=np.array([0.0, 1.0]), om_law_s=z(2),
+                om_law_rate=z(2), om_knots=z(0), om_ctrl=z((0, 6)), om_degree=0, om_R0=np.eye(3), squeeze=0.0,
                 gkp=z(2), gkd=z(2), weights=np.ones(N), vmass=np.ones(r), vinertia=np.tile(np.eye(3), (r, 1, 1)),
                 stall=np.full(N, np.inf), slope=z(N))
     base.update(fields)
@@ -268,7 +298,8 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> Packed
                    raw=z(N), zero=z(N), qdd=z(N), tau_arms=z(N), tau_c=z(N), Mb=z((N, nmax)), gerr=z((r, 6)),
                    p_r=z(3), v_r=z(6), a_r=z(6), a=z(6), acc=z(6), Y=z(6), v6=z(6), v3=z(3), A=z((k, m)),
                    JT=z((N, m)), f=z(m), fs=z(m), y=z(k), kkt=z((m + k, m + k)), x=z(m + k), MA=z((m, k)),
-                   G=z((k, k)), xk=z(k), R3=z((3, 3)), R3b=z((3, 3)))
+                   G=z((k, k)), xk=z(k), R3=z((3, 3)), R3b=z((3, 3)), ob_pc=z(3), ob_v=z(3), ob_tw=z(6), ob_ac=z(6),
+                   ob_law=z(2), ob_Ro=z((3, 3)), ob_E=z((3, 3)))
     out = {}
     for name in PackedControl._fields:
         v = base[name] if name in base else scratch[name]

@@ -1,13 +1,14 @@
 """The compiled controllers' references at time t: the joint trajectory's quintic Hermite interpolant
 (`coopsim.inverse.trajectory.trajectory_at_times`) and the prescribed object motion with its time law
-(`coopsim.inverse.trajectory.object_motion_at`).
+(`coopsim.inverse.trajectory.object_motion_at`; the kernel is the object-motion IK's own,
+`coopsim.compiled.object_state.object_state`).
 """
 
 from __future__ import annotations
 
-from coopsim.compiled.control.record import LAW_QUINTIC, REF_SETPOINT
+from coopsim.compiled.control.record import REF_SETPOINT
 from coopsim.compiled.linalg import bisect
-from coopsim.compiled.spatial import axis_rotation, matmul3
+from coopsim.compiled.object_state import Buffers, Motion, object_state
 from coopsim.compiled.toolchain.jit import kernel
 
 
@@ -85,45 +86,25 @@ def joint_reference(C, t):
 
 
 @kernel
-def time_law(kind, u):
-    """(s, ds/du, d²s/du²) of the normalised time law (`coopsim.inverse.trajectory.time_law`).
-
-    Args:
-        kind: LAW_QUINTIC, or LAW_CUBIC (any other code: cubic).
-        u: the normalised time in [0, 1].
-
-    Returns:
-        tuple[float, float, float]: s(u) ∈ [0, 1] and its first two derivatives in u.
-    """
-    if kind == LAW_QUINTIC:
-        return (10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5, 30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4,
-                60 * u - 180 * u ** 2 + 120 * u ** 3)
-    return 3 * u ** 2 - 2 * u ** 3, 6 * u - 6 * u ** 2, 6 - 12 * u
-
-
-@kernel
 def object_reference(C, t, R):
-    """The prescribed object state at om_t[0] + t (`coopsim.inverse.trajectory.object_motion_at`).
+    """The prescribed object state at om_t[0] + t: `coopsim.compiled.object_state.object_state` of the motion
+    the om_* fields hold (waypoints under a quintic, cubic or sampled time law, or a B-spline path), as
+    `coopsim.inverse.trajectory.object_motion_at`.
 
     Args:
-        C: the controller (PackedControl StructRef): reads the om_* tables and time_law; writes C.p_r
-            (3,) m (world), C.v_r = [v_C; ω] and C.a_r = [a_C; ω̇] (6,) (world axes), C.R3b scratch.
+        C: the controller (PackedControl StructRef): reads the om_* fields and time_law; writes C.p_r
+            (3,) m (world), C.v_r = [v_C; ω] and C.a_r = [a_C; ω̇] (6,) (world axes), the ob_* scratch.
         t: s, the time since the start of the run.
         R: (3, 3) written: the prescribed orientation of the object frame, world axes.
     """
-    ts = C.om_t
-    i, tc = segment(ts, ts[0] + t)
-    T = ts[i + 1] - ts[i]
-    s, ds, dds = time_law(C.time_law, (tc - ts[i]) / T)
-    if C.om_angle[i] > 0:
-        axis_rotation(C.om_axis[i], s * C.om_angle[i], C.R3b)
-        matmul3(C.om_R[i], C.R3b, R)
-    else:
-        for a in range(3):
-            for b in range(3):
-                R[a, b] = C.om_R[i, a, b]
+    mo = Motion(C.om_t, C.om_p, C.om_R, C.om_origin, C.time_law, C.zero, 0.0, C.om_law_t, C.om_law_s,
+                C.om_law_rate, 0.0, C.om_knots, C.om_ctrl, C.om_degree, C.om_R0)
+    B = Buffers(C.zero, C.zero, C.zero, C.ob_pc, C.ob_Ro, C.ob_tw, C.ob_ac, C.ob_E, C.ob_v, C.v3, C.R3b, C.v6,
+                C.v6, C.v6, C.zero, C.v3, C.zero, C.ob_law)
+    object_state(mo, C.om_t[0] + t, B)
     for a in range(3):
-        dp = C.om_p[i + 1, a] - C.om_p[i, a]
-        C.v_r[a], C.v_r[3 + a] = ds / T * dp, ds / T * C.om_w[i, a]
-        C.a_r[a], C.a_r[3 + a] = dds / T ** 2 * dp, dds / T ** 2 * C.om_w[i, a]
-        C.p_r[a] = C.om_p[i, a] + s * dp
+        for b in range(3):
+            R[a, b] = C.ob_Ro[a, b]
+        C.p_r[a] = C.om_origin[a] + C.ob_pc[a]
+    for a in range(6):
+        C.v_r[a], C.a_r[a] = C.ob_tw[a], C.ob_ac[a]
