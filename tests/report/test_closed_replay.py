@@ -39,9 +39,14 @@ pytestmark = pytest.mark.skipif(robots_folder() is None,
 
 
 @pytest.fixture(scope="module")
-def panda():
+def panda_study():
     model = load_scenario(PANDA)
-    study = retime_study(model, duration=1.5, intervals=10, methods=("paper",), method="paper")
+    return model, retime_study(model, duration=1.5, intervals=10, methods=("paper",), method="paper")
+
+
+@pytest.fixture(scope="module")
+def panda(panda_study):
+    model, study = panda_study
     rep = optimum_replay(study)
     return model, rep, closed_loop_replay(model, rep, closed_loop_reason(model, rep))
 
@@ -185,18 +190,19 @@ def test_animate_draws_the_closed_loop(panda, closed_log, tmp_path):
     assert bad.returncode == 2 and "no /closed_loop/native/joint_state" in bad.stderr, bad.stderr
 
 
-def test_optimize_writes_the_closed_loop_into_the_optimum_run_log(panda, workdir, monkeypatch):
-    """`coopsim optimize --retime --replay --closed-loop` (the fixture's replays standing in for the runs, which
-    are the fixture's own test above): the set as without the closed loop, optimize.json's closed_loop naming
-    its topics, and optimum_run.mcap holding the open loop and the closed loop that entry reports, its
-    largest joint error against the optimised path the entry's."""
-    from coopsim.report import optimum_replay as optimum
+def test_optimize_writes_the_closed_loop_into_the_optimum_run_log(panda_study, panda, workdir, monkeypatch):
+    """`coopsim optimize --retime --replay --closed-loop` (the fixtures' study and replays standing in for the
+    runs, which are the fixtures' own tests above): the set as without the closed loop, optimize.json's
+    closed_loop naming its topics, and optimum_run.mcap holding the open loop and the closed loop that entry
+    reports, its largest joint error against the optimised path the entry's."""
+    from coopsim.report import optimize_report, optimum_replay as optimum
 
     model, rep, cr = panda
+    monkeypatch.setattr(optimize_report, "retime_study", lambda *a, **k: panda_study[1])
     monkeypatch.setattr(optimum, "optimum_replay", lambda study, progress=None: rep)
     monkeypatch.setattr(closed_replay, "closed_loop_replay", lambda m, r, why: replace(cr, why=why))
     out = run_cli("optimize", "scenarios/robots/panda_ceiling_carry.yaml", "--retime", "--duration", "1.5",
-                  "--intervals", "4", "--method", "paper", "--replay", "--closed-loop", "--json", "--out", "res",
+                  "--intervals", "10", "--method", "paper", "--replay", "--closed-loop", "--json", "--out", "res",
                   cwd=workdir)
     assert out.returncode == 0, out.stderr
     entry = json.loads(out.stdout)["replay"]["closed_loop"]
