@@ -43,7 +43,14 @@ CLOSED_LOOP = "/closed_loop"
 
 
 def has_closed_loop(log: LogData) -> bool:
-    """Whether a run log holds a closed-loop pair of runs (topics under CLOSED_LOOP)."""
+    """Whether a run log holds a closed-loop pair of runs (topics under CLOSED_LOOP).
+
+    Args:
+        log: the LogData (`read_mcap`).
+
+    Returns:
+        bool: True where some topic starts with CLOSED_LOOP + "/".
+    """
     return any(t.startswith(CLOSED_LOOP + "/") for t in log.topics)
 
 

@@ -309,7 +309,15 @@ def closed_series(cr: ClosedReplay) -> list:
 
 
 def closed_metadata(cr: ClosedReplay) -> dict:
-    """The run log's "closed_loop" metadata record: why, the law, the gains and their source, the topics."""
+    """The run log's "closed_loop" metadata record: why, the law, the gains and their source, the topics.
+
+    Args:
+        cr: the ClosedReplay.
+
+    Returns:
+        dict: {"closed_loop": {why, law, gains, kp, kd (n,), native, twin (topic prefixes),
+        twin_vs_native_passed, omega_tries}}.
+    """
     return {"closed_loop": {"why": cr.why, "law": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd)", "gains": cr.gains,
                             "kp": cr.kp, "kd": cr.kd, "native": CLOSED_LOOP + "/native",
                             "twin": CLOSED_LOOP + "/mujoco", "twin_vs_native_passed": cr.comparison.passed,

@@ -88,8 +88,10 @@ class PackedControl(NamedTuple):
         G: (k, k) scratch: A MA, or an arm's S J_m.
         xk: (k,) scratch.
         R3, R3b: (3, 3) scratch.
-        ob_pc, ob_v: (3,), ob_tw, ob_ac: (6,), ob_law: (2,), ob_Ro, ob_E: (3, 3) scratch of the object motion's
-            state (`coopsim.compiled.object_state.Buffers`).
+        ob_pc, ob_v: (3,) scratch of the object motion's state (`coopsim.compiled.object_state.Buffers`).
+        ob_tw, ob_ac: (6,) scratch, likewise.
+        ob_law: (2,) scratch, likewise.
+        ob_Ro, ob_E: (3, 3) scratch, likewise.
     """
 
     law: int
