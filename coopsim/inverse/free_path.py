@@ -45,7 +45,7 @@ from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
 from coopsim.inverse.retime_weights import with_weights
-from coopsim.inverse.spline_path import KIND, BSplinePath, straight_control_points
+from coopsim.inverse.spline_path import KIND, BSplinePath, refinement, straight_control_points
 from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
 
 FD_STEP = 1e-7            # forward-difference step in the scaled unknowns (× reach m, × 1 rad)
@@ -55,6 +55,7 @@ WEIGHT_ROUNDS = 2         # path / weights rounds with `weights`
 RETIME_ROUNDS = 2         # retimed payloads (path / time law in turn): retime, optimise the path, retime
 INFEASIBLE = -1.0         # every constraint's value where the inverse kinematics refuses the path
 JOINT_MARGIN = 1e-6       # rad (m): how far inside its range a joint's path must stay between samples
+COARSE = (1, 2)           # the starts run with these many control points first, in turn (continuation in K, `_law_stage`)
 
 
 class PathOptimizationError(CoopsimError):
@@ -91,16 +92,18 @@ class StartResult:
 
     Attributes:
         start: the start's index (0: the straight path).
-        capacity_kg: kg, the closed-form capacity at its end point on the optimiser's grid (nan: IK refused).
+        capacity_kg: kg, the closed-form capacity at its end point on the optimiser's grid (nan: IK refused);
+            its end point is its heaviest accepted one (`accepted_mass`), start and iterates included.
         start_capacity_kg: kg, the capacity at its start point.
-        success: SLSQP reports convergence.
-        status: SLSQP's exit status (0: converged).
-        message: SLSQP's message.
+        success: SLSQP reports convergence, or the run stopped on the payload-gain criterion (STALL_GAIN).
+        status: SLSQP's exit status (0: converged, or stopped on that criterion; `SLSQP_STATUS`).
+        message: what ended the run, in words.
         iterations: its iterations.
         evaluations: path evaluations (IK + inverse dynamics), finite differences included.
         wall_s: s, its wall time.
         scenario_grid_kg: kg, the capacity at its end point on the object motion's output_dt grid (the
             scenario's time law; nan: not evaluated, or refused by the IK).
+        control_points: K of its path.
     """
 
     start: int
@@ -113,6 +116,7 @@ class StartResult:
     evaluations: int
     wall_s: float
     scenario_grid_kg: float = float("nan")
+    control_points: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -400,6 +404,7 @@ class FreePathProblem:
         mode: 'scaled' or 'payload'.
         law: a retimed TimeLaw held fixed (s(t) as it is, `evaluate_law`); None: the scenario's time law
             on the grid of inverse.optimize.sample_dt (`evaluate_motion`).
+        control_points: K, the interior control points; None: inverse.optimize.control_points.
 
     Attributes:
         model: the Model.
@@ -413,18 +418,20 @@ class FreePathProblem:
         evaluations: path evaluations so far.
     """
 
-    def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None):
+    def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None,
+                 control_points: int | None = None):
         opt = model.inverse.optimize
+        K = opt.control_points if control_points is None else int(control_points)
         self.model, self.res, self.mode, self.law = model, res, mode, law
         self.ends = end_poses(model.inverse.object_motion, opt.sample_dt)
-        self.straight = straight_control_points(self.ends, opt.control_points)
+        self.straight = straight_control_points(self.ends, K)
         S = model.rows
         reach = float(np.mean([np.sum(np.linalg.norm(a.joint_pos[1:], axis=1)) + np.linalg.norm(a.ee_pos)
                                for a in model.arms]))
         self._basis = S.T                                           # (6, k): offsets [dp; dφ] = Sᵀ δ
         self._row_scale = np.where(np.any(S[:, :3] != 0, axis=1), reach, 1.0)
-        self.scale = np.tile(self._row_scale, opt.control_points)
-        position = np.tile(np.any(S[:, :3] != 0, axis=1), opt.control_points)
+        self.scale = np.tile(self._row_scale, K)
+        position = np.tile(np.any(S[:, :3] != 0, axis=1), K)
         self.bounds = np.where(position, OFFSET_BOUND, OFFSET_BOUND * np.pi / 2)
         self._act = ~res.passive & np.isfinite(model.motors.stall_torque)
         self._ts = model.motors.stall_torque[self._act]
@@ -440,6 +447,27 @@ class FreePathProblem:
     def size(self) -> int:
         """The number of path unknowns K·k."""
         return len(self.scale)
+
+    @property
+    def control_points(self) -> int:
+        """K, the interior control points."""
+        return len(self.straight.positions)
+
+    def refined(self, x: np.ndarray, coarse: int) -> np.ndarray:
+        """This problem's scaled offsets of the path of a coarser one's offsets x (`spline_path.refinement`:
+        the same curve where the B-spline spaces are nested, as from K = 1 or 2, else its interpolant at
+        the Greville abscissae).
+
+        Args:
+            x: (coarse·k,) the coarse problem's scaled offsets (same scene, same scales per control point).
+            coarse: its K.
+
+        Returns:
+            np.ndarray: (K·k,) the offsets here; within the bounds where x is (the map's rows are convex
+            combinations where nested).
+        """
+        M = refinement(coarse, self.control_points)[1:-1, 1:-1]          # the ends' offsets are zero
+        return np.clip((M @ np.asarray(x, dtype=float).reshape(coarse, -1)).ravel(), -self.bounds, self.bounds)
 
     def path_of(self, x: np.ndarray) -> PathSpline:
         """The PathSpline of scaled offsets x (K·k,).
@@ -577,11 +605,58 @@ class FreePathProblem:
         return J
 
 
+STALL_GAIN = 1e-3         # a run stops when its best accepted payload gained less than this, relative,
+STALL_ITERATIONS = 6      # over this many iterations
+SLSQP_STATUS = {          # scipy's SLSQP exit modes, worded for a user
+    0: "converged", 2: "more equality constraints than unknowns",
+    3: "its least-squares subproblem took more than 3 n iterations",
+    4: "the linearised constraints are incompatible (no step satisfies them)",
+    5: "its least-squares subproblem is singular (matrix E)", 6: "its least-squares subproblem is singular (matrix C)",
+    7: "its equality subproblem is rank-deficient", 8: "the line search found no descent (positive directional derivative)",
+    9: "the iteration limit (inverse.optimize.max_iterations) was reached",
+}
+
+
+def status_text(status: int) -> str:
+    """What an SLSQP exit status means, in words (`SLSQP_STATUS`).
+
+    Args:
+        status: SLSQP's exit mode.
+
+    Returns:
+        str: e.g. 'status 9: the iteration limit (inverse.optimize.max_iterations) was reached'.
+    """
+    return f"status {status}: {SLSQP_STATUS.get(status, 'an exit mode SciPy does not document')}"
+
+
+def accepted_mass(problem: FreePathProblem, x: np.ndarray) -> float:
+    """kg, the closed-form capacity of the path of x where the inverse kinematics accepts it with every arm's
+    manipulability above its margin and the bare object carried; else nan.
+
+    Args:
+        problem: the FreePathProblem.
+        x: (K·k,) the scaled offsets.
+
+    Returns:
+        float: kg, or nan.
+    """
+    e = problem.evaluate(x)
+    if e is None or np.min(problem._rows(e)[3], initial=np.inf) < 0.0:
+        return float("nan")
+    mass = affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~problem.res.passive).mass
+    return float(mass) if np.isfinite(mass) and mass >= 0.0 else float("nan")
+
+
 def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter: int):
-    """One SLSQP run from x0: (x, StartResult)."""
+    """One SLSQP run from x0: (x, StartResult), x the heaviest accepted point among its start, its iterates
+    and its end point (`accepted_mass`), so a run never ends below its start. It stops early when that
+    payload gained less than STALL_GAIN (relative) over the last STALL_ITERATIONS iterations: a converged
+    run by that criterion (on the Panda carry the capacity is nearly flat in the path, gravity-bound, and
+    SLSQP's infeasible iterates wander while the payload of its accepted ones no longer grows)."""
     from scipy.optimize import minimize
 
     t0, n0 = time.perf_counter(), problem.evaluations
+    x0 = np.asarray(x0, dtype=float)
     start = problem.capacity(x0)
     mu0 = max(0.0, start.mass) if start is not None and np.isfinite(start.mass) else 0.0
     ref = max(mu0, 1.0)                                  # μ in units of the start's capacity
@@ -594,21 +669,44 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
         J[:, -1] *= ref
         return J
 
+    m0 = accepted_mass(problem, x0)
+    best = {"x": x0, "mass": m0 if np.isfinite(m0) else -np.inf, "iterate": 0, "history": [m0], "stalled": False}
+
+    def watch(z):
+        x = z[:-1].copy()
+        m = accepted_mass(problem, x)
+        best["history"].append(m)
+        if np.isfinite(m) and m > best["mass"]:
+            best.update(x=x, mass=m, iterate=len(best["history"]) - 1)
+        h = np.array(best["history"])
+        if len(h) > STALL_ITERATIONS and np.isfinite(best["mass"]):
+            before = np.nanmax(np.append(h[:-STALL_ITERATIONS], -np.inf))
+            if before > -np.inf and best["mass"] <= before * (1 + STALL_GAIN):
+                best["stalled"] = True
+                raise StopIteration
+
     bound = [(-b, b) for b in problem.bounds] + [(0.0, None)]
-    iterates = [np.asarray(x0, dtype=float)]
     opt = minimize(lambda z: -z[-1], np.append(x0, mu0 / ref), jac=lambda z: np.append(np.zeros(len(z) - 1), -1.0),
                    method="SLSQP", bounds=bound,
                    constraints=[{"type": "ineq", "fun": lambda z: problem.constraints(*split(z)), "jac": jac}],
-                   options={"maxiter": max_iter, "ftol": 1e-9}, callback=lambda z: iterates.append(z[:-1].copy()))
-    x, message = opt.x[:-1], str(opt.message)
-    if problem.evaluate(x) is None:
-        k = last_accepted(problem, iterates)
-        x = iterates[k]
-        message += f"; its end point is refused by the inverse kinematics: the run ends at iterate {k}"
+                   options={"maxiter": max_iter, "ftol": 1e-9}, callback=watch)
+    end = accepted_mass(problem, opt.x[:-1])
+    if np.isfinite(end) and end >= best["mass"] * (1 - 1e-9):                  # its end point, unless lighter
+        best.update(x=opt.x[:-1].copy(), mass=end, iterate=int(opt.nit))
+    if best["stalled"]:
+        success, status = True, 0
+        message = (f"stopped: its payload gained less than {100 * STALL_GAIN:g} % over the last {STALL_ITERATIONS} "
+                   f"iterations (best at iterate {best['iterate']} of {int(opt.nit)})")
+    else:
+        success, status = bool(opt.success), int(opt.status)
+        message = status_text(status) + (f"; its best accepted point is iterate {best['iterate']}"
+                                          if best["iterate"] != int(opt.nit) else "")
+    x = best["x"]
     cap = problem.capacity(x)
     mass = cap.mass if cap is not None else float("nan")
-    return x, StartResult(index, float(mass), float(mu0 if start is not None else np.nan), bool(opt.success),
-                          int(opt.status), message, int(opt.nit), problem.evaluations - n0, time.perf_counter() - t0)
+    return x, StartResult(index, float(mass), float(mu0 if start is not None else np.nan), success, status, message,
+                          int(opt.nit), problem.evaluations - n0, time.perf_counter() - t0,
+                          control_points=problem.control_points)
 
 
 def last_accepted(problem: FreePathProblem, iterates: list) -> int:
@@ -693,14 +791,14 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
     straight = problem.capacity(np.zeros(problem.size))
     eval_s, jacobian_s = _timings(problem)
     total = (WEIGHT_ROUNDS if weights else 1) + (RETIME_ROUNDS if retime else 0)
-    runs, (mass, x, problem, best) = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
+    runs, (mass, x, problem, best), others = _law_stage(problem, weights, lambda f: _tell(progress, f * (total - (
         RETIME_ROUNDS if retime else 0)) / total))
     quintic = (problem.motion_of(x, om.output_dt), problem.capacity(x))
     rounds = []
     if retime:
         T = float(om.times[-1] - om.times[0]) if duration is None else float(duration)
         intervals = max(1, int(round((om.times[-1] - om.times[0]) / opt.sample_dt)))
-        x, rounds, runs = _retime_stage(problem, x, T, intervals, runs, progress, total)
+        x, rounds, runs = _retime_stage(problem, x, T, intervals, runs, progress, total, others)
     return PathOptimum(quintic[0], quintic[1], straight, problem.res, mode, best, tuple(runs), eval_s,
                        jacobian_s, problem.size, problem.motion_of(x, om.output_dt) if retime else None,
                        rounds[-1]["retiming"] if rounds else None, tuple(rounds), time.perf_counter() - t0)
@@ -712,37 +810,87 @@ def _tell(progress, fraction: float) -> None:
 
 
 def _law_stage(problem: FreePathProblem, weights: bool, progress):
-    """The path under the scenario's time law from every start (and the weights in turn): (runs, best),
-    best = (mass kg, x, problem, its StartResult): the converged run heaviest on the scenario's output_dt grid
-    (the optimiser's coarser grid can favour a path whose peak falls between its samples), else the heaviest."""
-    opt, runs, best = problem.model.inverse.optimize, [], None
+    """The path under the scenario's time law (and the weights in turn): (runs, best, others), best = (mass kg,
+    x, problem, its StartResult): the converged run heaviest on the scenario's output_dt grid (the optimiser's
+    coarser grid can favour a path whose peak falls between its samples), else the heaviest; others: the
+    offsets (on best's problem) of the other candidate paths for the retimed stage.
+
+    Continuation in K: with K > COARSE control points every start (the straight path and the random ones)
+    runs first on the COARSE-point problem (K·k/COARSE times fewer unknowns, each Jacobian as much cheaper),
+    and the best of them, refined exactly to K points (`FreePathProblem.refined`: a cubic B-spline space
+    holds every quadratic), starts the one K-point run and competes with its end point (and, retimed, in
+    the retimed stage: a path heavier under the scenario's law need not be heavier retimed)."""
+    opt, runs, best, others = problem.model.inverse.optimize, [], None, []
     rounds = WEIGHT_ROUNDS if weights else 1
     for rnd in range(rounds):
-        starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
-        for i, x0 in enumerate(starts):
-            x, run = _solve_start(problem, x0, len(runs), opt.max_iterations)
-            run = replace(run, scenario_grid_kg=problem.scenario_grid_capacity(x))
-            runs.append(run)
-            if np.isfinite(run.scenario_grid_kg) and (best is None or (run.success, run.scenario_grid_kg) > (
-                    best[3].success, best[0])):
-                best = (run.scenario_grid_kg, x, problem, run)     # a converged run before any other
-            progress((rnd + (i + 1) / len(starts)) / rounds)
-        if best is None:
-            raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")
+        levels = [k for k in COARSE if k < problem.control_points]
+        if rnd == 0 and levels:
+            stage = FreePathProblem(problem.model, problem.res, problem.mode, control_points=levels[0])
+            lead = _best_run(stage, _starts(stage, opt.starts, opt.seed), runs, None,
+                             lambda f: progress((rnd + 0.5 * f) / rounds))
+            leads = [(lead[1], stage.control_points)]
+            for i, k in enumerate(levels[1:] + [problem.control_points]):
+                fine = problem if k == problem.control_points else FreePathProblem(
+                    problem.model, problem.res, problem.mode, control_points=k)
+                x_lead = fine.refined(lead[1], stage.control_points)
+                lead = _best_run(fine, [x_lead], runs, (lead[0], x_lead, fine, lead[3]),
+                                 lambda f: progress((rnd + 0.5 + 0.5 * (i + f) / len(levels)) / rounds))
+                stage = fine
+                leads.append((lead[1], k))
+            best = lead
+            others = [problem.refined(x_k, k) for x_k, k in leads[:-1]]
+        else:
+            starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
+            best = _best_run(problem, starts, runs, best, lambda f: progress((rnd + f) / rounds))
         if weights and rnd < rounds - 1:
             w, _ = optimise_weights(best[2].evaluate(best[1]).prob, best[2].res, problem.model.motors, problem.mode)
             problem = FreePathProblem(problem.model, replace(problem.res, weights=w), problem.mode)
-    return runs, best
+    return runs, best, others
+
+
+def _best_run(problem: FreePathProblem, starts: list, runs: list, best, progress):
+    """One run from each start (appended to runs): the best of them and `best` (as `_law_stage` ranks them).
+
+    Raises:
+        PathOptimizationError: no run and no `best` ends on a path the inverse kinematics accepts.
+    """
+    for i, x0 in enumerate(starts):
+        x, run = _solve_start(problem, x0, len(runs), problem.model.inverse.optimize.max_iterations)
+        run = replace(run, scenario_grid_kg=problem.scenario_grid_capacity(x))
+        runs.append(run)
+        if np.isfinite(run.scenario_grid_kg) and (best is None or (run.success, run.scenario_grid_kg) > (
+                best[3].success, best[0])):
+            best = (run.scenario_grid_kg, x, problem, run)     # a converged run before any other
+        progress((i + 1) / len(starts))
+    if best is None:
+        raise PathOptimizationError("inverse.optimize: no start ends on a path the inverse kinematics accepts")
+    return best
 
 
 def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, intervals: int, runs: list,
-                  progress, total: int):
-    """Path and retimed law in turn from x: (x, rounds, runs); each round a dict of the retimed payload
-    (mass_kg, retiming) at the round's path and the fixed-law run that followed (its StartResult or None)."""
+                  progress, total: int, others: tuple = ()):
+    """Path and retimed law in turn from x (or the heaviest retimed of x and `others`): (x, rounds, runs); each
+    round a dict of the retimed payload (mass_kg, retiming) at the round's path and the fixed-law run that
+    followed (its StartResult or None). A round whose retimed payload is below the last one's is dropped and
+    the last one stands (the fixed-law run checks the law at its grid points only, the retiming also between
+    them, so a fixed-law gain may not survive retiming)."""
     model, res, mode = problem.model, problem.res, problem.mode
-    rounds = []
+    rounds, x_new = [], x
     for rnd in range(RETIME_ROUNDS):
-        mass, r = retimed_capacity(model, problem.motion_of(x), res, mode, duration, intervals)
+        if rnd == 0:
+            mass, r = retimed_capacity(model, problem.motion_of(x), res, mode, duration, intervals)
+            for other in others:
+                try:
+                    m_o, r_o = retimed_capacity(model, problem.motion_of(other), res, mode, duration, intervals)
+                except CoopsimError:
+                    continue
+                if m_o > mass:
+                    x, mass, r = other, m_o, r_o
+        else:
+            mass, r = retimed_capacity(model, problem.motion_of(x_new), res, mode, duration, intervals)
+            if not mass > rounds[-1]["mass_kg"]:
+                break                                    # the last round's path and law stand
+            x = x_new
         rounds.append({"mass_kg": mass, "retiming": r, "run": None})
         _tell(progress, (total - RETIME_ROUNDS + rnd + 0.5) / total)
         if rnd == RETIME_ROUNDS - 1:
@@ -754,5 +902,4 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
         _tell(progress, (total - RETIME_ROUNDS + rnd + 1) / total)
         if not (np.isfinite(run.capacity_kg) and run.capacity_kg > mass * (1 + 1e-9)):
             break                                        # no gain with the law held: the last retiming stands
-        x = x_new
     return x, rounds, runs

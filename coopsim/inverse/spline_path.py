@@ -94,6 +94,62 @@ def greville(control_points: int) -> np.ndarray:
     return np.array([t[i + 1:i + 1 + d].mean() for i in range(control_points + 2)])
 
 
+def basis_matrix(control_points: int, s: np.ndarray) -> np.ndarray:
+    """The values of the K + 2 B-spline basis functions (`knots`, `degree`) at the points s.
+
+    Args:
+        control_points: K >= 1.
+        s: (M,) path parameters in [0, 1].
+
+    Returns:
+        np.ndarray: (M, K + 2), row m the basis at s[m] (each row sums to 1).
+    """
+    from scipy.interpolate import BSpline
+
+    n = control_points + 2
+    return BSpline(knots(control_points), np.eye(n), degree(control_points))(np.asarray(s, dtype=float))
+
+
+def nested(coarse: int, fine: int) -> bool:
+    """Whether every B-spline of K = coarse interior control points is one of K = fine (the spaces nested).
+
+    K = 1 is a quadratic and K = 2 a cubic polynomial (no interior knot), in every space of degree 3;
+    otherwise the coarse interior knots must be among the fine ones (knot insertion, Boehm).
+
+    Args:
+        coarse: K >= 1 of the given spline.
+        fine: K >= 1 of the refined one.
+
+    Returns:
+        bool.
+    """
+    if fine < coarse or degree(fine) < degree(coarse):
+        return False
+    if coarse == fine or coarse <= 2:
+        return True
+    inner = knots(fine)[degree(fine) + 1:-degree(fine) - 1]
+    return all(np.any(np.abs(inner - k) < 1e-12) for k in knots(coarse)[degree(coarse) + 1:-degree(coarse) - 1])
+
+
+def refinement(coarse: int, fine: int) -> np.ndarray:
+    """The linear map from a spline's K = coarse + 2 control points to those of K = fine + 2 that interpolate
+    it at the fine knots' Greville abscissae (where the fine basis is unisolvent, Schoenberg–Whitney).
+
+    Where the spaces are `nested` (degree elevation of K = 1, 2; knot insertion otherwise) the fine spline is
+    the coarse one itself, to rounding; elsewhere it is the interpolant. The ends map to the ends (both
+    splines are clamped) and a straight path to the straight path; every row sums to 1.
+
+    Args:
+        coarse: K >= 1 of the given spline.
+        fine: K >= 1 of the refined one.
+
+    Returns:
+        np.ndarray: (fine + 2, coarse + 2): c_fine = M c_coarse, per coordinate.
+    """
+    xi = greville(fine)
+    return np.linalg.solve(basis_matrix(fine, xi), basis_matrix(coarse, xi))
+
+
 def end_rotation_vector(motion: ObjectMotion) -> np.ndarray:
     """log(R₁R₀ᵀ) (3,) rad, world axes: the rotation vector from the first waypoint's orientation to the last's.
 
