@@ -395,8 +395,9 @@ def _cmd_optimize(args) -> int:
         if free is not None and not free.optimum.best.success:
             bar.close()
             best = free.optimum.best
-            raise PathOptimizationError(f"optimize --path: the optimiser did not converge (SLSQP status {best.status}: "
-                                        f"{best.message}); nothing written")
+            raise PathOptimizationError(f"optimize --path: the free-path optimiser did not converge: its best run "
+                                        f"(K = {best.control_points}, {best.iterations} iteration{'' if best.iterations == 1 else 's'}) ended with SLSQP "
+                                        f"{best.message}; nothing written")
         free_rep = path_replay(free, progress=bar) if args.replay and free is not None else None
         rep_closed, free_closed = (None if r is None else closed_replay_of(model, r, args.closed_loop)
                                    for r in (rep, free_rep))

@@ -607,26 +607,30 @@ class FreePathProblem:
 
 STALL_GAIN = 1e-3         # a run stops when its best accepted payload gained less than this, relative,
 STALL_ITERATIONS = 6      # over this many iterations
+STALL_FROM = 2            # on a path of at least this many control points (the K = 1 starts run to convergence)
 SLSQP_STATUS = {          # scipy's SLSQP exit modes, worded for a user
     0: "converged", 2: "more equality constraints than unknowns",
     3: "its least-squares subproblem took more than 3 n iterations",
     4: "the linearised constraints are incompatible (no step satisfies them)",
     5: "its least-squares subproblem is singular (matrix E)", 6: "its least-squares subproblem is singular (matrix C)",
     7: "its equality subproblem is rank-deficient", 8: "the line search found no descent (positive directional derivative)",
-    9: "the iteration limit (inverse.optimize.max_iterations) was reached",
+    9: "the iteration limit was reached",
 }
 
 
-def status_text(status: int) -> str:
+def status_text(status: int, max_iterations: int | None = None) -> str:
     """What an SLSQP exit status means, in words (`SLSQP_STATUS`).
 
     Args:
         status: SLSQP's exit mode.
+        max_iterations: the run's iteration limit, named with status 9; None: not named.
 
     Returns:
-        str: e.g. 'status 9: the iteration limit (inverse.optimize.max_iterations) was reached'.
+        str: e.g. 'status 9: the iteration limit was reached (inverse.optimize.max_iterations: 100)'.
     """
-    return f"status {status}: {SLSQP_STATUS.get(status, 'an exit mode SciPy does not document')}"
+    text = f"status {status}: {SLSQP_STATUS.get(status, 'an exit mode SciPy does not document')}"
+    return text + (f" (inverse.optimize.max_iterations: {max_iterations})"
+                   if status == 9 and max_iterations is not None else "")
 
 
 def accepted_mass(problem: FreePathProblem, x: np.ndarray) -> float:
@@ -679,7 +683,7 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
         if np.isfinite(m) and m > best["mass"]:
             best.update(x=x, mass=m, iterate=len(best["history"]) - 1)
         h = np.array(best["history"])
-        if len(h) > STALL_ITERATIONS and np.isfinite(best["mass"]):
+        if problem.control_points >= STALL_FROM and len(h) > STALL_ITERATIONS and np.isfinite(best["mass"]):
             before = np.nanmax(np.append(h[:-STALL_ITERATIONS], -np.inf))
             if before > -np.inf and best["mass"] <= before * (1 + STALL_GAIN):
                 best["stalled"] = True
@@ -699,7 +703,7 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
                    f"iterations (best at iterate {best['iterate']} of {int(opt.nit)})")
     else:
         success, status = bool(opt.success), int(opt.status)
-        message = status_text(status) + (f"; its best accepted point is iterate {best['iterate']}"
+        message = status_text(status, max_iter) + (f"; its best accepted point is iterate {best['iterate']}"
                                           if best["iterate"] != int(opt.nit) else "")
     x = best["x"]
     cap = problem.capacity(x)
@@ -873,7 +877,8 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
     round a dict of the retimed payload (mass_kg, retiming) at the round's path and the fixed-law run that
     followed (its StartResult or None). A round whose retimed payload is below the last one's is dropped and
     the last one stands (the fixed-law run checks the law at its grid points only, the retiming also between
-    them, so a fixed-law gain may not survive retiming)."""
+    them, so a fixed-law gain may not survive retiming). Where the inverse kinematics (or the joint-range check
+    between the law's grid points) refuses the path under the law, the round has a "note" and no run."""
     model, res, mode = problem.model, problem.res, problem.mode
     rounds, x_new = [], x
     for rnd in range(RETIME_ROUNDS):
@@ -895,7 +900,14 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
         _tell(progress, (total - RETIME_ROUNDS + rnd + 0.5) / total)
         if rnd == RETIME_ROUNDS - 1:
             break
-        fixed = FreePathProblem(model, res, mode, law=r.law)
+        try:
+            fixed = FreePathProblem(model, res, mode, law=r.law)
+        except PathOptimizationError:                    # the straight path under the law: the manipulability's base
+            fixed = None
+        if fixed is None or fixed.evaluate(x) is None:
+            rounds[-1]["note"] = ("no fixed-law pass: the path under the retimed law is refused by the inverse "
+                                  "kinematics or its joint-range check between the law's grid points")
+            break
         x_new, run = _solve_start(fixed, x, len(runs), problem.model.inverse.optimize.max_iterations)
         runs.append(run)
         rounds[-1]["run"] = run

@@ -249,7 +249,7 @@ def path_summary(study: PathStudy) -> dict:
                                                    for i, r in enumerate(o.starts)],
                    "starts": study.model.inverse.optimize.starts, "seed": study.model.inverse.optimize.seed,
                    "retime_rounds": [{"mass_kg": r["mass_kg"], "duration_s": r["retiming"].duration}
-                                     for r in o.retime_rounds]},
+                                     | ({"note": r["note"]} if "note" in r else {}) for r in o.retime_rounds]},
         "gradient": {"evaluation_s": o.eval_s, "jacobian_s": o.jacobian_s,
                      "jacobian_evaluations": o.unknowns + 1, "method": "forward differences"},
         "checks": study.checks,

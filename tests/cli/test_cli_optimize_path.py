@@ -56,7 +56,8 @@ def test_optimize_path_writes_one_set(workdir):
     (["--path", "--weights", "--method", "nonsqueezing"], {},
      "coopsim: error: --weights: the energy weights are the minimum energy's; give --method min_energy"),
     (["--path", "--method", "paper"], {"max_iterations": 1},
-     "coopsim: error: optimize --path: the optimiser did not converge (SLSQP status 9: Iteration limit reached)"),
+     "coopsim: error: optimize --path: the free-path optimiser did not converge: its best run (K = 1, 1 iteration) "
+     "ended with SLSQP status 9: the iteration limit was reached (inverse.optimize.max_iterations: 1)"),
 ])
 def test_bad_input_or_no_convergence_is_one_line_and_writes_nothing(workdir, args, optimize, message):
     out = run_cli("optimize", _scenario(workdir, **optimize), *args, "--out", "res", cwd=workdir)
