@@ -16,11 +16,19 @@ with τ(μ) = a + μ b the resolution's torques (`coopsim.inverse.capacity.affin
 divided by the motor's stall torque. Loop closure, reach, joint ranges and singularity crossings come
 with the closed-chain inverse kinematics of the path (`object_motion_trajectory`), the joint ranges also
 between its samples (`check_ranges_between`): a path it refuses is an infeasible point (every constraint
-−1), and a run that ends on one ends at its last accepted iterate (`last_accepted`). SciPy's SLSQP (sequential quadratic programming on dense
-Jacobians: the problem has tens of unknowns and thousands of rows) solves it from the straight path and
-from random starts (fixed seed); the constraint Jacobian in δ is by forward differences of the whole
-chain (IK, compiled inverse dynamics, distribution), in μ exact. The best start is the converged one whose
-capacity, recomputed in closed form at its end point on the object motion's output_dt grid, is largest.
+−1). SciPy's SLSQP (sequential quadratic programming on dense Jacobians: the problem has tens of unknowns
+and thousands of rows) solves it; the constraint Jacobian in δ is by forward differences of the whole
+chain (IK, compiled inverse dynamics, distribution), in μ exact. A run ends at its heaviest accepted point
+(`accepted_mass`: IK accepted, manipulability above its margin), its start included, so it never ends
+below its start; from two control points on it also stops when that payload gained less than STALL_GAIN
+over STALL_ITERATIONS iterations (where the capacity is nearly flat in the path SLSQP's slightly
+infeasible iterates otherwise walk on to its iteration limit).
+
+Continuation in K (`_law_stage`): the straight path and the random starts (fixed seed) run on one interior
+control point (a quadratic B-spline, k unknowns), the best of them is refined to 2 and then to K points
+(`FreePathProblem.refined`, the same curve: a cubic B-spline space holds every quadratic and cubic) and
+each refinement starts one run there. The best is the converged point whose capacity, recomputed in closed
+form on the object motion's output_dt grid, is largest (a refined start competes with its run's end point).
 
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
 paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
@@ -708,27 +716,9 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
     x = best["x"]
     cap = problem.capacity(x)
     mass = cap.mass if cap is not None else float("nan")
-    return x, StartResult(index, float(mass), float(mu0 if start is not None else np.nan), success, status, message,
+    return x, StartResult(index, float(mass), float(start.mass if start is not None else np.nan), success, status, message,
                           int(opt.nit), problem.evaluations - n0, time.perf_counter() - t0,
                           control_points=problem.control_points)
-
-
-def last_accepted(problem: FreePathProblem, iterates: list) -> int:
-    """The last of an optimiser run's iterates whose path the inverse kinematics accepts with every arm's
-    manipulability above its margin (the run's start, 0, when none after it is).
-
-    Args:
-        problem: the FreePathProblem.
-        iterates: the run's iterates x (K·k,), its start first (accepted).
-
-    Returns:
-        int: that iterate's index.
-    """
-    for k in range(len(iterates) - 1, 0, -1):
-        e = problem.evaluate(iterates[k])
-        if e is not None and np.min(problem._rows(e)[3]) >= 0.0:
-            return k
-    return 0
 
 
 def _starts(problem: FreePathProblem, count: int, seed: int) -> list[np.ndarray]:

@@ -12,8 +12,10 @@ import pytest
 from coopsim.dynamics.kinematics import arm_pose, ee_jacobian
 from coopsim.io.robots import robots_folder
 from coopsim.inverse.capacity import brute_force_check, method_capacity
-from coopsim.inverse.free_path import (JOINT_MARGIN, FreePathProblem, check_ranges_between, last_accepted, optimize_path,
-                                      spline_joint_path)
+from coopsim.inverse import free_path
+from coopsim.inverse.free_path import (JOINT_MARGIN, FreePathProblem, accepted_mass, check_ranges_between, optimize_path,
+                                      spline_joint_path, status_text)
+from coopsim.inverse.spline_path import BSplinePath
 from coopsim.inverse.trajectory import TrajectoryError, trajectory_at_times, JointTrajectory
 from coopsim.inverse.path import path_grid
 from coopsim.inverse.problem import inverse_problem
@@ -130,19 +132,76 @@ def test_a_refused_free_path_names_the_path_parameter():
     assert "t=" not in str(e.value)
 
 
-def test_a_run_ending_on_a_refused_path_ends_at_its_last_accepted_iterate():
-    """Iterates of a run on the one-via-point carry: the straight path, two small offsets, one whose via point
-    leaves the arms' reach (0.5 × 1.25 m in y), one accepted by the inverse kinematics below the manipulability
-    margin (0.4 × 1.25 m in x: the arms near stretched), one out of reach again: the last accepted is the
-    second offset; with none after the start, the start."""
+def test_accepted_mass_is_the_capacity_where_the_path_is_accepted():
+    """Points of the one-via-point carry: the straight path, two small offsets, one whose via point leaves
+    the arms' reach (0.5 × 1.25 m in y), one accepted by the inverse kinematics below the manipulability
+    margin (0.4 × 1.25 m in x: the arms near stretched), one out of reach again: the accepted ones carry
+    their closed-form capacity, the others nan."""
     m = _one_via_point()
     problem = FreePathProblem(m, resolution_for(m, "paper"), "payload")
-    iterates = [np.zeros(3), np.array([0.004, -0.006, 0.03]), np.array([0.002, 0.003, -0.02]),
-                np.array([0.0, 0.5, 0.0]), np.array([0.4, 0.0, 0.0]), np.array([0.5, 0.5, 0.0])]
-    assert [problem.evaluate(x) is None for x in iterates] == [False, False, False, True, False, True]
-    assert np.min(problem._rows(problem.evaluate(iterates[4]))[3]) < 0
-    assert last_accepted(problem, iterates) == 2
-    assert last_accepted(problem, iterates[:1] + iterates[3:]) == 0
+    points = [np.zeros(3), np.array([0.004, -0.006, 0.03]), np.array([0.002, 0.003, -0.02]),
+              np.array([0.0, 0.5, 0.0]), np.array([0.4, 0.0, 0.0]), np.array([0.5, 0.5, 0.0])]
+    assert [problem.evaluate(x) is None for x in points] == [False, False, False, True, False, True]
+    assert np.min(problem._rows(problem.evaluate(points[4]))[3]) < 0
+    masses = [accepted_mass(problem, x) for x in points]
+    assert np.isnan(masses[3:]).all()
+    assert masses[:3] == [problem.capacity(x).mass for x in points[:3]]
+
+
+def test_a_run_ends_at_its_heaviest_accepted_point(monkeypatch):
+    """From a turned via point (0.6 rad) on the one-via-point carry with 3 iterations, SLSQP's iterates go
+    up and down (measured: 135, 534, 418, 462 kg): the run ends at the heaviest of its start, iterates and
+    end point by `accepted_mass` recomputed here on every point the SLSQP callback and result show, so
+    never below its start."""
+    import scipy.optimize
+
+    seen, minimize = [], scipy.optimize.minimize
+
+    def recording(*args, **kwargs):
+        inner = kwargs["callback"]
+        kwargs["callback"] = lambda z: (seen.append(z[:-1].copy()), inner(z))
+        out = minimize(*args, **kwargs)
+        seen.append(out.x[:-1].copy())
+        return out
+
+    monkeypatch.setattr(scipy.optimize, "minimize", recording)
+    m = _one_via_point()
+    problem = FreePathProblem(m, resolution_for(m, "paper"), "payload")
+    x0 = np.array([0.0, 0.0, -0.6])
+    x, run = free_path._solve_start(problem, x0, 0, 3)
+    masses = np.array([accepted_mass(problem, p) for p in [x0] + seen])
+    assert run.capacity_kg == problem.capacity(x).mass == np.nanmax(masses)
+    assert run.capacity_kg >= run.start_capacity_kg == masses[0]
+    assert np.nanmin(masses[1:]) < 0.95 * run.capacity_kg                 # the case exercises the choice
+    assert run.status == 9 and "iteration limit" in run.message
+
+
+def test_continuation_refines_the_coarse_optimum_into_the_same_path():
+    """The K = 1 optimum's offsets refined to K = 4 (`FreePathProblem.refined`): the same path at 501 s to
+    1e-12 m, the same capacity to 1e-9 relative (the IK's Newton tolerance, 1e-13, on the same samples);
+    and `optimize_path` with K = 4 ends no lower on the scenario's grid than any of its K = 1 and K = 2 runs
+    (continuation: the refined start competes with its run's end)."""
+    m1 = _one_via_point()
+    m4 = _one_via_point(control_points=4, starts=2)
+    coarse = FreePathProblem(m1, resolution_for(m1, "paper"), "payload")
+    fine = FreePathProblem(m4, resolution_for(m4, "paper"), "payload")
+    x = np.array([0.004, -0.006, 0.03])
+    xf = fine.refined(x, 1)
+    s = np.linspace(0.0, 1.0, 501)
+    a, b = BSplinePath(coarse.motion_of(x)).at(s), BSplinePath(fine.motion_of(xf)).at(s)
+    assert max(np.max(np.abs(u - v)) for u, v in zip(a, b)) <= 1e-12
+    assert fine.capacity(xf).mass == pytest.approx(coarse.capacity(x).mass, rel=1e-9)
+    opt = optimize_path(m4, "paper", retime=False)
+    assert [r.control_points for r in opt.starts] == [1, 1, 2, 4]
+    assert len(opt.motion.path.positions) == 4
+    assert opt.best.scenario_grid_kg >= max(r.scenario_grid_kg for r in opt.starts)
+    assert opt.capacity.mass >= opt.straight.mass
+
+
+def test_slsqp_status_in_words():
+    assert status_text(9, 40) == "status 9: the iteration limit was reached (inverse.optimize.max_iterations: 40)"
+    assert status_text(8).startswith("status 8: the line search found no descent")
+    assert status_text(42) == "status 42: an exit mode SciPy does not document"
 
 
 def test_a_joint_passing_its_range_between_samples_is_refused():

@@ -6,7 +6,8 @@ import pytest
 
 from coopsim.core.model import ObjectMotion, PathSpline
 from coopsim.core.spatial import rot_log, rpy_to_rot
-from coopsim.inverse.spline_path import BSplinePath, greville, knots, straight_control_points
+from coopsim.inverse.spline_path import (BSplinePath, greville, knots, nested, refinement, spline_arrays,
+                                        straight_control_points)
 from coopsim.inverse.trajectory import object_motion_at
 
 H = 1e-5     # central differences: truncation O(h²) ~ 1e-10 × the third derivative, rounding ~ 1e-16/h
@@ -82,3 +83,39 @@ def test_object_motion_at_follows_the_spline_with_its_time_law():
         assert ac == pytest.approx((twu - twd) / (2 * H), abs=1e-7)
     for t in m.times:
         assert np.max(np.abs(object_motion_at(m, t)[2])) < 1e-15
+
+
+def _refined_motion(m: ObjectMotion, fine: int) -> ObjectMotion:
+    """The motion whose path has `fine` interior control points: `refinement` applied to the coefficients
+    [p − p₀, φ] of m's path (its end rows must come back as the ends)."""
+    _, C, _ = spline_arrays(m)
+    F = refinement(len(m.path.positions), fine) @ C
+    assert F[0] == pytest.approx(C[0], abs=1e-15) and F[-1] == pytest.approx(C[-1], abs=1e-14)
+    return ObjectMotion(m.times, m.positions, m.rotations, m.time_law, m.output_dt,
+                        path=PathSpline("bspline", m.positions[0] + F[1:-1, :3], F[1:-1, 3:]))
+
+
+@pytest.mark.parametrize("coarse,fine", [(1, 2), (1, 4), (2, 4), (3, 5), (4, 7), (4, 4)])
+def test_refinement_of_nested_splines_is_the_same_path(coarse, fine):
+    """Degree elevation (K = 1, 2: one polynomial piece) and knot insertion (K = 3 → 5, 4 → 7: the coarse
+    knots among the fine ones): the refined path, evaluated by scipy's BSpline on its own knots, is the
+    coarse one at 1001 points, with its s-derivatives and orientation, to 1e-12 (a 9 × 9 collocation solve
+    on the Greville abscissae, values and derivatives of order 1–10: rounding ~1e-14)."""
+    m = _motion(coarse)
+    assert nested(coarse, fine)
+    s = np.linspace(0.0, 1.0, 1001)
+    a, b = BSplinePath(m).at(s), BSplinePath(_refined_motion(m, fine)).at(s)
+    for x, y in zip(a, b):
+        assert np.max(np.abs(x - y)) <= 1e-12
+
+
+def test_refinement_of_a_spline_not_in_the_finer_space_interpolates_it():
+    """K = 3 (knot 1/2) is no spline on the knots 1/3, 2/3 of K = 4: the refinement meets the coarse path at
+    the fine Greville abscissae (to 1e-13) and differs from it between them (by more than 1 mm here)."""
+    m = _motion(3)
+    assert not nested(3, 4) and not nested(4, 3) and nested(1, 6) and not nested(2, 1)
+    f = _refined_motion(m, 4)
+    xi = greville(4)
+    assert np.max(np.abs(BSplinePath(m).at(xi).p - BSplinePath(f).at(xi).p)) <= 1e-13
+    s = np.linspace(0.0, 1.0, 201)
+    assert np.max(np.abs(BSplinePath(m).at(s).p - BSplinePath(f).at(s).p)) > 1e-3
