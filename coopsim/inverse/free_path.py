@@ -614,7 +614,7 @@ class FreePathProblem:
 
 
 STALL_GAIN = 1e-3         # a run stops when its best accepted payload gained less than this, relative,
-STALL_ITERATIONS = 6      # over this many iterations
+STALL_ITERATIONS = 15     # over this many iterations
 STALL_FROM = 2            # on a path of at least this many control points (the K = 1 starts run to convergence)
 SLSQP_STATUS = {          # scipy's SLSQP exit modes, worded for a user
     0: "converged", 2: "more equality constraints than unknowns",
