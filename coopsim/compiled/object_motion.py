@@ -39,6 +39,8 @@ from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.core.model import PRISMATIC
 
 OK, OUT_OF_REACH, SINGULAR, NOT_CONVERGED, OFF_PLANE, CROSSES, STEP_COLLAPSED = range(7)
+ODE_STEPS = 10_000            # the redundancy ODE's step attempts in one pass, at least (then STEP_COLLAPSED)
+ODE_STEPS_PER_SAMPLE = 50     # and at least this many per sample
 
 
 @entry
@@ -441,7 +443,10 @@ def redundant_pass(P, W, L, tab, S, mo, red, idx, first, reach_lim, t_out, guess
     h_abs·max(0.2, 0.9 err^(−1/8)) after a rejected one, the step cut to end on t_b; each sample in
     [t_a, t_b) (the last segment: to its end) taken from the dense output of the first step ending at or
     after it, then put on the grasps (`redundant_sample`); the segment's end state put on the grasps
-    starts the next one.
+    starts the next one. The pass stops with STEP_COLLAPSED when a step falls below 10 ulp of t (info's
+    second number 0) or after max(ODE_STEPS, ODE_STEPS_PER_SAMPLE × samples) step attempts (that budget
+    there): near a singularity the ODE turns stiff and can take 10⁵ steps before its step collapses
+    (the reference, without a budget, reaches the collapse).
 
     Args:
         P: the compiled model (PackedModel StructRef, read only).
@@ -469,6 +474,7 @@ def redundant_pass(P, W, L, tab, S, mo, red, idx, first, reach_lim, t_out, guess
     """
     n_s, ts, s = len(t_out), mo.times, tab.stages
     expo = -1.0 / (tab.err_order + 1)
+    budget, attempts = max(ODE_STEPS, ODE_STEPS_PER_SAMPLE * n_s), 0
     copy1(guess, B.y)
     st = on_grasp(P, W, S, mo, red, first, reach_lim, t_out[0], 0, B, tol, max_iter, plane_tol, info, where)
     if st != OK:
@@ -492,6 +498,9 @@ def redundant_pass(P, W, L, tab, S, mo, red, idx, first, reach_lim, t_out, guess
             while True:
                 if h_abs < min_step:
                     return fail(STEP_COLLAPSED, 0, i, t, B, h_abs, 0.0, 0.0, info, where)
+                attempts += 1
+                if attempts > budget:
+                    return fail(STEP_COLLAPSED, 0, i, t, B, h_abs, float(budget), 0.0, info, where)
                 t_new = min(t + h_abs, tb)
                 h = t_new - t
                 h_abs = abs(h)

@@ -497,12 +497,13 @@ def _compiled_motion(model: Model, motion: ObjectMotion, t_out, guess, redundant
                                spline=spline)
     if sol.status == om.OK:
         return sol.q, sol.qd, sol.qdd
-    m, (a, _) = sol.arm, sol.values
+    m, (a, b) = sol.arm, sol.values
     reason = {om.OUT_OF_REACH: "reach", om.NOT_CONVERGED: "newton", om.OFF_PLANE: "plane", om.CROSSES: "crosses",
               om.SINGULAR: "singular_redundant" if m in redundant else "singular"}.get(sol.status)
     if reason is None:
         reason = "integration"
-    raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev, parameter=parameter)
+    detail = f"more than {b:.0f} steps" if reason == "integration" and b > 0 else ""
+    raise _failure(model, reason, m, sol.t, sol.p_C, a, reach[m], sol.t_prev, detail, parameter=parameter)
 
 
 def _at(parameter: str, t: float) -> str:
@@ -516,7 +517,8 @@ def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.
     wording of both engines. reason: 'reach' (value: the grasp's distance), 'newton' (value: max |S e|
     left, or detail: the solver's own words), 'singular' / 'singular_redundant' (value: σ_min/σ_max), 'plane'
     (value: the full pose error), 'crosses' (between t_prev and t), 'integration' (the redundant arms' ODE
-    stopped). parameter: 't' (t is a time) or 's' (a path parameter: `object_motion_samples`)."""
+    stopped; detail: why, else its step size collapsed). parameter: 't' (t is a time) or 's' (a path
+    parameter: `object_motion_samples`)."""
     name = model.arms[m].name
     at, before = _at(parameter, t), _at(parameter, t_prev)
     where = f"at {at} (object at [{', '.join(f'{x:.4g}' for x in p_C)}] m)"
@@ -530,7 +532,7 @@ def _failure(model: Model, reason: str, m: int, t: float, p_C, value: float = 0.
             "plane": lambda: f"inverse.object_motion: at {at} the grasp of arm {name!r} leaves the plane of "
                              f"motion by {value:.3g} (m or rad)",
             "integration": lambda: f"inverse.object_motion: the redundancy resolution's integration failed at "
-                                   f"{at} (step size collapsed)",
+                                   f"{at} ({detail or 'step size collapsed'})",
             "crosses": lambda: f"inverse.object_motion: arm {name!r} crosses a singularity between {before} "
                                f"and {at} (det S J changes sign)"}[reason]()
     return TrajectoryError(text)

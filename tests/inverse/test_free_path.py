@@ -224,3 +224,18 @@ def test_a_joint_passing_its_range_between_samples_is_refused():
     with pytest.raises(TrajectoryError, match=r"^inverse\.optimize: between 0\.2 and 0\.4 arm 1 .*joint 3 may come "
                                               r"within 1e-06 of its range \[-0\.99, 0\.99\]"):
         check_ranges_between(replace(m, joint_range=narrow), t, q, qd, qdd)
+
+
+@pytest.mark.skipif(robots_folder() is None, reason="example-robot-data is not installed")
+def test_a_stiff_redundancy_ode_stops_at_its_step_budget():
+    """A Panda carry path SLSQP reached (K = 1, paper W⁺, its offsets at their bounds): the redundancy ODE turns
+    stiff near a singularity and, without a budget, ran 4.7-6.3 s to its step-size collapse; the compiled
+    pass stops it after max(10 000, 50 × samples) step attempts (here 10 000, 31 samples) with that reason."""
+    from coopsim.compiled.object_motion import ODE_STEPS
+    from coopsim.inverse.free_path import evaluate_motion
+
+    m = model("robots/panda_ceiling_carry")
+    problem = FreePathProblem(m, resolution_for(m, "paper"), "payload", control_points=1)
+    x = np.array([0.5, 0.5, -0.1708011961256875, -0.5063840506485718, 0.7853981633974483, 0.2406830246843173])
+    with pytest.raises(TrajectoryError, match=f"integration failed at t=1\\.\\d+ s \\(more than {ODE_STEPS} steps\\)"):
+        evaluate_motion(m, problem.motion_of(x), problem.res, problem.mode)
