@@ -27,7 +27,7 @@ infeasible iterates otherwise walk on to its iteration limit).
 Continuation in K (`_law_stage`): the straight path and the random starts (fixed seed) run on one interior
 control point (a quadratic B-spline, k unknowns), the best of them is refined to 2 and then to K points
 (`FreePathProblem.refined`, the same curve: a cubic B-spline space holds every quadratic and cubic) and
-each refinement starts one run there. The best is the converged point whose capacity, recomputed in closed
+each refinement starts one run there; the straight path also runs on K points. The best is the converged point whose capacity, recomputed in closed
 form on the object motion's output_dt grid, is largest (a refined start competes with its run's end point).
 
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
@@ -809,11 +809,13 @@ def _law_stage(problem: FreePathProblem, weights: bool, progress):
     coarser grid can favour a path whose peak falls between its samples), else the heaviest; others: the
     offsets (on best's problem) of the other candidate paths for the retimed stage.
 
-    Continuation in K: with K > COARSE control points every start (the straight path and the random ones)
-    runs first on the COARSE-point problem (K·k/COARSE times fewer unknowns, each Jacobian as much cheaper),
-    and the best of them, refined exactly to K points (`FreePathProblem.refined`: a cubic B-spline space
-    holds every quadratic), starts the one K-point run and competes with its end point (and, retimed, in
-    the retimed stage: a path heavier under the scenario's law need not be heavier retimed)."""
+    Continuation in K: with K > COARSE[0] control points every start (the straight path and the random
+    ones) runs first on COARSE[0] points (k unknowns for K·k, each Jacobian as much cheaper); the best of
+    them, refined to each following level of COARSE and then to K (`FreePathProblem.refined`: the same
+    curve, a cubic B-spline space holding every quadratic and cubic), starts one run there and competes with
+    its end point; then the straight path runs on K points too (on the Panda carry's paper W⁺ it finds an
+    optimum the refined one does not). Every level's best and the straight run's end are candidates of the
+    retimed stage (a path heavier under the scenario's law need not be heavier retimed)."""
     opt, runs, best, others = problem.model.inverse.optimize, [], None, []
     rounds = WEIGHT_ROUNDS if weights else 1
     for rnd in range(rounds):
@@ -828,11 +830,14 @@ def _law_stage(problem: FreePathProblem, weights: bool, progress):
                     problem.model, problem.res, problem.mode, control_points=k)
                 x_lead = fine.refined(lead[1], stage.control_points)
                 lead = _best_run(fine, [x_lead], runs, (lead[0], x_lead, fine, lead[3]),
-                                 lambda f: progress((rnd + 0.5 + 0.5 * (i + f) / len(levels)) / rounds))
+                                 lambda f: progress((rnd + 0.5 + 0.3 * (i + f) / len(levels)) / rounds))
                 stage = fine
                 leads.append((lead[1], k))
-            best = lead
-            others = [problem.refined(x_k, k) for x_k, k in leads[:-1]]
+            ends = []
+            best = _best_run(problem, [np.zeros(problem.size)], runs, lead, lambda f: progress((rnd + 1) / rounds),
+                             ends)                       # the straight path on K points too
+            others = [problem.refined(x_k, k) for x_k, k in leads[:-1]] + [leads[-1][0], ends[0]]
+            others = [x for x in others if x is not best[1]]
         else:
             starts = _starts(problem, opt.starts, opt.seed) if rnd == 0 else [best[1]]
             best = _best_run(problem, starts, runs, best, lambda f: progress((rnd + f) / rounds))
@@ -842,8 +847,9 @@ def _law_stage(problem: FreePathProblem, weights: bool, progress):
     return runs, best, others
 
 
-def _best_run(problem: FreePathProblem, starts: list, runs: list, best, progress):
-    """One run from each start (appended to runs): the best of them and `best` (as `_law_stage` ranks them).
+def _best_run(problem: FreePathProblem, starts: list, runs: list, best, progress, ends: list | None = None):
+    """One run from each start (appended to runs, its end point to `ends` if given): the best of them and
+    `best` (as `_law_stage` ranks them).
 
     Raises:
         PathOptimizationError: no run and no `best` ends on a path the inverse kinematics accepts.
@@ -852,6 +858,8 @@ def _best_run(problem: FreePathProblem, starts: list, runs: list, best, progress
         x, run = _solve_start(problem, x0, len(runs), problem.model.inverse.optimize.max_iterations)
         run = replace(run, scenario_grid_kg=problem.scenario_grid_capacity(x))
         runs.append(run)
+        if ends is not None:
+            ends.append(x)
         if np.isfinite(run.scenario_grid_kg) and (best is None or (run.success, run.scenario_grid_kg) > (
                 best[3].success, best[0])):
             best = (run.scenario_grid_kg, x, problem, run)     # a converged run before any other

@@ -179,10 +179,10 @@ def test_a_run_ends_at_its_heaviest_accepted_point(monkeypatch):
 def test_continuation_refines_the_coarse_optimum_into_the_same_path():
     """The K = 1 optimum's offsets refined to K = 4 (`FreePathProblem.refined`): the same path at 501 s to
     1e-12 m, the same capacity to 1e-9 relative (the IK's Newton tolerance, 1e-13, on the same samples);
-    and `optimize_path` with K = 4 ends no lower on the scenario's grid than any of its K = 1 and K = 2 runs
-    (continuation: the refined start competes with its run's end)."""
+    and `optimize_path` with K = 4 ends no lower on the scenario's grid than any of its runs (K = 1 starts,
+    the refined K = 2 and K = 4 runs, the straight path on K = 4; a refined start competes with its run's end)."""
     m1 = _one_via_point()
-    m4 = _one_via_point(control_points=4, starts=2)
+    m4 = _one_via_point(control_points=4)
     coarse = FreePathProblem(m1, resolution_for(m1, "paper"), "payload")
     fine = FreePathProblem(m4, resolution_for(m4, "paper"), "payload")
     x = np.array([0.004, -0.006, 0.03])
@@ -192,7 +192,8 @@ def test_continuation_refines_the_coarse_optimum_into_the_same_path():
     assert max(np.max(np.abs(u - v)) for u, v in zip(a, b)) <= 1e-12
     assert fine.capacity(xf).mass == pytest.approx(coarse.capacity(x).mass, rel=1e-9)
     opt = optimize_path(m4, "paper", retime=False)
-    assert [r.control_points for r in opt.starts] == [1, 1, 2, 4]
+    assert [r.control_points for r in opt.starts] == [1, 2, 4, 4]             # the last: the straight path
+    assert opt.starts[-1].start_capacity_kg == pytest.approx(opt.straight.mass, rel=1e-12)
     assert len(opt.motion.path.positions) == 4
     assert opt.best.scenario_grid_kg >= max(r.scenario_grid_kg for r in opt.starts)
     assert opt.capacity.mass >= opt.straight.mass
