@@ -39,7 +39,8 @@ from coopsim.compiled.toolchain.jit import entry, kernel
 from coopsim.core.model import PRISMATIC
 
 OK, OUT_OF_REACH, SINGULAR, NOT_CONVERGED, OFF_PLANE, CROSSES, STEP_COLLAPSED = range(7)
-ODE_STEPS = 10_000            # the redundancy ODE's step attempts in one pass, at least (then STEP_COLLAPSED)
+ODE_STEPS = 2_000             # the redundancy ODE's step attempts in one pass, at least (then STEP_COLLAPSED;
+                              # a path the optimiser meets takes 20-40)
 ODE_STEPS_PER_SAMPLE = 50     # and at least this many per sample
 
 

@@ -20,7 +20,7 @@ between its samples (`check_ranges_between`): a path it refuses is an infeasible
 and thousands of rows) solves it; the constraint Jacobian in δ is by forward differences of the whole
 chain (IK, compiled inverse dynamics, distribution), in μ exact. A run ends at its heaviest accepted point
 (`accepted_mass`: IK accepted, manipulability above its margin), its start included, so it never ends
-below its start; from two control points on it also stops when that payload gained less than STALL_GAIN
+below its start; it also stops when that payload gained less than STALL_GAIN
 over STALL_ITERATIONS iterations (where the capacity is nearly flat in the path SLSQP's slightly
 infeasible iterates otherwise walk on to its iteration limit).
 
@@ -615,7 +615,6 @@ class FreePathProblem:
 
 STALL_GAIN = 1e-3         # a run stops when its best accepted payload gained less than this, relative,
 STALL_ITERATIONS = 15     # over this many iterations
-STALL_FROM = 2            # on a path of at least this many control points (the K = 1 starts run to convergence)
 SLSQP_STATUS = {          # scipy's SLSQP exit modes, worded for a user
     0: "converged", 2: "more equality constraints than unknowns",
     3: "its least-squares subproblem took more than 3 n iterations",
@@ -691,7 +690,7 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
         if np.isfinite(m) and m > best["mass"]:
             best.update(x=x, mass=m, iterate=len(best["history"]) - 1)
         h = np.array(best["history"])
-        if problem.control_points >= STALL_FROM and len(h) > STALL_ITERATIONS and np.isfinite(best["mass"]):
+        if len(h) > STALL_ITERATIONS and np.isfinite(best["mass"]):
             before = np.nanmax(np.append(h[:-STALL_ITERATIONS], -np.inf))
             if before > -np.inf and best["mass"] <= before * (1 + STALL_GAIN):
                 best["stalled"] = True
