@@ -1,7 +1,9 @@
 """Run the MuJoCo twin: replay the scenario's torques (or its controller) through MuJoCo from a given state.
 
 MuJoCo's RK4 evaluates the control callback at every stage with the stage's time, so the twin sees
-the same continuous torque τ(t) as the native model (no zero-order hold).
+the same continuous torque τ(t) as the native model (no zero-order hold). Where a controller's reference
+jumps in acceleration (a sampled time law: s̈ constant between its samples), the steps are cut around
+the jump (`reference_kinks`, `advance`), so that no RK4 step but a short one (2·10⁻⁹ of a step) straddles it.
 """
 
 from __future__ import annotations
@@ -135,13 +137,68 @@ def _steps_per_sample(t_out: np.ndarray, dt: float) -> np.ndarray:
     return np.round(np.diff(t_out) / dt).astype(int)
 
 
+KINK_GAP = 1e-9            # the step over a kink spans ±this share of the step around it (its stages read both sides)
+
+
+def reference_kinks(model: Model) -> np.ndarray:
+    """The run times (s, from the run's start) where the reference of a `control:` section jumps in
+    acceleration: the sample times of a sampled time law of inverse.object_motion (s̈ constant between
+    samples, `coopsim.core.model.SampledTimeLaw`; the run's t = 0 is the motion's first time).
+
+    Args:
+        model: the Model.
+
+    Returns:
+        np.ndarray: (K,) s, increasing; empty without a control section or a sampled law.
+    """
+    motion = None if model.control is None or model.inverse is None else model.inverse.object_motion
+    if motion is None or motion.time_law != "sampled" or motion.samples is None:
+        return np.zeros(0)
+    return np.asarray(motion.samples.t, dtype=float) - float(motion.times[0])
+
+
+def advance(m: mujoco.MjModel, d: mujoco.MjData, t0: float, steps: int, kinks: np.ndarray) -> None:
+    """`steps` MuJoCo steps of m.opt.timestep h from time t0, cut around every kink c within them: the steps
+    end at c − ε and the next starts at c + ε (ε = KINK_GAP·h, at least 1000 ulps of the time), one step of
+    2ε between, so that every RK4 stage but that short step's reads one side of the jump (a stage at c itself
+    could read either). m.opt.timestep is restored.
+
+    Args:
+        m: the MjModel (its opt.timestep h).
+        d: the MjData at time t0, stepped in place.
+        t0: s, the time of the first step's start (the step ends counted in whole steps from here).
+        steps: the number of steps of h.
+        kinks: (K,) s, increasing, the times to cut at (`reference_kinks`).
+    """
+    h = float(m.opt.timestep)
+    end = t0 + steps * h
+    eps = max(KINK_GAP * h, 1e3 * float(np.spacing(abs(end))))
+    lo, hi = np.searchsorted(kinks, [t0 - eps, end + eps])
+    if lo >= hi:
+        mujoco.mj_step(m, d, steps)
+        return
+    c = kinks[lo:hi]
+    cuts = np.clip(np.concatenate([c - eps, c + eps]), t0, end)
+    ends = t0 + h * np.arange(1, steps + 1)
+    near = np.min(np.abs(ends[:, None] - c[None, :]), axis=1) <= eps     # a step end inside a cut: dropped
+    points = np.unique(np.concatenate([[t0], ends[~near], cuts, [end]]))
+    points = points[np.concatenate([[True], np.diff(points) > 0.5 * eps])]
+    points[-1] = end
+    try:
+        for x, y in zip(points[:-1], points[1:]):
+            m.opt.timestep = y - x
+            mujoco.mj_step(m, d)
+    finally:
+        m.opt.timestep = h
+
+
 def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, progress=None) -> TwinResult:
     """Simulate the twin from (q0, qd0) at t_out[0] = 0 and sample it at t_out.
 
     The sample intervals are whole multiples of model.mujoco.timestep (set: `coopsim.twin.weld.twin_step`
     chooses an automatic one from the native run). A `control:` section runs its
     controller in the loop (`coopsim.control.controller.closed_loop`), fed the twin's state at every RK4
-    stage.
+    stage; the steps are cut around the jumps of its reference's acceleration (`advance`).
 
     Args:
         model: the scenario's Model (the twin is built from it, `coopsim.twin.mjcf.build_spec`).
@@ -165,6 +222,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     links = np.array([m.body(f"a{a}_l{i}").id for a, arm in enumerate(model.arms) for i in range(arm.n)])
     weld_rows = lambda: d.efc_type[: d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY  # noqa: E731
     steps = _steps_per_sample(t_out, m.opt.timestep)
+    kinks = reference_kinks(model)
     N, n = len(t_out), model.n_total
     out = {k: np.zeros((N,) + s) for k, s in [("q", (n,)), ("qd", (n,)), ("qdd", (n,)), ("tau", (n,)),
                                             ("object_pos", (3,)), ("object_quat", (4,)),
@@ -176,7 +234,7 @@ def run_twin(model: Model, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray, p
     with _control(model, d, ctrl, qadr, dadr):
         for i in range(N):
             if i:
-                mujoco.mj_step(m, d, int(steps[i - 1]))
+                advance(m, d, float(t_out[i - 1]), int(steps[i - 1]), kinks)
             mujoco.mj_forward(m, d)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, obj, vel, 0)
             out["q"][i], out["qd"][i], out["qdd"][i] = d.qpos[qadr], d.qvel[dadr], d.qacc[dadr]
