@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import time
 from functools import partial
+from types import SimpleNamespace
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -47,11 +48,13 @@ from coopsim.core.errors import CoopsimError
 from coopsim.core.model import Model, ObjectMotion, PathSpline, torque_limits
 from coopsim.core.labels import joint_labels
 from coopsim.forward.diagnostics import manipulability
-from coopsim.inverse.capacity import Capacity, affine_capacity, affine_torques, optimise_weights
+from coopsim.inverse.capacity import (Capacity, affine_capacity, affine_torques, lp_capacity, mass_line,
+                                      optimise_weights)
 from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
-from coopsim.inverse.retime import Retiming, TimeLaw, max_payload, path_dynamics
+from coopsim.inverse.qp import solve_lps
+from coopsim.inverse.retime import LP_BOUND, Retiming, TimeLaw, grasp_null_space, max_payload, path_dynamics
 from coopsim.inverse.retime_weights import with_weights
 from coopsim.inverse.spline_path import KIND, BSplinePath, refinement, straight_control_points
 from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
@@ -360,21 +363,42 @@ def evaluate_law(model: Model, motion: ObjectMotion, law: TimeLaw, res: Resoluti
     Raises:
         TrajectoryError: the inverse kinematics refuses the path.
     """
+    dyn, sides, b, lo, hi, manip = law_dynamics(weighted(model, res), motion, law, res.method, mode)
+    a0, b0 = ([dyn.tau[k, 0] + a * dyn.tau[k, 1] + b * dyn.tau[k, 2] for a in sides] for k in (0, 1))
+    return PathEvaluation(np.tile(law.t, 2), None, np.vstack(a0), np.vstack(b0), np.vstack([lo, lo]),
+                          np.vstack([hi, hi]), manip)
+
+
+def law_dynamics(model: Model, motion: ObjectMotion, law: TimeLaw, method: str, mode: str):
+    """The parts of a B-spline motion under a retimed law that `evaluate_law` and `LPFreePathProblem` share.
+
+    Args:
+        model: the Model (its energy weights those of the resolution).
+        motion: the ObjectMotion (two waypoints and a B-spline path).
+        law: the TimeLaw (one piece, its grid s, N points).
+        method: a linear resolution's name or 'lp' (`path_dynamics`).
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        tuple: (dyn, sides, b, lo, hi, manip): the PathDynamics, s̈ (N, 1) of the interval before each point
+        and of the one after it, ṡ² b (N, 1), τ_min and τ_max (N, n) of eq. 36 at θ̇ = θ′√b, each arm's
+        manipulability (N, r).
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the path.
+    """
     from coopsim.compiled import api
 
-    m = weighted(model, res)
-    jp = spline_joint_path(m, motion, law.s, law.piece)
+    jp = spline_joint_path(model, motion, law.s, law.piece)
     check_ranges_between(model, law.s, jp.q, jp.d1, jp.d2)
-    dyn = path_dynamics(m, jp, res.method, mode)
+    dyn = path_dynamics(model, jp, method, mode)
     b = law.b[:, None]
     qd = jp.d1 * np.sqrt(np.maximum(b, 0.0))
     lo, hi = torque_limits(model.motors, qd)
     sides = [np.append(0.0, law.a[:-1])[:, None], law.a[:, None]]
-    a0, b0 = ([dyn.tau[k, 0] + a * dyn.tau[k, 1] + b * dyn.tau[k, 2] for a in sides] for k in (0, 1))
     zero = np.zeros_like(jp.q)
     J = api.inverse_terms(model, jp.q, zero, zero).J
-    return PathEvaluation(np.tile(law.t, 2), None, np.vstack(a0), np.vstack(b0), np.vstack([lo, lo]),
-                          np.vstack([hi, hi]), manipulability(model, J))
+    return dyn, sides, b, lo, hi, manipulability(model, J)
 
 
 def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: str, duration: float,
@@ -517,13 +541,38 @@ class FreePathProblem:
                 self._cache.clear()
             self.evaluations += 1
             try:
-                if self.law is None:
-                    self._cache[key] = evaluate_motion(self.model, self.motion_of(x), self.res, self.mode)
-                else:
-                    self._cache[key] = evaluate_law(self.model, self.motion_of(x), self.law, self.res, self.mode)
+                self._cache[key] = self._evaluation(self.motion_of(x))
             except CoopsimError:
                 self._cache[key] = None
         return self._cache[key]
+
+    def _evaluation(self, motion: ObjectMotion) -> PathEvaluation:
+        """The PathEvaluation of a motion under this problem's law (`evaluate_motion` or `evaluate_law`)."""
+        if self.law is None:
+            return evaluate_motion(self.model, motion, self.res, self.mode)
+        return evaluate_law(self.model, motion, self.law, self.res, self.mode)
+
+    def variant(self, law: TimeLaw | None = None, control_points: int | None = None) -> "FreePathProblem":
+        """The same problem (class, model, resolution, mode) with another law held fixed or another K.
+
+        Args:
+            law: the TimeLaw held fixed; None: the scenario's law.
+            control_points: K; None: this one's.
+
+        Returns:
+            FreePathProblem: of this one's class.
+        """
+        return type(self)(self.model, self.res, self.mode, law=law,
+                          control_points=self.control_points if control_points is None else control_points)
+
+    @property
+    def extra_size(self) -> int:
+        """The number of unknowns besides the path's and μ (0 here; the LP bound's internal wrenches)."""
+        return 0
+
+    def extra_start(self, x: np.ndarray, mu: float) -> np.ndarray:
+        """The extra unknowns' start at path x and mass μ kg: (extra_size,), none here."""
+        return np.zeros(0)
 
     def capacity(self, x: np.ndarray) -> Capacity | None:
         """The closed-form capacity of the path of x on the optimiser's grid (None: refused by the IK).
@@ -564,12 +613,13 @@ class FreePathProblem:
         W = (e.manip / self._manip0 - self.model.inverse.optimize.manipulability_margin).ravel()
         return T, U, B, W
 
-    def constraints(self, x: np.ndarray, mu: float) -> np.ndarray:
+    def constraints(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
         """The NLP's inequality rows (>= 0 feasible) at (x, μ).
 
         Args:
             x: (K·k,) the scaled offsets.
             mu: kg, the carried mass.
+            extra: the extra unknowns (none here; ignored).
 
         Returns:
             np.ndarray: [T − μB; U + μB; T; U; W] (see `_rows`); INFEASIBLE everywhere where the IK refuses.
@@ -584,20 +634,22 @@ class FreePathProblem:
         T, _, _, W = self._rows(self.evaluate(np.zeros(self.size)))
         return 4 * len(T) + len(W)
 
-    def jacobian(self, x: np.ndarray, mu: float) -> np.ndarray:
-        """d(constraints)/d(x, μ) (rows, K·k + 1): forward differences in x (backward where the forward
-        point is refused), exact in μ.
+    def jacobian(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
+        """d(constraints)/d(x, extra, μ) (rows, K·k + extra_size + 1): forward differences in x (backward
+        where the forward point is refused; the extra unknowns held), exact in the extra unknowns and μ.
 
         Args:
             x: (K·k,) the scaled offsets.
             mu: kg, the carried mass.
+            extra: (extra_size,) the extra unknowns; None: zeros.
 
         Returns:
             np.ndarray: the Jacobian; zero rows in x where the IK refuses x itself.
         """
         x = np.asarray(x, dtype=float)
-        c0 = self.constraints(x, mu)
-        J = np.zeros((len(c0), self.size + 1))
+        extra = np.zeros(self.extra_size) if extra is None else np.asarray(extra, dtype=float)
+        c0 = self.constraints(x, mu, extra)
+        J = np.zeros((len(c0), self.size + self.extra_size + 1))
         e = self.evaluate(x)
         if e is None:
             return J
@@ -606,11 +658,240 @@ class FreePathProblem:
                 xi = x.copy()
                 xi[i] += h
                 if self.evaluate(xi) is not None:
-                    J[:, i] = (self.constraints(xi, mu) - c0) / h
+                    J[:, i] = (self.constraints(xi, mu, extra) - c0) / h
                     break
-        B = self._rows(e)[2]
-        J[:, -1] = np.concatenate([-B, B, np.zeros(len(c0) - 2 * len(B))])
+        J[:, self.size:] = self._exact_columns(e, len(c0))
         return J
+
+    def _exact_columns(self, e: PathEvaluation, rows: int) -> np.ndarray:
+        """The constraints' derivatives in the extra unknowns and μ (rows, extra_size + 1): here d/dμ only."""
+        B = self._rows(e)[2]
+        return np.concatenate([-B, B, np.zeros(rows - 2 * len(B))])[:, None]
+
+
+def lp_resolution(model: Model) -> Resolution:
+    """The Resolution standing for the LP bound (method 'lp'): it carries the passive joints and the energy
+    weights that `path_dynamics` and `max_payload` read; the distribution itself is free.
+
+    Args:
+        model: the Model.
+
+    Returns:
+        Resolution: method LP_BOUND.
+    """
+    return replace(resolution_for(model, "paper"), method=LP_BOUND)
+
+
+def lp_motion_capacity(model: Model, motion: ObjectMotion, mode: str) -> Capacity:
+    """The LP bound's capacity of a motion at its output_dt samples (`coopsim.inverse.capacity.lp_capacity`).
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion.
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        Capacity.
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the motion.
+    """
+    traj = object_motion_trajectory(model, motion)
+    check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
+    prob = inverse_problem(model, traj, model.inverse.payload_position)
+    return lp_capacity(prob, model.motors, model.motors.passive.astype(bool), mode)
+
+
+@dataclass(frozen=True, eq=False)
+class LPEvaluation(PathEvaluation):
+    """A free path's rows for the LP bound (M rows, n joints, m active motors with a finite stall torque, nz
+    internal-wrench unknowns per row): a, b the torques of the grasp wrenches f = A⁺ȳ (`grasp_null_space`)
+    at μ = 0 and per kg, C = Jᵀ_active N their rate with the internal wrenches z (f = A⁺ȳ + N z).
+
+    Attributes:
+        C: (M, m, nz) N·m per unit of z (N, N·m: the null space's columns are orthonormal).
+    """
+
+    C: np.ndarray = None
+
+
+class LPFreePathProblem(FreePathProblem):
+    """The free path of the LP bound (the best distribution): grasp wrenches free at every row-time.
+
+    The unknowns are the path's offsets x, the internal wrenches z (nz per row-time: each grid point of a law
+    held fixed has its own on each side) scaled by `z_scale`, and μ:
+
+        maximise μ  subject to  τ_min <= a(x) + μ b(x) + C(x) z <= τ_max  (active motors, eq. 36, over τ_s)
+                                and each arm's manipulability rows (as `FreePathProblem`),
+
+    f = A⁺ȳ + N z meeting the object wrench and the passive joints' zero torque exactly at every row, the
+    null space N aligned to the straight path's (orthogonal Procrustes per row) so that it is smooth in x.
+    The capacity of a path is the LP over the same rows (max μ with z free per row; under the scenario's law
+    `coopsim.inverse.capacity.lp_capacity` of its inverse problem). Rows at μ = 0 are not imposed.
+
+    Args: as `FreePathProblem` (res: `lp_resolution`).
+
+    Attributes:
+        z_scale: N (N·m) per unit of a scaled z: 1 / the largest |C|/τ_s at the straight path.
+    """
+
+    def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None,
+                 control_points: int | None = None):
+        self._null_ref = None
+        super().__init__(model, res, mode, law, control_points)
+        first = self.evaluate(np.zeros(self.size))
+        G = first.C / self._ts[None, :, None]
+        self.z_scale = 1.0 / max(float(np.max(np.abs(G), initial=0.0)), 1e-300)
+
+    def _evaluation(self, motion: ObjectMotion) -> LPEvaluation:
+        model, mode = self.model, self.mode
+        if self.law is None:
+            traj = object_motion_trajectory(model, motion)
+            check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
+            prob = inverse_problem(model, traj, model.inverse.payload_position)
+            y0, y1 = mass_line(prob, mode)
+            lo, hi = torque_limits(model.motors, traj.qd)
+            from coopsim.compiled import api
+
+            manip = manipulability(model, api.inverse_terms(model, traj.q, traj.qd, traj.qdd).J)
+            t, ta, JT, A = traj.t, prob.tau_arms, prob.JT, prob.A
+        else:
+            dyn, sides, b, lo, hi, manip = law_dynamics(model, motion, self.law, LP_BOUND, mode)
+            ta, y0, y1 = (np.vstack([c[0] + a * c[1] + b * c[2] for a in sides])
+                          for c in (dyn.tau[0], dyn.y[0], dyn.y[1]))
+            t, JT, A, lo, hi, prob = np.tile(self.law.t, 2), np.tile(dyn.JT, (2, 1, 1)), np.tile(dyn.A, (2, 1, 1)), \
+                np.vstack([lo, lo]), np.vstack([hi, hi]), None
+        active = ~self.res.passive
+        ns = grasp_null_space(SimpleNamespace(A=A, JT=JT, active=active, stall=model.motors.stall_torque))
+        if ns is None:
+            raise PathOptimizationError("inverse.optimize: the grasp's null space changes rank along the path")
+        plus, null = ns
+        Aeq = np.concatenate([A, JT[:, ~active, :]], 1)
+        rhs = np.stack([np.concatenate([y0, -ta[:, ~active]], 1), np.concatenate([y1, 0.0 * ta[:, ~active]], 1)])
+        F = np.einsum("niq,xnq->xni", plus, rhs)
+        miss = np.max(np.abs(np.einsum("nqi,xni->xnq", Aeq, F) - rhs), initial=0.0)
+        if not miss <= 1e-9 * max(float(np.max(np.abs(rhs), initial=0.0)), 1e-300):
+            raise PathOptimizationError("inverse.optimize: the object wrench and the passive joints' zero torque "
+                                        "cannot be met by the grasp wrenches along the path")
+        if self._null_ref is None:
+            self._null_ref = null
+        U, _, Vt = np.linalg.svd(np.swapaxes(null, 1, 2) @ self._null_ref)
+        null = null @ (U @ Vt)                                  # the basis nearest the straight path's
+        a = ta + np.einsum("nji,ni->nj", JT, F[0])
+        b = np.einsum("nji,ni->nj", JT, F[1])
+        return LPEvaluation(t, prob, a, b, lo, hi, manip, JT[:, self._act, :] @ null)
+
+    @property
+    def extra_size(self) -> int:
+        """M·nz: the internal-wrench unknowns of every row-time."""
+        e = self.evaluate(np.zeros(self.size))
+        return int(e.C.shape[0] * e.C.shape[2])
+
+    def _G(self, e: LPEvaluation) -> np.ndarray:
+        """(M, m, nz) C/τ_s per unit of scaled z."""
+        return e.C / self._ts[None, :, None] * self.z_scale
+
+    def _count(self) -> int:
+        T, _, _, W = self._rows(self.evaluate(np.zeros(self.size)))
+        return 2 * len(T) + len(W)
+
+    def constraints(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
+        """The NLP's rows (>= 0 feasible) at (x, μ, z): [T − μB − Gz; U + μB + Gz; W] (`_rows`, G = C/τ_s).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            mu: kg, the carried mass.
+            extra: (M·nz,) the scaled internal wrenches (row-time after row-time); None: zeros.
+
+        Returns:
+            np.ndarray: the rows; INFEASIBLE everywhere where the IK refuses x.
+        """
+        e = self.evaluate(x)
+        if e is None:
+            return np.full(self._count(), INFEASIBLE)
+        T, U, B, W = self._rows(e)
+        G = self._G(e)
+        z = np.zeros(G.shape[0] * G.shape[2]) if extra is None else np.asarray(extra, dtype=float)
+        Gz = np.einsum("njz,nz->nj", G, z.reshape(G.shape[0], G.shape[2])).ravel()
+        return np.concatenate([T - mu * B - Gz, U + mu * B + Gz, W])
+
+    def _exact_columns(self, e: LPEvaluation, rows: int) -> np.ndarray:
+        """d/dz (block-diagonal ∓G) and d/dμ of the rows (rows, M·nz + 1)."""
+        B = self._rows(e)[2]
+        G = self._G(e)
+        M, m, nz = G.shape
+        block = np.zeros((M, m, M, nz))
+        block[np.arange(M), :, np.arange(M), :] = G
+        block = block.reshape(M * m, M * nz)
+        out = np.zeros((rows, M * nz + 1))
+        out[:M * m, :-1], out[M * m:2 * M * m, :-1] = -block, block
+        out[:M * m, -1], out[M * m:2 * M * m, -1] = -B, B
+        return out
+
+    def _row_lps(self, e: LPEvaluation, mu: float | None):
+        """Per row-time one LP on the NLP's rows: mu None: max μ >= 0 with z free (unknowns [z; μ]); else the
+        largest common slack t <= 1 of the rows at that μ (unknowns [z; t]). Returns the `solve_lps` batch."""
+        T, U, B, _ = self._rows(e)
+        G = self._G(e)
+        M, m, nz = G.shape
+        T, U, B = (v.reshape(M, m) for v in (T, U, B))
+        last = B if mu is None else np.ones((M, m))
+        lastn = -B if mu is None else np.ones((M, m))
+        A_ub = np.concatenate([np.concatenate([G, last[:, :, None]], 2), np.concatenate([-G, lastn[:, :, None]], 2)], 1)
+        b_ub = np.concatenate([T, U], 1) if mu is None else np.concatenate([T - mu * B, U + mu * B], 1)
+        c = np.zeros(nz + 1)
+        c[-1] = -1.0
+        bounds = [(None, None)] * nz + ([(0.0, None)] if mu is None else [(None, 1.0)])
+        return solve_lps(c, A_ub, b_ub, np.zeros((M, 0, nz + 1)), np.zeros((M, 0)), bounds)
+
+    def capacity(self, x: np.ndarray) -> Capacity | None:
+        """The LP bound's capacity of the path of x on the optimiser's grid (None: refused by the IK): under the
+        scenario's law `lp_capacity` of its inverse problem; under a law held fixed the LP of each row-time
+        (`_row_lps`), its smallest optimum.
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            Capacity | None.
+        """
+        e = self.evaluate(x)
+        if e is None:
+            return None
+        if e.prob is not None:
+            return lp_capacity(e.prob, self.model.motors, self.res.passive, self.mode)
+        lp = self._row_lps(e, None)
+        upper = np.select([lp.status == 0, lp.status == 3], [lp.x[:, -1], np.inf], -np.inf)
+        i = int(np.argmin(upper))
+        mass = float(upper[i])
+        return Capacity(mass, 0.0, mass >= 0.0, None, i, float(e.t[i]), None,
+                        "" if mass >= 0.0 else "infeasible LP", upper)
+
+    def extra_start(self, x: np.ndarray, mu: float) -> np.ndarray:
+        """The scaled internal wrenches at path x feasible for mass μ with the largest common slack per
+        row-time (`_row_lps`); zeros on a row-time whose LP has no optimum, or where the IK refuses x."""
+        e = self.evaluate(x)
+        if e is None:
+            return np.zeros(self.extra_size)
+        lp = self._row_lps(e, float(mu))
+        z = np.where((lp.status == 0)[:, None], np.nan_to_num(lp.x[:, :-1]), 0.0)
+        return z.ravel()
+
+    def scenario_grid_capacity(self, x: np.ndarray) -> float:
+        """kg, the LP bound's capacity of the path of x under the scenario's law on its output_dt grid
+        (`lp_motion_capacity`; nan where the IK refuses it).
+
+        Args:
+            x: (K·k,) the scaled offsets.
+
+        Returns:
+            float: kg.
+        """
+        try:
+            return lp_motion_capacity(self.model, self.motion_of(x, self.model.inverse.object_motion.output_dt),
+                                      self.mode).mass
+        except CoopsimError:
+            return float("nan")
 
 
 STALL_GAIN = 1e-3         # a run stops when its best accepted payload gained less than this, relative,
@@ -654,7 +935,7 @@ def accepted_mass(problem: FreePathProblem, x: np.ndarray) -> float:
     e = problem.evaluate(x)
     if e is None or np.min(problem._rows(e)[3], initial=np.inf) < 0.0:
         return float("nan")
-    mass = affine_capacity(e.a, e.b, e.lo, e.hi, e.t, ~problem.res.passive).mass
+    mass = problem.capacity(x).mass
     return float(mass) if np.isfinite(mass) and mass >= 0.0 else float("nan")
 
 
@@ -671,9 +952,11 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
     start = problem.capacity(x0)
     mu0 = max(0.0, start.mass) if start is not None and np.isfinite(start.mass) else 0.0
     ref = max(mu0, 1.0)                                  # μ in units of the start's capacity
+    nx = problem.size                                    # unknowns [x; extra; μ/ref] (`extra_start`)
+    e0 = problem.extra_start(x0, mu0)
 
     def split(z):
-        return z[:-1], z[-1] * ref
+        return z[:nx], z[-1] * ref, z[nx:-1]
 
     def jac(z):
         J = problem.jacobian(*split(z))
@@ -684,7 +967,7 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
     best = {"x": x0, "mass": m0 if np.isfinite(m0) else -np.inf, "iterate": 0, "history": [m0], "stalled": False}
 
     def watch(z):
-        x = z[:-1].copy()
+        x = z[:nx].copy()
         m = accepted_mass(problem, x)
         best["history"].append(m)
         if np.isfinite(m) and m > best["mass"]:
@@ -696,14 +979,14 @@ def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter:
                 best["stalled"] = True
                 raise StopIteration
 
-    bound = [(-b, b) for b in problem.bounds] + [(0.0, None)]
-    opt = minimize(lambda z: -z[-1], np.append(x0, mu0 / ref), jac=lambda z: np.append(np.zeros(len(z) - 1), -1.0),
+    bound = [(-b, b) for b in problem.bounds] + [(None, None)] * len(e0) + [(0.0, None)]
+    opt = minimize(lambda z: -z[-1], np.concatenate([x0, e0, [mu0 / ref]]), jac=lambda z: np.append(np.zeros(len(z) - 1), -1.0),
                    method="SLSQP", bounds=bound,
                    constraints=[{"type": "ineq", "fun": lambda z: problem.constraints(*split(z)), "jac": jac}],
                    options={"maxiter": max_iter, "ftol": 1e-9}, callback=watch)
-    end = accepted_mass(problem, opt.x[:-1])
+    end = accepted_mass(problem, opt.x[:nx])
     if np.isfinite(end) and end >= best["mass"] * (1 - 1e-9):                  # its end point, unless lighter
-        best.update(x=opt.x[:-1].copy(), mass=end, iterate=int(opt.nit))
+        best.update(x=opt.x[:nx].copy(), mass=end, iterate=int(opt.nit))
     if best["stalled"]:
         success, status = True, 0
         message = (f"stopped: its payload gained less than {100 * STALL_GAIN:g} % over the last {STALL_ITERATIONS} "
@@ -759,7 +1042,8 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
 
     Args:
         model: the Model (inverse.object_motion with at least two waypoints; inverse.optimize).
-        method: a linear resolution ('paper', 'nonsqueezing', 'min_energy').
+        method: a linear resolution ('paper', 'nonsqueezing', 'min_energy') or 'lp' (the LP bound,
+            `LPFreePathProblem`).
         mode: 'scaled' or 'payload'; None: `capacity_mode`.
         weights: with 'min_energy', optimise its energy weights with the path.
         duration: s, T_max of the retimed stage; None: the waypoints' span.
@@ -780,7 +1064,8 @@ def optimize_path(model: Model, method: str, mode: str | None = None, weights: b
     t0 = time.perf_counter()
     opt, mode = model.inverse.optimize, mode or capacity_mode(model)
     om = model.inverse.object_motion
-    problem = FreePathProblem(model, resolution_for(model, method), mode)
+    problem = (LPFreePathProblem(model, lp_resolution(model), mode) if method == LP_BOUND
+               else FreePathProblem(model, resolution_for(model, method), mode))
     straight = problem.capacity(np.zeros(problem.size))
     eval_s, jacobian_s = _timings(problem)
     total = (WEIGHT_ROUNDS if weights else 1) + (RETIME_ROUNDS if retime else 0)
@@ -820,13 +1105,12 @@ def _law_stage(problem: FreePathProblem, weights: bool, progress):
     for rnd in range(rounds):
         levels = [k for k in COARSE if k < problem.control_points]
         if rnd == 0 and levels:
-            stage = FreePathProblem(problem.model, problem.res, problem.mode, control_points=levels[0])
+            stage = problem.variant(control_points=levels[0])
             lead = _best_run(stage, _starts(stage, opt.starts, opt.seed), runs, None,
                              lambda f: progress((rnd + 0.5 * f) / rounds))
             leads = [(lead[1], stage.control_points)]
             for i, k in enumerate(levels[1:] + [problem.control_points]):
-                fine = problem if k == problem.control_points else FreePathProblem(
-                    problem.model, problem.res, problem.mode, control_points=k)
+                fine = problem if k == problem.control_points else problem.variant(control_points=k)
                 x_lead = fine.refined(lead[1], stage.control_points)
                 lead = _best_run(fine, [x_lead], runs, (lead[0], x_lead, fine, lead[3]),
                                  lambda f: progress((rnd + 0.5 + 0.3 * (i + f) / len(levels)) / rounds))
@@ -898,7 +1182,7 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
         if rnd == RETIME_ROUNDS - 1:
             break
         try:
-            fixed = FreePathProblem(model, res, mode, law=r.law)
+            fixed = problem.variant(law=r.law)
         except PathOptimizationError:                    # the straight path under the law: the manipulability's base
             fixed = None
         if fixed is None or fixed.evaluate(x) is None:
