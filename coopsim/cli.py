@@ -362,8 +362,6 @@ def _cmd_optimize(args) -> int:
 
     if not (args.retime or args.path):
         raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
-    if args.path and args.method == "lp":
-        raise CoopsimError("--method lp: --path optimises a resolution's path (paper, nonsqueezing, min_energy)")
     if args.closed_loop and not args.replay:
         raise CoopsimError("--closed-loop: replays the optimum under feedback; give it with --replay")
     if args.replay and args.method == "lp":

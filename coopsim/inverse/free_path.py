@@ -30,6 +30,12 @@ control point (a quadratic B-spline, k unknowns), the best of them is refined to
 each refinement starts one run there; the straight path also runs on K points. The best is the converged point whose capacity, recomputed in closed
 form on the object motion's output_dt grid, is largest (a refined start competes with its run's end point).
 
+For the LP bound (method 'lp', the best distribution: `LPFreePathProblem`) the grasp wrenches are free at every
+row-time: f = A⁺ȳ + N z (`coopsim.inverse.retime.grasp_null_space`) meets the object wrench and the passive
+joints' zero torque exactly, the internal wrenches z (nz per row-time) join the unknowns, and each row reads
+τ_min <= a(δ) + μ b(δ) + C(δ) z <= τ_max with C = Jᵀ_active N; the Jacobian is exact in z and μ. A path's
+capacity is the LP over the same rows (`coopsim.inverse.capacity.lp_capacity` under the scenario's law).
+
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
 paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
 the optimum's trajectory), each round started from the last, so the capacity never drops.

@@ -69,11 +69,11 @@ def path_study(model: Model, method: str = "min_energy", weights: bool = False, 
 
     Args:
         model: the Model (an inverse.object_motion, finite motor limits; inverse.optimize).
-        method: a linear resolution ('paper', 'nonsqueezing', 'min_energy').
+        method: a linear resolution ('paper', 'nonsqueezing', 'min_energy') or 'lp' (the LP bound).
         weights: with 'min_energy', optimise its energy weights with the path.
         duration: s, T_max of the retimed stage; None: the waypoints' span.
         retime: also the retimed stage (and the scenario's own path retimed, for the gain).
-        replay_check: also the forward-dynamics replay of the optimum.
+        replay_check: also the forward-dynamics replay of the optimum (never for 'lp': no torques to replay).
         progress: hears the stages path, retime and check.
 
     Returns:
@@ -90,13 +90,31 @@ def path_study(model: Model, method: str = "min_energy", weights: bool = False, 
                         progress=lambda f: _report(progress, "path", f))
     _report(progress, "check", 0.0)
     res = opt.resolution
-    own = cap.method_capacity(inverse_problem(model, object_motion_trajectory(model, om),
-                                              model.inverse.payload_position), res, model.motors, opt.mode)
+    own = trajectory_capacity(model, object_motion_trajectory(model, om), res, opt.mode)
     own_retimed = own_path_retimed(model, res, opt.mode, T) if retime else None
     motion = opt.motion if opt.retimed is None else rt.retimed_motion(opt.retimed_motion, opt.retimed.law)
-    checks = path_checks(model, opt, motion, replay_check)
+    checks = path_checks(model, opt, motion, replay_check and method != rt.LP_BOUND)
     _report(progress, "check", 1.0)
     return PathStudy(model, method, opt, own, own_retimed, T, checks, motion)
+
+
+def trajectory_capacity(model: Model, traj, res, mode: str) -> cap.Capacity:
+    """The capacity of a resolution along a trajectory at its samples: `coopsim.inverse.capacity.method_capacity`,
+    for the LP bound (res.method 'lp') `coopsim.inverse.capacity.lp_capacity`.
+
+    Args:
+        model: the Model (its payload position, motors).
+        traj: the JointTrajectory.
+        res: the Resolution (`coopsim.inverse.free_path.lp_resolution` for the LP bound).
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        Capacity.
+    """
+    prob = inverse_problem(model, traj, model.inverse.payload_position)
+    if res.method == rt.LP_BOUND:
+        return cap.lp_capacity(prob, model.motors, res.passive, mode)
+    return cap.method_capacity(prob, res, model.motors, mode)
 
 
 def own_path_retimed(model: Model, res, mode: str, duration: float) -> float:
@@ -149,20 +167,19 @@ def path_checks(model: Model, opt: PathOptimum, motion: ObjectMotion, replay_che
 
     Returns:
         dict: scenario_grid_kg, finer_grid_kg, finer_dt_s, saturating_motor and saturating_time_s,
-        brute_force (dict), and with the retimed stage retimed_grid_excess, retimed_fine_excess (relative to
+        brute_force (dict; None for the LP bound, which has no torque distribution to rerun), and with the retimed stage retimed_grid_excess, retimed_fine_excess (relative to
         τ_s) and retimed_scenario_kg, and with the replay replay_max_angle_error_rad, replay_max_line_excess
         (relative to τ_s).
     """
     m, res, mode = model, opt.resolution, opt.mode
     pos = model.inverse.payload_position
     traj = object_motion_trajectory(m, opt.motion)
-    c = cap.method_capacity(inverse_problem(m, traj, pos), res, m.motors, mode)
+    c = trajectory_capacity(m, traj, res, mode)
     dt = opt.motion.output_dt / FINER
-    fine = cap.method_capacity(inverse_problem(m, object_motion_trajectory(m, replace(opt.motion, output_dt=dt)), pos),
-                               res, m.motors, mode)
+    fine = trajectory_capacity(m, object_motion_trajectory(m, replace(opt.motion, output_dt=dt)), res, mode)
     out = {"scenario_grid_kg": c.mass, "finer_grid_kg": fine.mass, "finer_dt_s": dt,
            "saturating_motor": None if c.joint is None else joint_labels(m)[c.joint], "saturating_time_s": c.time,
-           "brute_force": cap.brute_force_check(m, traj, res, mode, c, pos)}
+           "brute_force": None if res.method == rt.LP_BOUND else cap.brute_force_check(m, traj, res, mode, c, pos)}
     if opt.retimed is not None:
         r = opt.retimed
         mw = weighted(m, res)
@@ -171,8 +188,7 @@ def path_checks(model: Model, opt: PathOptimum, motion: ObjectMotion, replay_che
         fs, fp = path_grid(np.array([0.0, 1.0]), FINE_LAW * (len(r.law.s) - 1))
         fdyn = rt.path_dynamics(mw, spline_joint_path(mw, opt.retimed_motion, fs, fp), res.method, mode)
         out["retimed_fine_excess"] = fine_check(fdyn, r)["max_excess"]
-        out["retimed_scenario_kg"] = cap.method_capacity(inverse_problem(m, object_motion_trajectory(m, motion), pos),
-                                                         res, m.motors, mode).mass
+        out["retimed_scenario_kg"] = trajectory_capacity(m, object_motion_trajectory(m, motion), res, mode).mass
     if replay_check:
         out |= _replay(m, traj, res, mode, c.mass)
     return out
@@ -283,7 +299,8 @@ def format_path_summary(s: dict) -> str:
              f"free path {kg(p['free_path_scenario_law'])} (scenario's law), {kg(p['free_path_retimed'])} (retimed)",
              f"  check: optimiser grid {kg(p['free_path_scenario_law_optimiser_grid'])}, {c['finer_dt_s']:g} s grid "
              f"{kg(c['finer_grid_kg'])}, "
-             f"brute force {'ok' if c['brute_force']['ok'] else 'FAILED'}"]
+             + ("brute force n/a (the LP bound has no torque distribution to rerun)" if c["brute_force"] is None
+                else f"brute force {'ok' if c['brute_force']['ok'] else 'FAILED'}")]
     if "retimed_grid_excess" in c:
         lines.append(f"  retimed law: eq. 36 excess {c['retimed_grid_excess']:.2e} (grid), "
                      f"{c['retimed_fine_excess']:.2e} (10x finer); the written scenario carries "

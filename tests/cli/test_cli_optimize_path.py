@@ -52,7 +52,7 @@ def test_optimize_path_writes_one_set(workdir):
 
 
 @pytest.mark.parametrize("args,optimize,message", [
-    (["--path", "--method", "lp"], {}, "coopsim: error: --method lp: --path optimises a resolution's path"),
+    (["--path", "--method", "lp", "--replay"], {}, "coopsim: error: --replay: the LP bound has no torque distribution"),
     (["--path", "--weights", "--method", "nonsqueezing"], {},
      "coopsim: error: --weights: the energy weights are the minimum energy's; give --method min_energy"),
     (["--path", "--method", "paper"], {"max_iterations": 1},
@@ -64,6 +64,26 @@ def test_bad_input_or_no_convergence_is_one_line_and_writes_nothing(workdir, arg
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1 and out.stderr.startswith(message)
     assert not (workdir / "res").exists()
+
+
+def test_optimize_path_lp_writes_its_set(workdir):
+    """--path --method lp (the best distribution; a 1 s optimiser grid, so 13 retiming intervals): optimize.json's
+    path entry (method lp, the LP free path at least the straight path's capacity and its retimed payload at least
+    the own path's retimed, the checks without a brute-force rerun) and the free path's scenario, which loads
+    as it is."""
+    out = run_cli("optimize", _scenario(workdir, sample_dt=1.0), "--path", "--method", "lp", "--json", "--out", "res",
+                  cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    p = json.loads(out.stdout)["path"]
+    kg = p["payload_kg"]
+    assert p["method"] == "lp" and p["success"] and p["checks"]["brute_force"] is None
+    assert kg["free_path_scenario_law_optimiser_grid"] >= kg["straight_path"] * (1 - 1e-9)
+    assert kg["free_path_retimed"] >= kg["own_path_retimed"] * (1 - 1e-9) > 0
+    assert p["checks"]["retimed_grid_excess"] <= 1e-9
+    files = {f.name for f in (workdir / "res").iterdir()}
+    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "paper_planar_2x3_carry_path.yaml"} <= files
+    m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
+    assert m.inverse.object_motion.path is not None and m.inverse.object_motion.time_law == "sampled"
 
 
 def test_weights_with_the_free_path_are_written_into_its_scenario(workdir):
