@@ -128,3 +128,29 @@ def test_the_start_wrenches_carry_the_start_capacity(carry):
     x = np.zeros(3)
     mu = problem.capacity(x).mass
     assert np.min(problem.constraints(x, mu, problem.extra_start(x, mu))) >= -1e-9
+
+
+def test_under_a_retimed_law_the_rows_lp_is_the_retimed_payload(carry):
+    """A bent path retimed for the LP bound on 4 intervals (`retimed_capacity`, `max_payload` of the 'lp' path
+    dynamics: its own LP formulation on f, checked also between the grid points): the law held fixed, each grid
+    point on both sides with its own z (2 × 5 row-times), the rows' LP capacity is never below that payload and
+    here equal to it (measured 5·10⁻¹⁶ relative; allowed 1e-7, the bisection's and HiGHS' tolerances); the
+    Jacobian's z columns there are exact (rows linear in z)."""
+    from coopsim.inverse.free_path import retimed_capacity
+
+    m, problem, _ = carry
+    x = np.array([0.004, -0.006, 0.03])
+    mass, r = retimed_capacity(m, problem.motion_of(x), problem.res, "payload", 13.0, 4)
+    held = problem.variant(law=r.law)
+    assert held.extra_size == 2 * 5 * 3
+    got = held.capacity(x).mass
+    assert got >= mass * (1 - 1e-9)
+    assert got == pytest.approx(mass, rel=1e-7)
+    z = held.extra_start(x, mass)
+    assert np.min(held.constraints(x, mass, z)) >= -1e-9
+    J = held.jacobian(x, mass, z)
+    for j in (0, held.extra_size - 1):
+        dz = np.zeros(held.extra_size)
+        dz[j] = 1.0
+        diff = (held.constraints(x, mass, z + dz) - held.constraints(x, mass, z - dz)) / 2.0
+        assert J[:, 3 + j] == pytest.approx(diff, abs=1e-9 * np.max(np.abs(diff)))
