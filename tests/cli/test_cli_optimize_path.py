@@ -55,6 +55,8 @@ def test_optimize_path_writes_one_set(workdir):
     (["--path", "--method", "lp", "--replay"], {}, "coopsim: error: --replay: the LP bound has no torque distribution"),
     (["--path", "--weights", "--method", "nonsqueezing"], {},
      "coopsim: error: --weights: the energy weights are the minimum energy's; give --method min_energy"),
+    (["--path", "--weights", "--method", "lp"], {},
+     "coopsim: error: --weights: the energy weights are the minimum energy's; give --method min_energy"),
     (["--path", "--method", "paper"], {"max_iterations": 1},
      "coopsim: error: optimize --path: the free-path optimiser did not converge: its best run (K = 1, 1 iteration) "
      "ended with SLSQP status 9: the iteration limit was reached (inverse.optimize.max_iterations: 1)"),
