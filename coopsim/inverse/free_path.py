@@ -577,7 +577,15 @@ class FreePathProblem:
         return 0
 
     def extra_start(self, x: np.ndarray, mu: float) -> np.ndarray:
-        """The extra unknowns' start at path x and mass μ kg: (extra_size,), none here."""
+        """The extra unknowns' start at path x and mass μ: none for a linear resolution.
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            mu: kg, the carried mass.
+
+        Returns:
+            np.ndarray: (extra_size,) = (0,).
+        """
         return np.zeros(0)
 
     def capacity(self, x: np.ndarray) -> Capacity | None:
@@ -875,7 +883,15 @@ class LPFreePathProblem(FreePathProblem):
 
     def extra_start(self, x: np.ndarray, mu: float) -> np.ndarray:
         """The scaled internal wrenches at path x feasible for mass μ with the largest common slack per
-        row-time (`_row_lps`); zeros on a row-time whose LP has no optimum, or where the IK refuses x."""
+        row-time (`_row_lps`); zeros on a row-time whose LP has no optimum, or where the IK refuses x.
+
+        Args:
+            x: (K·k,) the scaled offsets.
+            mu: kg, the carried mass.
+
+        Returns:
+            np.ndarray: (extra_size,) the z of every row-time, one after the other.
+        """
         e = self.evaluate(x)
         if e is None:
             return np.zeros(self.extra_size)
