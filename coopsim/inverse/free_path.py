@@ -205,6 +205,28 @@ def end_poses(motion: ObjectMotion, output_dt: float | None = None) -> ObjectMot
                    output_dt=motion.output_dt if output_dt is None else float(output_dt))
 
 
+def motion_problem(model: Model, motion: ObjectMotion):
+    """A motion's closed-chain IK (its joint ranges checked between the samples too, `check_ranges_between`),
+    the compiled per-sample terms and the InverseProblem along it (the payload at inverse.payload_position).
+
+    Args:
+        model: the Model.
+        motion: the ObjectMotion (sampled every output_dt).
+
+    Returns:
+        tuple: (JointTrajectory, InverseProblem, the terms of `coopsim.compiled.api.inverse_terms`).
+
+    Raises:
+        TrajectoryError: the inverse kinematics refuses the motion.
+    """
+    from coopsim.compiled import api
+
+    traj = object_motion_trajectory(model, motion)
+    check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
+    terms = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
+    return traj, inverse_problem(model, traj, model.inverse.payload_position, terms=terms), terms
+
+
 def evaluate_motion(model: Model, motion: ObjectMotion, res: Resolution, mode: str) -> PathEvaluation:
     """A motion's IK, inverse problem, affine torques, motor lines and manipulability.
 
@@ -220,12 +242,7 @@ def evaluate_motion(model: Model, motion: ObjectMotion, res: Resolution, mode: s
     Raises:
         TrajectoryError: the inverse kinematics refuses the motion.
     """
-    from coopsim.compiled import api
-
-    traj = object_motion_trajectory(model, motion)
-    check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
-    terms = api.inverse_terms(model, traj.q, traj.qd, traj.qdd)
-    prob = inverse_problem(model, traj, model.inverse.payload_position, terms=terms)
+    traj, prob, terms = motion_problem(model, motion)
     a, b = affine_torques(prob, res, mode)
     lo, hi = torque_limits(model.motors, traj.qd)
     return PathEvaluation(traj.t, prob, a, b, lo, hi, manipulability(model, terms.J))
@@ -710,9 +727,7 @@ def lp_motion_capacity(model: Model, motion: ObjectMotion, mode: str) -> Capacit
     Raises:
         TrajectoryError: the inverse kinematics refuses the motion.
     """
-    traj = object_motion_trajectory(model, motion)
-    check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
-    prob = inverse_problem(model, traj, model.inverse.payload_position)
+    prob = motion_problem(model, motion)[1]
     return lp_capacity(prob, model.motors, model.motors.passive.astype(bool), mode)
 
 
@@ -760,14 +775,10 @@ class LPFreePathProblem(FreePathProblem):
     def _evaluation(self, motion: ObjectMotion) -> LPEvaluation:
         model, mode = self.model, self.mode
         if self.law is None:
-            traj = object_motion_trajectory(model, motion)
-            check_ranges_between(model, traj.t, traj.q, traj.qd, traj.qdd)
-            prob = inverse_problem(model, traj, model.inverse.payload_position)
+            traj, prob, terms = motion_problem(model, motion)
             y0, y1 = mass_line(prob, mode)
             lo, hi = torque_limits(model.motors, traj.qd)
-            from coopsim.compiled import api
-
-            manip = manipulability(model, api.inverse_terms(model, traj.q, traj.qd, traj.qdd).J)
+            manip = manipulability(model, terms.J)
             t, ta, JT, A = traj.t, prob.tau_arms, prob.JT, prob.A
         else:
             dyn, sides, b, lo, hi, manip = law_dynamics(model, motion, self.law, LP_BOUND, mode)
