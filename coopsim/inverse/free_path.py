@@ -60,7 +60,8 @@ from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.qp import solve_lps
-from coopsim.inverse.retime import LP_BOUND, Retiming, TimeLaw, grasp_null_space, max_payload, path_dynamics
+from coopsim.inverse.retime import (LP_BOUND, Retiming, TimeLaw, grasp_null_space, max_payload, path_dynamics,
+                                    retime)
 from coopsim.inverse.retime_weights import with_weights
 from coopsim.inverse.spline_path import KIND, BSplinePath, refinement, straight_control_points
 from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
@@ -425,9 +426,13 @@ def law_dynamics(model: Model, motion: ObjectMotion, law: TimeLaw, method: str, 
 
 
 def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: str, duration: float,
-                     intervals: int) -> tuple[float, Retiming]:
+                     intervals: int, above: float | None = None) -> tuple[float, Retiming] | None:
     """The heaviest payload the B-spline motion's path carries within `duration`, the time law free
     (`coopsim.inverse.retime.max_payload` on `intervals` equal intervals of s).
+
+    With `above` (another path's payload) the path is first asked whether it carries that mass within the
+    duration at all (one minimum-time solve: the minimum time grows with the mass); where it does not, None,
+    and where it does, the search starts from it (`max_payload(at_least=)`).
 
     Args:
         model: the Model.
@@ -436,9 +441,11 @@ def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: 
         mode: 'scaled' or 'payload'.
         duration: s, T_max.
         intervals: the grid's intervals.
+        above: kg, a payload to beat, or None.
 
     Returns:
-        tuple[float, Retiming]: the mass kg and its Retiming.
+        tuple[float, Retiming] | None: the mass kg and its Retiming; None where `above` is given and the path
+        does not carry it within the duration.
 
     Raises:
         TrajectoryError: the inverse kinematics refuses the path.
@@ -446,7 +453,12 @@ def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: 
     """
     m = weighted(model, res)
     s, piece = path_grid(np.array([0.0, 1.0]), intervals)
-    mass, r, _ = max_payload(path_dynamics(m, spline_joint_path(m, motion, s, piece), res.method, mode), duration)
+    dyn = path_dynamics(m, spline_joint_path(m, motion, s, piece), res.method, mode)
+    if above is not None:
+        first = retime(dyn, float(above))
+        if not (first.feasible and first.duration <= duration):
+            return None
+    mass, r, _ = max_payload(dyn, duration, at_least=above)
     return mass, r
 
 
@@ -1200,16 +1212,18 @@ def _retime_stage(problem: FreePathProblem, x: np.ndarray, duration: float, inte
             mass, r = retimed_capacity(model, problem.motion_of(x), res, mode, duration, intervals)
             for other in others:
                 try:
-                    m_o, r_o = retimed_capacity(model, problem.motion_of(other), res, mode, duration, intervals)
+                    found = retimed_capacity(model, problem.motion_of(other), res, mode, duration, intervals,
+                                             above=mass)
                 except CoopsimError:
                     continue
-                if m_o > mass:
-                    x, mass, r = other, m_o, r_o
+                if found is not None and found[0] > mass:
+                    x, (mass, r) = other, found
         else:
-            mass, r = retimed_capacity(model, problem.motion_of(x_new), res, mode, duration, intervals)
-            if not mass > rounds[-1]["mass_kg"]:
+            found = retimed_capacity(model, problem.motion_of(x_new), res, mode, duration, intervals,
+                                     above=rounds[-1]["mass_kg"])
+            if found is None or not found[0] > rounds[-1]["mass_kg"]:
                 break                                    # the last round's path and law stand
-            x = x_new
+            x, (mass, r) = x_new, found
         rounds.append({"mass_kg": mass, "retiming": r, "run": None})
         _tell(progress, (total - RETIME_ROUNDS + rnd + 0.5) / total)
         if rnd == RETIME_ROUNDS - 1:

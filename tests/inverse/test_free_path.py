@@ -14,7 +14,7 @@ from coopsim.io.robots import robots_folder
 from coopsim.inverse.capacity import brute_force_check, method_capacity
 from coopsim.inverse import free_path
 from coopsim.inverse.free_path import (JOINT_MARGIN, FreePathProblem, accepted_mass, check_ranges_between, optimize_path,
-                                      spline_joint_path, status_text)
+                                      retimed_capacity, spline_joint_path, status_text)
 from coopsim.inverse.spline_path import BSplinePath
 from coopsim.inverse.trajectory import TrajectoryError, trajectory_at_times, JointTrajectory
 from coopsim.inverse.path import path_grid
@@ -241,3 +241,18 @@ def test_a_stiff_redundancy_ode_stops_at_its_step_budget():
     x = np.array([0.5, 0.5, -0.1708011961256875, -0.5063840506485718, 0.7853981633974483, 0.2406830246843173])
     with pytest.raises(TrajectoryError, match=f"integration failed at t=1\\.\\d+ s \\(more than {ODE_STEPS} steps\\)"):
         evaluate_motion(m, problem.motion_of(x), problem.res, problem.mode)
+
+
+def test_a_retimed_path_asked_to_beat_a_payload():
+    """The straight one-via-point path retimed within 13 s (26 intervals): asked to beat 1 % more than its own
+    heaviest payload it says no (None: its minimum time at that mass exceeds 13 s); asked to beat 1 % less, it
+    finds the same heaviest payload as the plain search, within the two searches' tolerances (1e-10 of the
+    mass each, 3e-10 allowed)."""
+    m = _one_via_point()
+    problem = FreePathProblem(m, resolution_for(m, "paper"), "payload")
+    motion = problem.motion_of(np.zeros(problem.size))
+    mass, r = retimed_capacity(m, motion, problem.res, "payload", 13.0, 26)
+    assert r.duration <= 13.0 and mass > 0.0
+    assert retimed_capacity(m, motion, problem.res, "payload", 13.0, 26, above=1.01 * mass) is None
+    near, r_near = retimed_capacity(m, motion, problem.res, "payload", 13.0, 26, above=0.99 * mass)
+    assert near == pytest.approx(mass, rel=3e-10) and r_near.duration <= 13.0
