@@ -78,6 +78,20 @@ class Capacity:
     per_sample: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
+def nominal_mass(model: Model, mode: str) -> float:
+    """kg, the carried mass μ of the bare object: the object's mass in the 'scaled' mode (μ the whole
+    object's), 0 in the 'payload' mode (μ the payload's).
+
+    Args:
+        model: the Model.
+        mode: 'scaled' or 'payload'.
+
+    Returns:
+        float: kg.
+    """
+    return float(model.object.mass) if mode == "scaled" else 0.0
+
+
 def mass_line(prob: InverseProblem, mode: str) -> tuple[np.ndarray, np.ndarray]:
     """(y₀, y₁) (N, k): the net object wrench is y₀ + μ y₁ for carried mass μ.
 

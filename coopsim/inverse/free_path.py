@@ -55,7 +55,7 @@ from coopsim.core.model import Model, ObjectMotion, PathSpline, torque_limits
 from coopsim.core.labels import joint_labels
 from coopsim.forward.diagnostics import manipulability
 from coopsim.inverse.capacity import (Capacity, affine_capacity, affine_torques, lp_capacity, mass_line,
-                                      optimise_weights)
+                                      nominal_mass, optimise_weights)
 from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
@@ -980,8 +980,9 @@ def accepted_mass(problem: FreePathProblem, x: np.ndarray) -> float:
     e = problem.evaluate(x)
     if e is None or np.min(problem._rows(e)[3], initial=np.inf) < 0.0:
         return float("nan")
-    mass = problem.capacity(x).mass
-    return float(mass) if np.isfinite(mass) and mass >= 0.0 else float("nan")
+    cap = problem.capacity(x)
+    carried = cap.feasible and cap.lower <= nominal_mass(problem.model, problem.mode) <= cap.mass
+    return float(cap.mass) if carried and np.isfinite(cap.mass) else float("nan")
 
 
 def _solve_start(problem: FreePathProblem, x0: np.ndarray, index: int, max_iter: int):

@@ -197,7 +197,7 @@ def path_dynamics(model: Model, jp: JointPath, method: str, mode: str = "payload
             fjp = fine if isinstance(fine, JointPath) else jp.refined(fine)
             return path_dynamics(model, fjp, method, mode, payload_position, None)
     return PathDynamics(jp, method, mode, tau, y, JT, A, motors.stall_torque.astype(float), motors.line_slope,
-                        ~motors.passive.astype(bool), model.object.mass if mode == "scaled" else 0.0, maker)
+                        ~motors.passive.astype(bool), cap.nominal_mass(model, mode), maker)
 
 
 @dataclass(frozen=True, eq=False)

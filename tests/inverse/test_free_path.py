@@ -148,6 +148,22 @@ def test_accepted_mass_is_the_capacity_where_the_path_is_accepted():
     assert masses[:3] == [problem.capacity(x).mass for x in points[:3]]
 
 
+def test_an_accepted_point_carries_the_bare_object(monkeypatch):
+    """`accepted_mass` of the straight one-via-point path whose capacity interval [lower, mass] is replaced:
+    starting above the bare object's μ (0 in the payload mode: the motors cannot move a lighter load), or
+    infeasible, the point is not accepted (nan); from 0 it carries its mass."""
+    from dataclasses import replace as swap
+
+    m = _one_via_point()
+    problem = FreePathProblem(m, resolution_for(m, "paper"), "payload")
+    x, real = np.zeros(3), problem.capacity(np.zeros(3))
+    assert real.lower == 0.0 and accepted_mass(problem, x) == real.mass
+    for lower, feasible, expect in ((0.1 * real.mass, True, np.nan), (0.0, False, np.nan), (0.0, True, real.mass)):
+        monkeypatch.setattr(problem, "capacity", lambda x, c=swap(real, lower=lower, feasible=feasible): c)
+        got = accepted_mass(problem, x)
+        assert (np.isnan(got) and np.isnan(expect)) or got == expect, (lower, feasible, got)
+
+
 def test_a_run_ends_at_its_heaviest_accepted_point(monkeypatch):
     """From a turned via point (0.6 rad) on the one-via-point carry with 3 iterations, SLSQP's iterates go
     up and down (measured: 135, 534, 418, 462 kg): the run ends at the heaviest of its start, iterates and
