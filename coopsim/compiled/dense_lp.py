@@ -72,16 +72,23 @@ def dual_feasible(M, h, n, c, B, x, LU, piv, w):
     """
     if not _factor(M, h, n, B, x, LU, piv):
         return False
+    big = _multipliers(LU, n, piv, c, w)
+    for q in range(n):
+        if w[q] < -PIVOT_TOL * big:
+            return False
+    return True
+
+
+@kernel
+def _multipliers(LU, n, piv, c, w):
+    """The basis' multipliers w = M_B⁻ᵀ c (LU: M_B's factors) written into w; returns max |w|."""
     for q in range(n):
         w[q] = c[q]
     _lu_solve_transposed(LU, n, piv, w)
     big = 0.0
     for q in range(n):
         big = max(big, abs(w[q]))
-    for q in range(n):
-        if w[q] < -PIVOT_TOL * big:
-            return False
-    return True
+    return big
 
 
 @kernel
@@ -399,12 +406,7 @@ def _stage_lp(g, h, e, slot, W, r0, r1, nz, ns, d, fix_b, b_fix, strip_lo, strip
             for q in range(n):
                 saved[q] = B[q]
             shape[0], shape[1] = m, n
-            for q in range(n):
-                y[q] = c[q]
-            _lu_solve_transposed(LU, n, piv, y)
-            ymax = 0.0
-            for q in range(n):
-                ymax = max(ymax, abs(y[q]))
+            ymax = _multipliers(LU, n, piv, c, y)
             binding = False
             for q in range(n):
                 if _is_box(B[q], n, fix_b) and y[q] > PIVOT_TOL * ymax:
