@@ -60,8 +60,7 @@ from coopsim.inverse.problem import InverseProblem, Resolution, inverse_problem
 from coopsim.inverse.solve import resolution_for
 from coopsim.inverse.path import JointPath, PathPoints, joint_path, path_grid
 from coopsim.inverse.qp import solve_lps
-from coopsim.inverse.retime import (LP_BOUND, Retiming, TimeLaw, grasp_null_space, max_payload, path_dynamics,
-                                    retime)
+from coopsim.inverse.retime import LP_BOUND, Retiming, TimeLaw, grasp_null_space, max_payload, path_dynamics
 from coopsim.inverse.retime_weights import with_weights
 from coopsim.inverse.spline_path import KIND, BSplinePath, refinement, straight_control_points
 from coopsim.inverse.trajectory import TrajectoryError, object_motion_samples, object_motion_trajectory
@@ -432,7 +431,7 @@ def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: 
 
     With `above` (another path's payload) the path is first asked whether it carries that mass within the
     duration at all (one minimum-time solve: the minimum time grows with the mass); where it does not, None,
-    and where it does, the search starts from it (`max_payload(at_least=)`).
+    and where it does, the search starts from it (`max_payload(at_least=above, only_above=True)`).
 
     Args:
         model: the Model.
@@ -454,12 +453,8 @@ def retimed_capacity(model: Model, motion: ObjectMotion, res: Resolution, mode: 
     m = weighted(model, res)
     s, piece = path_grid(np.array([0.0, 1.0]), intervals)
     dyn = path_dynamics(m, spline_joint_path(m, motion, s, piece), res.method, mode)
-    if above is not None:
-        first = retime(dyn, float(above))
-        if not (first.feasible and first.duration <= duration):
-            return None
-    mass, r, _ = max_payload(dyn, duration, at_least=above)
-    return mass, r
+    found = max_payload(dyn, duration, at_least=above, only_above=above is not None)
+    return None if found is None else found[:2]
 
 
 class FreePathProblem:

@@ -1187,7 +1187,7 @@ def _static_problem(dyn: PathDynamics):
 
 def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, rtol: float = 1e-10,
                 field: str = "--duration", names: list[str] | None = None, refine: bool = True,
-                at_least: float | None = None):
+                at_least: float | None = None, only_above: bool = False):
     """The heaviest carried mass whose minimum time is within `duration`, and its Retiming.
 
     The minimum time grows with μ; the bracket [nominal mass, μ_hi] is grown (×4 from twice the nominal
@@ -1197,7 +1197,9 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
     (`retime`), so that later solves rarely need a second round. With `at_least` (a mass known to be
     carried within the duration, e.g. the refined law's heaviest when the grid's rows alone are asked) the
     bracket starts there instead, its width grown from NEAR × μ by ×16: a few solves where the answer
-    lies close above it.
+    lies close above it. With `only_above` a path that does not carry `at_least` within the duration (nor,
+    then, any heavier load: the minimum time grows with the mass) gives None after that one solve, where
+    the search would start from the nominal load: whether a path beats another's payload.
 
     Args:
         dyn: the PathDynamics.
@@ -1209,9 +1211,11 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
         refine: as `retime` (the rows between the grid points).
         at_least: kg, a mass carried within the duration (the search starts from it; one not carried
             there is ignored), or None.
+        only_above: return None where `at_least` is not carried within the duration (or the motors cannot
+            hold the nominal load at rest).
 
     Returns:
-        tuple: (mass kg, Retiming at it, the minimum-time solves made).
+        tuple | None: (mass kg, Retiming at it, the minimum-time solves made); None only with `only_above`.
 
     Raises:
         RetimeError: the motors cannot hold the nominal load at rest, or no motion carries it within
@@ -1220,14 +1224,18 @@ def max_payload(dyn: PathDynamics, duration: float, solver: str | None = None, r
     lo = dyn.nominal_mass
     top = static_capacity(dyn)
     if not top > lo:
+        if only_above:
+            return None
         raise RetimeError(hold_failure(dyn, names))
     count = [0]
     first = None
-    if at_least is not None and lo < at_least < top:
+    if at_least is not None and (lo < at_least < top or only_above):
         count[0] += 1
         first = retime(dyn, float(at_least), solver, refine=refine)
         if not first.feasible or first.duration > duration:
             first = None
+    if first is None and only_above:
+        return None
     near = first is not None
     if first is None:
         count[0] += 1
