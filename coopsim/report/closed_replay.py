@@ -52,6 +52,7 @@ from coopsim.report.optimum_replay import OptimumReplay, format_replay_summary, 
 from coopsim.twin.compare import Comparison, compare
 from coopsim.twin.mujoco_run import TwinResult, run_twin
 
+CLOSED_NATIVE, CLOSED_TWIN = CLOSED_LOOP + "/native", CLOSED_LOOP + "/mujoco"   # the closed loop's topic prefixes
 OMEGAS = (10.0, 30.0)   # rad/s, the default law's natural frequencies (critically damped), tried in turn
 DEFAULT_OMEGA = OMEGAS[0]
 
@@ -156,24 +157,31 @@ def closed_loop_replay(model: Model, rep: OptimumReplay, why: str) -> ClosedRepl
         validation.max_angle_error, else the last; `tries` lists them).
     """
     if model.control is not None:
-        return _closed_run(model, rep, why, *feedback_gains(model, rep.traj.q[0]))
+        kp, kd, where = feedback_gains(model, rep.traj.q[0])
+        return _closed_run(model, rep, why, kp, kd, where, *_native_loop(model, rep, kp, kd))
     tries = []
-    for omega in OMEGAS:
-        cr = _closed_run(model, rep, why, *feedback_gains(model, rep.traj.q[0], omega))
-        tries.append((omega, float(np.max(np.abs(cr.native.q - rep.traj.q)))))
+    for omega in OMEGAS:                      # the native loop decides; the twin runs once, at the gains kept
+        kp, kd, where = feedback_gains(model, rep.traj.q[0], omega)
+        loop = _native_loop(model, rep, kp, kd)
+        tries.append((omega, float(np.max(np.abs(loop[2].q - rep.traj.q)))))
         if tries[-1][1] <= model.validation.max_angle_error:
             break
-    return replace(cr, tries=tuple(tries))
+    return replace(_closed_run(model, rep, why, kp, kd, where, *loop), tries=tuple(tries))
 
 
-def _closed_run(model: Model, rep: OptimumReplay, why: str, kp, kd, where: str) -> ClosedReplay:
-    """One closed-loop replay with the gains kp, kd (n,) (`closed_loop_replay`)."""
+def _native_loop(model: Model, rep: OptimumReplay, kp, kd):
+    """The native closed loop with the gains kp, kd (n,): (its ControlSettings, its Model, its SimResult)."""
     traj = rep.traj
     settings = ControlSettings("joint_pd", kp, kd, compensation="none", distribution=rep.method,
                                reference="object_motion", saturate=model.control is not None and model.control.saturate)
     native_model = _in_the_loop(rep.native.sim.model, settings, traj)
-    dt = float(traj.t[1] - traj.t[0])
-    native = simulate(native_model, fixed_step=dt)
+    return settings, native_model, simulate(native_model, fixed_step=float(traj.t[1] - traj.t[0]))
+
+
+def _closed_run(model: Model, rep: OptimumReplay, why: str, kp, kd, where: str, settings, native_model,
+                native) -> ClosedReplay:
+    """The closed-loop replay of a native loop (`_native_loop`) with its twin (`closed_loop_replay`)."""
+    traj = rep.traj
     twin_model = _in_the_loop(rep.twin_model, settings, traj)
     twin = run_twin(twin_model, native.initial.q, native.initial.qd, native.t)
     cmd = record(native_model.torques.fn, native.t, native.q, native.qd)
@@ -286,7 +294,7 @@ def replay_entry(rep: OptimumReplay, closed: ClosedReplay | None = None) -> dict
     out = replay_summary(rep)
     if closed is not None:
         out["closed_loop"] = closed_summary(closed, rep.traj) | {
-            "topics": {"native": CLOSED_LOOP + "/native", "twin": CLOSED_LOOP + "/mujoco"}}
+            "topics": {"native": CLOSED_NATIVE, "twin": CLOSED_TWIN}}
     return out
 
 
@@ -302,10 +310,9 @@ def closed_series(cr: ClosedReplay) -> list:
         /control (`coopsim.io.log.control_series`, joint_pd: the optimised joint path as reference, the angle
         error, the command τ_opt + PD and the applied torque), at each run's sample times.
     """
-    native, twin = CLOSED_LOOP + "/native", CLOSED_LOOP + "/mujoco"
-    out = simulation_series(cr.native, native) + twin_series(cr.twin, twin)
+    out = simulation_series(cr.native, CLOSED_NATIVE) + twin_series(cr.twin, CLOSED_TWIN)
     return out + [control_series(rec, res.t, prefix, "joint_pd")
-                  for rec, res, prefix in zip(cr.control, (cr.native, cr.twin), (native, twin))]
+                  for rec, res, prefix in zip(cr.control, (cr.native, cr.twin), (CLOSED_NATIVE, CLOSED_TWIN))]
 
 
 def closed_metadata(cr: ClosedReplay) -> dict:
@@ -319,8 +326,8 @@ def closed_metadata(cr: ClosedReplay) -> dict:
         twin_vs_native_passed, omega_tries}}.
     """
     return {"closed_loop": {"why": cr.why, "law": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd)", "gains": cr.gains,
-                            "kp": cr.kp, "kd": cr.kd, "native": CLOSED_LOOP + "/native",
-                            "twin": CLOSED_LOOP + "/mujoco", "twin_vs_native_passed": cr.comparison.passed,
+                            "kp": cr.kp, "kd": cr.kd, "native": CLOSED_NATIVE,
+                            "twin": CLOSED_TWIN, "twin_vs_native_passed": cr.comparison.passed,
                             "omega_tries": [list(t) for t in cr.tries]}}
 
 
