@@ -14,6 +14,7 @@ rtol, which the steps are far inside). θ̇ = (S J)⁻¹ S v and θ̈ inherit th
 compiled object state against scipy's BSpline and the NumPy left Jacobian, the passes on bent splines
 of a planar square pair, a spatial 6R pair and the redundant Panda carry."""
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -77,14 +78,25 @@ def test_compiled_pass_equals_the_reference_with_the_cubic_law_and_a_rest_pull()
     _assert_engines_agree(four, replace(short_motion(four), rest_gain=5.0, time_law="cubic"))
 
 
+UNCONVERGED = re.compile(r"max \|error\| (\S+) after")   # a Newton that did not converge: its last residual
+
+
 def _same_error(m, motion, match):
-    """Both engines raise one TrajectoryError text, matching `match`."""
+    """Both engines raise one TrajectoryError text, matching `match`.
+
+    The texts are equal but for the last residual of a Newton that did not converge: after its 50 steps
+    it wanders, and where it ends depends on each engine's rounding (0.0256 against 0.0556 on one CPU,
+    equal on another), so there each residual need only exceed Newton's tolerance by far (> 1e-6).
+    """
     texts = []
     for engine in ("compiled", "reference"):
         with pytest.raises(TrajectoryError, match=match) as err:
             object_motion_trajectory(m, motion, engine=engine)
         texts.append(str(err.value))
-    assert texts[0] == texts[1], texts
+    residuals = [[float(r) for r in UNCONVERGED.findall(t)] for t in texts]
+    assert all(r > 1e-6 for rs in residuals for r in rs), texts
+    masked = [UNCONVERGED.sub("max |error| … after", t) for t in texts]
+    assert masked[0] == masked[1], texts
 
 
 def _motion(positions, yaws_deg, dt=0.05):
