@@ -2,8 +2,8 @@
 along waypoints at rest under a time law (quintic, cubic, linear, or a sampled law σ(t)), or along a B-spline
 path (`coopsim.inverse.spline_path`) with the time law once over the whole span. The kernels of the
 object-motion inverse kinematics (`coopsim.compiled.object_motion`) and of the computed-torque controller's
-reference (`coopsim.compiled.control.references`); the reference is
-`coopsim.inverse.trajectory.object_motion_at`.
+reference (`coopsim.compiled.control.references`, which may track a body point other than the frame's origin,
+`body_point`); the references are `coopsim.inverse.trajectory.object_motion_at` and `body_point_state`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from coopsim.compiled.linalg import bisect
-from coopsim.compiled.spatial import axis_rotation, cross3, matmul3, rot_log
+from coopsim.compiled.spatial import axis_rotation, cross3, matmul3, rigid_point_acceleration, rot_log
 from coopsim.compiled.toolchain.jit import kernel
 
 QUINTIC, CUBIC, SAMPLED, LINEAR = 0, 1, 2, 3
@@ -350,3 +350,23 @@ def object_state(mo, t, B):
         B.tw[a], B.tw[3 + a] = fv * dp, fv * wa
         B.ac[a], B.ac[3 + a] = fa * dp, fa * wa
         B.pc[a] = (P[i, a] - mo.origin[a]) + s * dp
+
+
+@kernel
+def body_point(c, B):
+    """B.pc, B.tw, B.ac ← the state of the object's body point c in place of its frame's origin
+    (`coopsim.inverse.trajectory.body_point_state`): with r = R c (R = B.Ro), p + r, v + ω × r and
+    a + ω̇ × r + ω × (ω × r); R, ω and ω̇ unchanged.
+
+    Args:
+        c: (3,) m, the point, object frame (zero: the origin itself, every value unchanged).
+        B: the Buffers as `object_state` wrote them: pc, tw[:3] and ac[:3] updated; v scratch.
+    """
+    r, R = B.v, B.Ro
+    for a in range(3):
+        r[a] = R[a, 0] * c[0] + R[a, 1] * c[1] + R[a, 2] * c[2]
+    w0, w1, w2 = cross3(B.tw[3], B.tw[4], B.tw[5], r[0], r[1], r[2])
+    rigid_point_acceleration(B.ac[:3], B.tw[3:], B.ac[3:], r, B.ac[:3])
+    B.tw[0], B.tw[1], B.tw[2] = B.tw[0] + w0, B.tw[1] + w1, B.tw[2] + w2
+    for a in range(3):
+        B.pc[a] += r[a]

@@ -35,6 +35,27 @@ def cross_into(a, b, out):
 
 
 @kernel
+def rigid_point_acceleration(a_O, w, dw, r, out):
+    """out ← a_O + ω̇ × r + ω × (ω × r), the acceleration of a point of a rigid body.
+
+    As `coopsim.core.spatial.rigid_acceleration`; all vectors in one set of axes (world).
+
+    Args:
+        a_O: (3,) m/s², the acceleration of the reference point O.
+        w: (3,) rad/s, the body's angular velocity ω.
+        dw: (3,) rad/s², its angular acceleration ω̇.
+        r: (3,) m, the point relative to O.
+        out: (3,) written: the point's acceleration, m/s² (may alias a_O, not r, w or dw).
+    """
+    c0 = w[1] * r[2] - w[2] * r[1]
+    c1 = w[2] * r[0] - w[0] * r[2]
+    c2 = w[0] * r[1] - w[1] * r[0]
+    out[0] = a_O[0] + (dw[1] * r[2] - dw[2] * r[1]) + (w[1] * c2 - w[2] * c1)
+    out[1] = a_O[1] + (dw[2] * r[0] - dw[0] * r[2]) + (w[2] * c0 - w[0] * c2)
+    out[2] = a_O[2] + (dw[0] * r[1] - dw[1] * r[0]) + (w[0] * c1 - w[1] * c0)
+
+
+@kernel
 def axis_rotation(axis, angle, out):
     """out ← the rotation of `angle` about the unit `axis`, by Rodrigues' formula.
 

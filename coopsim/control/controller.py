@@ -9,7 +9,8 @@ clip it when `saturate` is set:
     distributed by a redundancy resolution (`coopsim.inverse.resolutions`); θ_r a set-point on the loop-closure
     manifold or the joint trajectory of a prescribed object motion.
   * computed_torque: the object acceleration a = a_r + Kd (v_r − v) + Kp e (pose error e = [p_r − p;
-    log(R_r Rᵀ)], world axes) is turned into the arms' joint accelerations by differential kinematics
+    log(R_r Rᵀ)], world axes; the reference inverse.object_motion's, or that of a body point given to the
+    Controller, `coopsim.inverse.trajectory.body_point_state`, which the object frame then tracks) is turned into the arms' joint accelerations by differential kinematics
     (`coopsim.inverse.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
     the resolution gives τ; a squeeze force f_s along each grasp line (towards the centre of mass) is
     added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion;
@@ -50,7 +51,8 @@ from coopsim.core.model import COMPENSATIONS, COMPILED_DISTRIBUTIONS, LAWS, REFE
 from coopsim.forward.diagnostics import describe_state, run_warning
 from coopsim.inverse.problem import SampleFailureWarning, inverse_problem, torques_of
 from coopsim.inverse.spline_path import spline_arrays
-from coopsim.inverse.trajectory import JointTrajectory, object_motion_at, object_motion_trajectory, trajectory_at
+from coopsim.inverse.trajectory import (JointTrajectory, body_point_state, object_motion_at, object_motion_trajectory,
+                                       trajectory_at)
 
 # The compiled engine's modules and the distributions are imported in the methods that use them
 # (tests/cross/test_architecture.py, DEFERRED): every run imports this module for closed_loop, and most runs
@@ -113,6 +115,11 @@ class Controller:
         trajectory: joint_pd with reference 'object_motion': the JointTrajectory it tracks in place of the
             closed-chain IK of inverse.object_motion (e.g. an optimum's, computed on another model than the
             plant's); None: that IK.
+        resolution: the Resolution that distributes the object's share (e.g. an optimum's, its virtual bodies
+            and weights another model's); None: control.distribution's on the plant (`resolution`).
+        point: computed_torque: (3,) m, the body point of the plant's object frame that follows
+            inverse.object_motion (its reference `coopsim.inverse.trajectory.body_point_state`; e.g. the
+            nominal centre of mass when the plant's frame sits at a composite one); None: the frame's origin.
 
     Attributes:
         model: the scene as given.
@@ -123,8 +130,10 @@ class Controller:
         ControlError: computed_torque on an arm with more or fewer joints than constrained rows.
     """
 
-    def __init__(self, model: Model, trajectory: JointTrajectory | None = None):
-        self.model, self.settings, self._given = model, model.control, trajectory
+    def __init__(self, model: Model, trajectory: JointTrajectory | None = None, resolution=None,
+                 point: np.ndarray | None = None):
+        self.model, self.settings, self._given, self._resolution = model, model.control, trajectory, resolution
+        self.point = np.zeros(3) if point is None else np.asarray(point, dtype=float)
         self.plant = _controller_model(model, model.control.mass_scale)
         k = model.rows.shape[0]
         if self.settings.law == "computed_torque" and any(arm.n != k for arm in model.arms):
@@ -134,10 +143,12 @@ class Controller:
 
     @cached_property
     def resolution(self):
-        """The distribution's resolution (`coopsim.inverse.solve.resolution_for`); 'bounded' with the bounds of
-        inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
+        """The distribution's resolution: the one given, else `coopsim.inverse.solve.resolution_for`'s; 'bounded'
+        with the bounds of inverse.internal_force_bound and internal_moment_bound (none: unbounded)."""
         from coopsim.inverse.solve import resolution_for
 
+        if self._resolution is not None:
+            return self._resolution
         inv = self.plant.inverse
         bounds = [np.inf if b is None else b for b in (inv.internal_force_bound, inv.internal_moment_bound)]
         return resolution_for(self.plant, self.settings.distribution, force_bound=bounds[0], moment_bound=bounds[1])
@@ -284,7 +295,7 @@ class Controller:
         W = self._kernel[2]                      # J, J̇θ̇ of every arm at (q, qd), from that evaluation
         p, R, v = state.p_C[0], state.R_o[0], state.twist[0]
         motion = m.inverse.object_motion
-        p_r, R_r, v_r, a_r = object_motion_at(motion, motion.times[0] + t)
+        p_r, R_r, v_r, a_r = body_point_state(*object_motion_at(motion, motion.times[0] + t), self.point)
         e, ed = pose_error(p_r, R_r, p, R), v_r - v
         a = object_acceleration(s.object_kp, s.object_kd, e, ed, a_r)
         n = [sl.stop - sl.start for sl in m.dof_slices]
@@ -345,7 +356,7 @@ class Controller:
             tr = self.trajectory
             fields.update(tr_t=tr.t, tr_q=tr.q, tr_qd=tr.qd, tr_qdd=tr.qdd)
         else:
-            fields.update(_packed_motion(self.plant, self.plant.inverse.object_motion))
+            fields.update(_packed_motion(self.plant, self.plant.inverse.object_motion), om_point=self.point)
         res = self.resolution
         return cc.new_control(N, r, k, max(a.n for a in m.arms), LAWS.index(s.law), weights=res.weights,
                               vmass=res.masses, vinertia=res.inertias, stall=m.motors.stall_torque,

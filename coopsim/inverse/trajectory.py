@@ -279,6 +279,26 @@ def object_motion_at(motion: ObjectMotion, t: float, origin: np.ndarray | None =
     return p_a + s * dp, R, twist, acc
 
 
+def body_point_state(p: np.ndarray, R: np.ndarray, twist: np.ndarray, acc: np.ndarray, point: np.ndarray):
+    """The state of a rigid body's point c (body frame) from its frame's: p + r, R, [v + ω × r; ω] and
+    [a + ω̇ × r + ω × (ω × r); ω̇] with r = R c (`coopsim.core.spatial.rigid_acceleration`).
+
+    Args:
+        p: (3,) m, the frame's origin, world.
+        R: (3, 3) world ← body.
+        twist: (6,) [v; ω] [m/s; rad/s] of the origin, world axes.
+        acc: (6,) [a; ω̇] [m/s²; rad/s²] of the origin, world axes.
+        point: (3,) m, c, body frame.
+
+    Returns:
+        tuple: the point's position (3,) m, R (3, 3), its twist (6,) and acceleration (6,), world axes.
+    """
+    r = R @ np.asarray(point, dtype=float)
+    w, dw = twist[3:], acc[3:]
+    return (p + r, R, np.concatenate([twist[:3] + cross(w, r), w]),
+            np.concatenate([rigid_acceleration(acc[:3], w, dw, r), dw]))
+
+
 def grasp_targets(model: Model, p_C: np.ndarray, R_o: np.ndarray, twist: np.ndarray, acc: np.ndarray,
                   origin: np.ndarray | None = None):
     """End-effector targets of every arm for an object state: p_EE, R_EE, twist and acceleration per arm.

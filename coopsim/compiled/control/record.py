@@ -52,6 +52,8 @@ class PackedControl(NamedTuple):
             motion as `coopsim.compiled.object_state.Motion` holds it (origin = the first waypoint's position;
             a sampled time law's samples; a B-spline path's knots, coefficients, degree (0: waypoints) and
             reference orientation), read by `coopsim.compiled.control.references.object_reference`.
+        om_point: (3,) m, the body point the computed torque tracks, object frame (zero: the frame's origin,
+            the motion's C).
         squeeze: N, the computed torque's squeeze force (0: none).
         gkp: (2,) grasp-error stiffness [linear N/m, angular N·m/rad] (`grasp_feedback`).
         gkd: (2,) grasp-error damping [linear N·s/m, angular N·m·s/rad].
@@ -120,6 +122,7 @@ class PackedControl(NamedTuple):
     om_ctrl: np.ndarray
     om_degree: int
     om_R0: np.ndarray
+    om_point: np.ndarray
     squeeze: float
     gkp: np.ndarray
     gkd: np.ndarray
@@ -206,6 +209,7 @@ def _new_control(r):
     s.om_ctrl = r.om_ctrl
     s.om_degree = r.om_degree
     s.om_R0 = r.om_R0
+    s.om_point = r.om_point
     s.squeeze = r.squeeze
     s.gkp = r.gkp
     s.gkd = r.gkd
@@ -292,9 +296,9 @@ def new_control(N: int, r: int, k: int, nmax: int, law: int, **fields) -> Packed
                 time_law=LAW_QUINTIC, kp=z(N), kd=z(N), q_set=z(N), tr_t=np.array([0.0, 1.0]), tr_q=z((2, N)),
                 tr_qd=z((2, N)), tr_qdd=z((2, N)), okp=z(2), okd=z(2), om_t=np.array([0.0, 1.0]), om_p=z((2, 3)),
                 om_R=np.tile(np.eye(3), (2, 1, 1)), om_origin=z(3), om_law_t=np.array([0.0, 1.0]), om_law_s=z(2),
-                om_law_rate=z(2), om_knots=z(0), om_ctrl=z((0, 6)), om_degree=0, om_R0=np.eye(3), squeeze=0.0,
-                gkp=z(2), gkd=z(2), weights=np.ones(N), vmass=np.ones(r), vinertia=np.tile(np.eye(3), (r, 1, 1)),
-                stall=np.full(N, np.inf), slope=z(N))
+                om_law_rate=z(2), om_knots=z(0), om_ctrl=z((0, 6)), om_degree=0, om_R0=np.eye(3), om_point=z(3),
+                squeeze=0.0, gkp=z(2), gkd=z(2), weights=np.ones(N), vmass=np.ones(r),
+                vinertia=np.tile(np.eye(3), (r, 1, 1)), stall=np.full(N, np.inf), slope=z(N))
     base.update(fields)
     scratch = dict(count=np.zeros(3, dtype=np.int64), q_ref=z(N), qd_ref=z(N), err=z(6), rate_err=z(6), u=z(N),
                    raw=z(N), zero=z(N), qdd=z(N), tau_arms=z(N), tau_c=z(N), Mb=z((N, nmax)), gerr=z((r, 6)),

@@ -1,14 +1,14 @@
 """The compiled controllers' references at time t: the joint trajectory's quintic Hermite interpolant
 (`coopsim.inverse.trajectory.trajectory_at_times`) and the prescribed object motion with its time law
 (`coopsim.inverse.trajectory.object_motion_at`; the kernel is the object-motion IK's own,
-`coopsim.compiled.object_state.object_state`).
+`coopsim.compiled.object_state.object_state`), at the tracked body point (`body_point`).
 """
 
 from __future__ import annotations
 
 from coopsim.compiled.control.record import REF_SETPOINT
 from coopsim.compiled.linalg import bisect
-from coopsim.compiled.object_state import Buffers, Motion, object_state
+from coopsim.compiled.object_state import Buffers, Motion, body_point, object_state
 from coopsim.compiled.toolchain.jit import kernel
 
 
@@ -87,13 +87,15 @@ def joint_reference(C, t):
 
 @kernel
 def object_reference(C, t, R):
-    """The prescribed object state at om_t[0] + t: `coopsim.compiled.object_state.object_state` of the motion
-    the om_* fields hold (waypoints under a quintic, cubic or sampled time law, or a B-spline path), as
-    `coopsim.inverse.trajectory.object_motion_at`.
+    """The prescribed state of the tracked point at om_t[0] + t: `coopsim.compiled.object_state.object_state` of
+    the motion the om_* fields hold (waypoints under a quintic, cubic or sampled time law, or a B-spline path),
+    as `coopsim.inverse.trajectory.object_motion_at`, moved to the body point om_point (`body_point`, as
+    `coopsim.inverse.trajectory.body_point_state`; zero: the motion's own point).
 
     Args:
         C: the controller (PackedControl StructRef): reads the om_* fields and time_law; writes C.p_r
-            (3,) m (world), C.v_r = [v_C; ω] and C.a_r = [a_C; ω̇] (6,) (world axes), the ob_* scratch.
+            (3,) m (world), C.v_r = [v; ω] and C.a_r = [a; ω̇] (6,) of the point (world axes), the ob_*
+            scratch.
         t: s, the time since the start of the run.
         R: (3, 3) written: the prescribed orientation of the object frame, world axes.
     """
@@ -102,6 +104,7 @@ def object_reference(C, t, R):
     B = Buffers(C.zero, C.zero, C.zero, C.ob_pc, C.ob_Ro, C.ob_tw, C.ob_ac, C.ob_E, C.ob_v, C.v3, C.R3b, C.v6,
                 C.v6, C.v6, C.zero, C.v3, C.zero, C.ob_law)
     object_state(mo, C.om_t[0] + t, B)
+    body_point(C.om_point, B)
     for a in range(3):
         for b in range(3):
             R[a, b] = C.ob_Ro[a, b]
