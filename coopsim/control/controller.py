@@ -9,11 +9,12 @@ clip it when `saturate` is set:
     distributed by a redundancy resolution (`coopsim.inverse.resolutions`); θ_r a set-point on the loop-closure
     manifold or the joint trajectory of a prescribed object motion.
   * computed_torque: the object acceleration a = a_r + Kd (v_r − v) + Kp e (pose error e = [p_r − p;
-    log(R_r Rᵀ)], world axes; the reference inverse.object_motion's, or that of a body point given to the
-    Controller, `coopsim.inverse.trajectory.body_point_state`, which the object frame then tracks) is turned into the arms' joint accelerations by differential kinematics
-    (`coopsim.inverse.trajectory.arm_rates`), and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by
-    the resolution gives τ; a squeeze force f_s along each grasp line (towards the centre of mass) is
-    added in the null space of the grasp matrix, so it changes the grasp wrenches, never the motion;
+    log(R_r Rᵀ)], world axes; the reference inverse.object_motion's, or moved to a body point c given to the
+    Controller, `coopsim.inverse.trajectory.body_point_state`, which the object frame then tracks) is turned
+    into the arms' joint accelerations by differential kinematics (`coopsim.inverse.trajectory.arm_rates`),
+    and the closed-chain inverse dynamics of (θ, θ̇, θ̈) distributed by the resolution gives τ; a squeeze force
+    f_s along each grasp line (towards the centre of mass) is added in the null space of the grasp matrix, so it
+    changes the grasp wrenches, never the motion;
     and each arm's grasp error (`grasp_errors`) is fed back in joint space, τ_m += J_mᵀSᵀS (Kp e_m +
     Kd ė_m) (zero on the native model up to its closure tolerance; the twin's welds yield).
     With a perfect model and zero initial error this is the inverse-dynamics feedforward of the
@@ -117,9 +118,10 @@ class Controller:
             plant's); None: that IK.
         resolution: the Resolution that distributes the object's share (e.g. an optimum's, its virtual bodies
             and weights another model's); None: control.distribution's on the plant (`resolution`).
-        point: computed_torque: (3,) m, the body point of the plant's object frame that follows
-            inverse.object_motion (its reference `coopsim.inverse.trajectory.body_point_state`; e.g. the
-            nominal centre of mass when the plant's frame sits at a composite one); None: the frame's origin.
+        point: computed_torque: (3,) m, c, object axes: where the plant's object frame sits relative to the
+            point inverse.object_motion prescribes; the reference is moved to that body point
+            (`coopsim.inverse.trajectory.body_point_state`), so that the point −c of the plant's frame follows
+            the motion (e.g. c a composite centre of mass relative to the nominal one); None: zero.
 
     Attributes:
         model: the scene as given.

@@ -574,6 +574,20 @@ def scaled_model(model: Model, mass: float) -> Model:
     return replace(model, object=replace(obj, mass=float(mass), inertia=obj.inertia * (mass / obj.mass)))
 
 
+def payload_centre(model: Model, position: np.ndarray, mass: float) -> np.ndarray:
+    """The centre of mass of the object with a point payload, relative to the object's own: m p / (m_o + m).
+
+    Args:
+        model: the Model (its object's mass m_o).
+        position: (3,) m, p, the payload's position, object frame (relative to the nominal C).
+        mass: kg, m, the payload's mass.
+
+    Returns:
+        np.ndarray: (3,) m, object frame: where `payload_model`'s composite frame sits.
+    """
+    return mass * np.asarray(position, dtype=float) / (model.object.mass + mass)
+
+
 def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
     """The model whose object also carries a point mass `mass` kg at `position`.
 
@@ -590,7 +604,7 @@ def payload_model(model: Model, position: np.ndarray, mass: float) -> Model:
     """
     obj = model.object
     total = obj.mass + mass
-    shift = mass * np.asarray(position, dtype=float) / total          # new centre, old object frame
+    shift = payload_centre(model, position, mass)
     d0, d1 = -shift, position - shift
 
     def steiner(m, d):

@@ -51,6 +51,7 @@ class OptimumReplay:
         cross: the CrossValidation of the twin against the native replay (scenario thresholds).
         twin_model: the twin's Model (its step, the torques tabulated at its RK4 stage times).
         log: the run log's file name in the output set.
+        resolution: the Resolution whose torques are replayed (its weights and virtual bodies).
     """
 
     source: str
@@ -63,6 +64,7 @@ class OptimumReplay:
     cross: CrossValidation
     twin_model: Model
     log: str = RUN_LOG
+    resolution: Resolution | None = None
 
 
 def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> OptimumReplay:
@@ -147,7 +149,7 @@ def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str
     twin_model = _twin_model(native, traj, res)
     cv = cross_validate(native.model, native=native, twin_model=twin_model, progress=progress)
     return OptimumReplay(source, res.method, mode, mass, traj, rep, excess, cv, twin_model,
-                         RUN_LOG if source == "retimed" else PATH_RUN_LOG)
+                         RUN_LOG if source == "retimed" else PATH_RUN_LOG, res)
 
 
 def _twin_model(native: SimResult, traj: JointTrajectory, res: Resolution) -> Model:
