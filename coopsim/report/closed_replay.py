@@ -359,7 +359,7 @@ def format_closed_summary(s: dict) -> str:
         str: one line per model and one for the torques.
     """
     n, t = s["native"], s["twin"]
-    return (f"  closed loop ({s['why']}, {s['control_law']}): native {n['max_angle_error_rad']:.2e} rad, "
+    return (f"  closed loop ({s['why']}), {s['control_law']}: native {n['max_angle_error_rad']:.2e} rad, "
             f"{n['max_object_position_error_m']:.2e} m from the optimised path; twin {t['max_angle_error_rad']:.2e} "
             f"rad, {t['max_object_position_error_m']:.2e} m ({'PASS' if s['twin_vs_native']['passed'] else 'FAIL'} "
             f"against the native loop)\n"

@@ -218,3 +218,22 @@ def test_optimize_writes_the_closed_loop_into_the_optimum_run_log(panda_study, p
     err = np.max(np.abs(log.topics[f"{CLOSED_LOOP}/mujoco/joint_state"]["angle"] - rep.traj.q))
     assert err == entry["twin"]["max_angle_error_rad"]
     assert log.metadata["closed_loop"]["why"] == "asked"
+
+
+def test_a_computed_torque_section_on_redundant_arms_falls_back_to_joint_pd(panda):
+    """The scenario's computed_torque law needs square arms (`Controller` refuses the Panda's 7R for 6 rows):
+    with such a section the replay runs joint PD about the optimised joint path, its gains the law's object
+    gains per unit joint inertia (Kp = 100 I_jj, Kd = 20 I_jj), and still tracks within the scenario's
+    1e-6 rad."""
+    from coopsim.core.model import ControlSettings
+
+    model, rep, cr = panda
+    n = model.n_total
+    ct = replace(model, control=ControlSettings("computed_torque", np.zeros(n), np.zeros(n), distribution="paper",
+                                                object_kp=np.array([100.0, 100.0]), object_kd=np.array([20.0, 20.0])))
+    assert closed_replay.computed_torque_loop(ct, rep) is None
+    cr2 = closed_loop_replay(ct, rep, "asked")
+    kp, kd, _ = feedback_gains(ct, rep.traj.q[0])
+    assert cr2.law == "joint_pd" and np.array_equal(cr2.kp, kp) and np.allclose(kd, 0.2 * kp, rtol=1e-12)
+    assert closed_summary(cr2, rep.traj)["control_law"] == "joint_pd"
+    assert float(np.max(np.abs(cr2.native.q - rep.traj.q))) <= model.validation.max_angle_error
