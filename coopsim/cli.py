@@ -801,10 +801,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "with --path the free path (its 'replay', DIR/optimum_path_run.mcap), run logs for "
                         "coopsim animate")
     p.add_argument("--closed-loop", action="store_true",
-                   help="with --replay: also replay under feedback about the optimised joint path with the optimum "
-                        "as feedforward (replay 'closed_loop': tracking error, feedback share, motor lines); done "
-                        "without asking where the open loop leaves the thresholds or the scenario has a control: "
-                        "section")
+                   help="with --replay: also replay under feedback with the optimum as feedforward: the scenario's "
+                        "computed_torque law about the optimised object motion where it has one (square arms), "
+                        "else joint PD about the optimised joint path (replay 'closed_loop': the law, tracking "
+                        "error, feedback share, motor lines); done without asking where the open loop leaves the "
+                        "thresholds or the scenario has a control: section")
     p.add_argument("--out", default=None, help="output folder (default: out/NAME/optimize)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     _add_set(p)
