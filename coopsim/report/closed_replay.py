@@ -44,9 +44,10 @@ trajectory and compensation none (the feedforward replaces it). The gains:
 Either way `saturate` is the scenario's (default off, so that the total torque's excess over its lines is
 reported, not hidden), and the scenario's torque tables, squeeze and mass_scale do not apply: the
 feedforward is the optimum's, on the loaded model. The native joint PD loop takes fixed DOP853 steps of one
-sample, as the open loop; the native computed-torque loop adaptive ones at the scenario's tolerances (a
-sampled law's acceleration jumps at its samples, which fall between the replay's, and the law follows it: a
-fixed step across a jump loses its order). The tracking is measured against the optimised path: the
+sample, as the open loop; the native computed-torque loop adaptive ones at a hundredth of the scenario's
+tolerances (CT_TOLERANCE): a sampled law's acceleration jumps at its samples, which fall between the
+replay's, and the law follows it; a step across a jump loses its order, and at the scenario's own
+tolerances the error estimate lets such steps through. The tracking is measured against the optimised path: the
 joint angles against its joint path, the loaded object's frame against its forward kinematics along it, and
 with computed torque the law's own pose error at the tracked point.
 
@@ -80,6 +81,7 @@ LAWS = {"joint_pd": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd), q_r the optimis
                            "frame's point), distributed by the optimum's resolution: tau_opt at zero error"}
 OMEGAS = (10.0, 30.0)   # rad/s, the default law's natural frequencies (critically damped), tried in turn
 DEFAULT_OMEGA = OMEGAS[0]
+CT_TOLERANCE = 1e-2     # the native computed-torque loop's integrator tolerances relative to the scenario's
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,7 +94,7 @@ class ClosedReplay:
         kp, kd: joint_pd: (n,) N·m/rad, N·m·s/rad (N/m, N·s/m on a prismatic joint); computed_torque: the
             object gains (2,) [linear, angular] 1/s², 1/s.
         native: the native closed-loop SimResult (joint_pd: fixed DOP853 steps of one sample, as the open loop;
-            computed_torque: adaptive DOP853 at the scenario's tolerances, module docstring).
+            computed_torque: adaptive DOP853 at CT_TOLERANCE times the scenario's tolerances, module docstring).
         twin: the twin's closed-loop TwinResult.
         comparison: the twin against the native closed loop (the scenario's thresholds).
         feedforward: (N, n) N·m, τ_opt at the samples.
@@ -234,8 +236,8 @@ def computed_torque_loop(model: Model, rep: OptimumReplay):
         rep: the open-loop OptimumReplay (its loaded model, motion and resolution).
 
     Returns:
-        tuple | None: (the native loop's Controller, its Model, its SimResult: adaptive DOP853 at the scenario's
-        tolerances, sampled as the open loop); None where the scenario's law is not computed_torque or its
+        tuple | None: (the native loop's Controller, its Model, its SimResult: adaptive DOP853 at CT_TOLERANCE
+        times the scenario's tolerances, sampled as the open loop); None where the scenario's law is not computed_torque or its
         Controller refuses the arms.
     """
     c = model.control
@@ -246,7 +248,8 @@ def computed_torque_loop(model: Model, rep: OptimumReplay):
         native_model = _in_the_loop(rep.native.sim.model, settings, rep, tracked_point(model, rep))
     except ControlError:
         return None
-    native = simulate(native_model)          # adaptive: the reference's acceleration jumps at a sampled law's samples
+    it = native_model.integrator
+    native = simulate(native_model, settings=replace(it, rtol=CT_TOLERANCE * it.rtol, atol=CT_TOLERANCE * it.atol))
     return native_model.torques.fn, native_model, native
 
 

@@ -61,20 +61,20 @@ def test_the_law_at_the_optimised_states_is_the_optimum(carry):
 
 def test_the_closed_loop_tracks_the_optimum_native_and_twin(carry):
     """The tracked point is the composite centre, m/(m_o + m)·0.2 m along the bar; the native loop (adaptive
-    DOP853, rtol 1e-10) stays within 1e-9 rad of the optimised joint path and 1e-9 m, 1e-9 rad of the loaded
-    frame's pose along it (measured 1.9e-11 rad, 5.6e-12 m, 7.5e-12 rad), the law's own error at its point
-    the same to 1e-12 m (the reference moved to the right point); its torque within 1e-6 τ_s of τ_opt (the
-    gains times that error: measured 4.2e-8 τ_s). The twin (its welds yield: 1.4e-8 rad) within the
-    scenario's thresholds of the optimised path and of the native loop."""
+    DOP853 at rtol 1e-12) stays within 1e-10 rad of the optimised joint path and 1e-10 m, 1e-10 rad of the
+    loaded frame's pose along it (measured 2.5e-13 rad, 8.5e-14 m, 4.2e-14 rad: the IK's own residual), the
+    law's own error at its point the same to 1e-12 m (the reference moved to the right point); its torque
+    within 1e-8 τ_s of τ_opt (the gains times that error: measured 2.8e-10 τ_s). The twin (its welds yield:
+    1.4e-8 rad) within the scenario's thresholds of the optimised path and of the native loop."""
     model, rep, cr = carry
     m, mo = rep.mass, model.object.mass
     assert np.allclose(cr.point, [0.2 * m / (mo + m), 0.0, 0.0], rtol=1e-12, atol=1e-15)
     s = closed_summary(cr, rep.traj)
     n, tw, v = s["native"], s["twin"], model.validation
-    assert n["max_angle_error_rad"] <= 1e-9
-    assert max(n["max_object_position_error_m"], n["max_object_orientation_error_rad"]) <= 1e-9
+    assert n["max_angle_error_rad"] <= 1e-10
+    assert max(n["max_object_position_error_m"], n["max_object_orientation_error_rad"]) <= 1e-10
     assert abs(n["max_tracked_position_error_m"] - n["max_object_position_error_m"]) <= 1e-12
-    assert np.max(np.abs(cr.tau - cr.feedforward) / model.motors.stall_torque) <= 1e-6
+    assert np.max(np.abs(cr.tau - cr.feedforward) / model.motors.stall_torque) <= 1e-8
     assert tw["max_angle_error_rad"] <= v.max_angle_error
     assert tw["max_object_position_error_m"] <= v.max_object_position_error
     assert tw["max_object_orientation_error_rad"] <= v.max_object_orientation_error
