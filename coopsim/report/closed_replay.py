@@ -42,14 +42,15 @@ trajectory and compensation none (the feedforward replaces it). The gains:
     on 20 ms samples (the Panda carry) the fixed-step native loop diverges; hence no third try.
 
 Either way `saturate` is the scenario's (default off, so that the total torque's excess over its lines is
-reported, not hidden), and the scenario's torque tables, squeeze and mass_scale do not apply: the
-feedforward is the optimum's, on the loaded model. The native joint PD loop takes fixed DOP853 steps of one
-sample, as the open loop; the native computed-torque loop adaptive ones at a hundredth of the scenario's
-tolerances (CT_TOLERANCE): a sampled law's acceleration jumps at its samples, which fall between the
-replay's, and the law follows it; a step across a jump loses its order, and at the scenario's own
-tolerances the error estimate lets such steps through. The tracking is measured against the optimised path: the
-joint angles against its joint path, the loaded object's frame against its forward kinematics along it, and
-with computed torque the law's own pose error at the tracked point.
+reported, not hidden), and the scenario's torque tables, squeeze and mass_scale do not apply (with joint PD
+neither do its distribution and grasp gains): the feedforward is the optimum's, on the loaded model. The
+native joint PD loop takes fixed DOP853 steps of one sample, as the open loop; the native computed-torque
+loop adaptive ones at a hundredth of the scenario's tolerances (CT_TOLERANCE): a sampled law's acceleration
+jumps at its samples, which fall between the replay's, and the law follows it; a step across a jump loses
+its order, and at the scenario's own tolerances the error estimate lets such steps through. The tracking is
+measured against the optimised path: the joint angles against its joint path, the loaded object's frame
+against its forward kinematics along it, and with computed torque the law's own pose error at the tracked
+point.
 
 Both closed-loop runs go into the optimum's run log beside the open loop's (`closed_series`: the topics
 under `coopsim.io.log.CLOSED_LOOP`, read back by `coopsim.io.log.read_run_log` and drawn by
@@ -76,7 +77,7 @@ from coopsim.twin.compare import Comparison, compare
 from coopsim.twin.mujoco_run import TwinResult, run_twin
 
 CLOSED_NATIVE, CLOSED_TWIN = CLOSED_LOOP + "/native", CLOSED_LOOP + "/mujoco"   # the closed loop's topic prefixes
-LAWS = {"joint_pd": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd), q_r the optimised joint path",
+LAWS = {"joint_pd": "tau_opt(t) + Kp (q_r - q) + Kd (qd_r - qd)",       # the laws as the summary and the log name them
         "computed_torque": "the scenario's computed torque about the optimum's object motion (tracked at the loaded "
                            "frame's point), distributed by the optimum's resolution: tau_opt at zero error"}
 OMEGAS = (10.0, 30.0)   # rad/s, the default law's natural frequencies (critically damped), tried in turn
@@ -237,8 +238,8 @@ def computed_torque_loop(model: Model, rep: OptimumReplay):
 
     Returns:
         tuple | None: (the native loop's Controller, its Model, its SimResult: adaptive DOP853 at CT_TOLERANCE
-        times the scenario's tolerances, sampled as the open loop); None where the scenario's law is not computed_torque or its
-        Controller refuses the arms.
+        times the scenario's tolerances, sampled as the open loop); None where the scenario's law is not
+        computed_torque or its Controller refuses the arms.
     """
     c = model.control
     if c is None or c.law != "computed_torque":
@@ -329,7 +330,8 @@ def closed_summary(cr: ClosedReplay, traj) -> dict:
     excess = {"native": _line_excess(motors, cr.tau, cr.native.qd, active),
               "twin": _line_excess(motors, cr.twin_tau, cr.twin.qd, active)}
     return {
-        "why": cr.why, "control_law": cr.law, "law": LAWS[cr.law],
+        "why": cr.why, "control_law": cr.law,
+        "law": LAWS[cr.law] + (", q_r the optimised joint path" if cr.law == "joint_pd" else ""),
         "gains": cr.gains, "kp": cr.kp.tolist(), "kd": cr.kd.tolist(),
         "native": _tracking(cr.native.q, cr.native.object_pos, cr.native.object_quat, traj, cr.reference)
         | _law_error(cr, 0),

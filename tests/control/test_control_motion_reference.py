@@ -121,8 +121,9 @@ def _spatial_path():
     om = load_scenario(CARRY).inverse.object_motion
     ends = end_poses(replace(om, times=om.times[:2], positions=om.positions[:2], rotations=om.rotations[:2]))
     line = spline_path.straight_control_points(ends, 2)
-    return replace(ends, path=PathSpline(line.kind, line.positions + np.array([[0.02, -0.02, 0.02], [-0.02, 0.02, 0.01]]),
-                                         line.rotation_vectors + np.array([[0.1, -0.2, 0.05], [-0.15, 0.1, -0.05]])))
+    bend = np.array([[0.02, -0.02, 0.02], [-0.02, 0.02, 0.01]])
+    turn = np.array([[0.1, -0.2, 0.05], [-0.15, 0.1, -0.05]])
+    return replace(ends, path=PathSpline(line.kind, line.positions + bend, line.rotation_vectors + turn))
 
 
 def test_the_body_point_reference_is_the_derivative_of_its_pose():

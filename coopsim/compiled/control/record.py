@@ -52,8 +52,8 @@ class PackedControl(NamedTuple):
             motion as `coopsim.compiled.object_state.Motion` holds it (origin = the first waypoint's position;
             a sampled time law's samples; a B-spline path's knots, coefficients, degree (0: waypoints) and
             reference orientation), read by `coopsim.compiled.control.references.object_reference`.
-        om_point: (3,) m, the body point the computed torque tracks, object frame (zero: the frame's origin,
-            the motion's C).
+        om_point: (3,) m, object axes: the body point the prescribed motion is moved to, where the plant's
+            object frame sits relative to the motion's point (`Controller`'s point; zero: the motion's own).
         squeeze: N, the computed torque's squeeze force (0: none).
         gkp: (2,) grasp-error stiffness [linear N/m, angular N·m/rad] (`grasp_feedback`).
         gkd: (2,) grasp-error damping [linear N·s/m, angular N·m·s/rad].
