@@ -73,6 +73,8 @@ RETIME_ROUNDS = 2         # retimed payloads (path / time law in turn): retime, 
 INFEASIBLE = -1.0         # every constraint's value where the inverse kinematics refuses the path
 JOINT_MARGIN = 1e-6       # rad (m): how far inside its range a joint's path must stay between samples
 COARSE = (1, 2)           # the starts run with these many control points first, in turn (continuation in K, `_law_stage`)
+Z_BAND = 0.5              # an LP run's internal-wrench unknowns: row-times within this of the least capacity
+LP_ROW_CLIP = 1e3         # the other row-times' rows (c_i − μ)/kg are clipped to ±this
 
 
 class PathOptimizationError(CoopsimError):
@@ -663,10 +665,17 @@ class FreePathProblem:
             np.ndarray: [T − μB; U + μB; T; U; W] (see `_rows`); INFEASIBLE everywhere where the IK refuses.
         """
         e = self.evaluate(x)
-        if e is None:
-            return np.full(self._count(), INFEASIBLE)
+        return np.full(self._count(), INFEASIBLE) if e is None else self._nlp_rows(e, mu, extra)
+
+    def _nlp_rows(self, e: PathEvaluation, mu: float, extra: np.ndarray | None, held=None) -> np.ndarray:
+        """The NLP's rows of an accepted path's evaluation (`constraints`; `held` is the LP bound's)."""
         T, U, B, W = self._rows(e)
         return np.concatenate([T - mu * B, U + mu * B, T, U, W])
+
+    def _held(self, e: PathEvaluation):
+        """What the Jacobian's differences in x hold at the point of evaluation e besides the unknowns (none here;
+        the LP bound's row-time LPs, `LPFreePathProblem._held`)."""
+        return None
 
     def _count(self) -> int:
         T, _, _, W = self._rows(self.evaluate(np.zeros(self.size)))
@@ -686,17 +695,19 @@ class FreePathProblem:
         """
         x = np.asarray(x, dtype=float)
         extra = np.zeros(self.extra_size) if extra is None else np.asarray(extra, dtype=float)
-        c0 = self.constraints(x, mu, extra)
-        J = np.zeros((len(c0), self.size + self.extra_size + 1))
         e = self.evaluate(x)
         if e is None:
-            return J
+            return np.zeros((self._count(), self.size + self.extra_size + 1))
+        held = self._held(e)
+        c0 = self._nlp_rows(e, mu, extra, held)
+        J = np.zeros((len(c0), self.size + self.extra_size + 1))
         for i in range(self.size):
             for h in (FD_STEP, -FD_STEP):
                 xi = x.copy()
                 xi[i] += h
-                if self.evaluate(xi) is not None:
-                    J[:, i] = (self.constraints(xi, mu, extra) - c0) / h
+                ei = self.evaluate(xi)
+                if ei is not None:
+                    J[:, i] = (self._nlp_rows(ei, mu, extra, held) - c0) / h
                     break
         J[:, self.size:] = self._exact_columns(e, len(c0))
         return J
@@ -773,11 +784,13 @@ class LPFreePathProblem(FreePathProblem):
 
     def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None,
                  control_points: int | None = None):
-        self._null_ref = None
+        self._null_ref, self.free, self._lps = None, None, {}
         super().__init__(model, res, mode, law, control_points)
         first = self.evaluate(np.zeros(self.size))
         G = first.C / self._ts[None, :, None]
         self.z_scale = 1.0 / max(float(np.max(np.abs(G), initial=0.0)), 1e-300)
+        straight = self.capacity(np.zeros(self.size)).mass
+        self.kg = max(abs(straight), 1.0) if np.isfinite(straight) else 1.0
 
     def _evaluation(self, motion: ObjectMotion) -> LPEvaluation:
         model, mode = self.model, self.mode
@@ -815,66 +828,133 @@ class LPFreePathProblem(FreePathProblem):
 
     @property
     def extra_size(self) -> int:
-        """M·nz: the internal-wrench unknowns of every row-time."""
+        """nz × the row-times with internal-wrench unknowns (`free`: all of them unless `extra_start` chose)."""
         e = self.evaluate(np.zeros(self.size))
-        return int(e.C.shape[0] * e.C.shape[2])
+        return int(e.C.shape[2] * (e.C.shape[0] if self.free is None else len(self.free)))
 
     def _G(self, e: LPEvaluation) -> np.ndarray:
         """(M, m, nz) C/τ_s per unit of scaled z."""
         return e.C / self._ts[None, :, None] * self.z_scale
 
+    def _split(self, M: int) -> tuple[np.ndarray, np.ndarray]:
+        """(the row-times with z unknowns, the others), indices into the M row-times."""
+        free = np.arange(M) if self.free is None else self.free
+        return free, np.setdiff1d(np.arange(M), free)
+
     def _count(self) -> int:
-        T, _, _, W = self._rows(self.evaluate(np.zeros(self.size)))
-        return 2 * len(T) + len(W)
+        e = self.evaluate(np.zeros(self.size))
+        M, m, _ = e.C.shape
+        free, rest = self._split(M)
+        return 2 * len(free) * m + len(rest) + len(self._rows(e)[3])
 
     def constraints(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
-        """The NLP's rows (>= 0 feasible) at (x, μ, z): [T − μB − Gz; U + μB + Gz; W] (`_rows`, G = C/τ_s).
+        """The NLP's rows (>= 0 feasible) at (x, μ, z): [T − μB − Gz; U + μB + Gz] of the row-times with z unknowns
+        (`free`; `_rows`, G = C/τ_s), (c_i − μ)/`kg` of each other row-time i (c_i its LP capacity, `_row_lps`,
+        within ±LP_ROW_CLIP), then W.
 
         Args:
             x: (K·k,) the scaled offsets.
             mu: kg, the carried mass.
-            extra: (M·nz,) the scaled internal wrenches (row-time after row-time); None: zeros.
+            extra: (nz × len(free),) the scaled internal wrenches (row-time after row-time); None: zeros.
 
         Returns:
             np.ndarray: the rows; INFEASIBLE everywhere where the IK refuses x.
         """
         e = self.evaluate(x)
-        if e is None:
-            return np.full(self._count(), INFEASIBLE)
+        return np.full(self._count(), INFEASIBLE) if e is None else self._nlp_rows(e, mu, extra)
+
+    def _nlp_rows(self, e: LPEvaluation, mu: float, extra: np.ndarray | None, held=None) -> np.ndarray:
+        """`constraints` of an accepted path's evaluation; with `held` (`_held` at another evaluation) the other
+        row-times' rows are their LPs' Lagrangians at the held optima and multipliers (`_held_rows`)."""
         T, U, B, W = self._rows(e)
         G = self._G(e)
-        z = np.zeros(G.shape[0] * G.shape[2]) if extra is None else np.asarray(extra, dtype=float)
-        Gz = np.einsum("njz,nz->nj", G, z.reshape(G.shape[0], G.shape[2])).ravel()
-        return np.concatenate([T - mu * B - Gz, U + mu * B + Gz, W])
-
-    def _exact_columns(self, e: LPEvaluation, rows: int) -> np.ndarray:
-        """d/dz (block-diagonal ∓G) and d/dμ of the rows (rows, M·nz + 1)."""
-        B = self._rows(e)[2]
-        G = self._G(e)
         M, m, nz = G.shape
-        block = np.zeros((M, m, M, nz))
-        block[np.arange(M), :, np.arange(M), :] = G
-        block = block.reshape(M * m, M * nz)
-        out = np.zeros((rows, M * nz + 1))
-        out[:M * m, :-1], out[M * m:2 * M * m, :-1] = -block, block
-        out[:M * m, -1], out[M * m:2 * M * m, -1] = -B, B
-        return out
+        free, rest = self._split(M)
+        T, U, B = (v.reshape(M, m)[free] for v in (T, U, B))
+        z = np.zeros((len(free), nz)) if extra is None else np.asarray(extra, dtype=float).reshape(len(free), nz)
+        Gz = np.einsum("njz,nz->nj", G[free], z)
+        if held is None:
+            others = self._lp_rows(self._rest_lps(e, rest), mu)
+        else:
+            others = self._held_rows(e, rest, mu, held)
+        return np.concatenate([(T - mu * B - Gz).ravel(), (U + mu * B + Gz).ravel(), others, W])
 
-    def _row_lps(self, e: LPEvaluation, mu: float | None):
-        """Per row-time one LP on the NLP's rows: mu None: max μ >= 0 with z free (unknowns [z; μ]); else the
-        largest common slack t <= 1 of the rows at that μ (unknowns [z; t]). Returns the `solve_lps` batch."""
+    def _rest_lps(self, e: LPEvaluation, rest: np.ndarray):
+        """The `_row_lps` capacity batch of the row-times `rest` of evaluation e (the last few kept)."""
+        hit = self._lps.get(id(e))
+        if hit is None or hit[0] is not e or not np.array_equal(hit[1], rest):
+            if len(self._lps) > 8:
+                self._lps.clear()
+            hit = self._lps[id(e)] = (e, rest, self._row_lps(e, None, rest) if len(rest) else None)
+        return hit[2]
+
+    def _lp_rows(self, lp, mu: float) -> np.ndarray:
+        """(c_i − μ)/kg per LP of the batch (c_i: its optimum, inf where unbounded, −inf where infeasible), clipped."""
+        if lp is None:
+            return np.zeros(0)
+        upper = np.select([lp.status == 0, lp.status == 3], [lp.x[:, -1], np.inf], -np.inf)
+        return np.clip((upper - mu) / self.kg, -LP_ROW_CLIP, LP_ROW_CLIP)
+
+    def _held(self, e: LPEvaluation):
+        """The other row-times' LP optima (z, μ) and multipliers at evaluation e, for `_held_rows`; None: no others."""
+        rest = self._split(e.C.shape[0])[1]
+        lp = self._rest_lps(e, rest)
+        return None if lp is None else (lp, rest)
+
+    def _held_rows(self, e: LPEvaluation, rest: np.ndarray, mu: float, held) -> np.ndarray:
+        """The other row-times' rows as the Lagrangian of their LPs at the held optimum v* = (z*, c*) and multipliers
+        y >= 0: (c* + yᵀ s(v*) − μ)/kg, s the LP's row slacks at evaluation e (complementary slackness: c* at the
+        held point itself). Its change with the path is the LP optimum's (the envelope theorem) where the basis
+        is unique; held constant where the LP had no optimum or its row was clipped."""
+        lp, _ = held
         T, U, B, _ = self._rows(e)
         G = self._G(e)
         M, m, nz = G.shape
-        T, U, B = (v.reshape(M, m) for v in (T, U, B))
-        last = B if mu is None else np.ones((M, m))
-        lastn = -B if mu is None else np.ones((M, m))
+        T, U, B = (v.reshape(M, m)[rest] for v in (T, U, B))
+        fixed = self._lp_rows(lp, mu)
+        ok = (lp.status == 0) & (np.abs(fixed) < LP_ROW_CLIP)
+        v = np.where(ok[:, None], np.nan_to_num(lp.x), 0.0)
+        Gz = np.einsum("njz,nz->nj", G[rest], v[:, :-1])
+        s = np.concatenate([T - v[:, -1:] * B - Gz, U + v[:, -1:] * B + Gz], 1)
+        lagrangian = (v[:, -1] + np.sum(-lp.marginals * s, axis=1) - mu) / self.kg
+        return np.where(ok, lagrangian, fixed)
+
+    def _exact_columns(self, e: LPEvaluation, rows: int) -> np.ndarray:
+        """d/dz (block-diagonal ∓G on the row-times with z) and d/dμ of the rows (rows, nz × len(free) + 1)."""
+        B = self._rows(e)[2]
+        G = self._G(e)
+        M, m, nz = G.shape
+        free, rest = self._split(M)
+        F = len(free)
+        block = np.zeros((F, m, F, nz))
+        block[np.arange(F), :, np.arange(F), :] = G[free]
+        block = block.reshape(F * m, F * nz)
+        Bf = B.reshape(M, m)[free].ravel()
+        out = np.zeros((rows, F * nz + 1))
+        out[:F * m, :-1], out[F * m:2 * F * m, :-1] = -block, block
+        out[:F * m, -1], out[F * m:2 * F * m, -1] = -Bf, Bf
+        out[2 * F * m:2 * F * m + len(rest), -1] = -1.0 / self.kg
+        return out
+
+    def _row_lps(self, e: LPEvaluation, mu: float | None, rows: np.ndarray | None = None):
+        """Per row-time (of `rows`; None: all) one LP on the NLP's rows: mu None: max μ >= 0 with z free (unknowns
+        [z; μ]); else the largest common slack t <= 1 of the rows at that μ (unknowns [z; t]). Returns the
+        `solve_lps` batch."""
+        T, U, B, _ = self._rows(e)
+        G = self._G(e)
+        M, m, nz = G.shape
+        pick = np.arange(M) if rows is None else rows
+        T, U, B = (v.reshape(M, m)[pick] for v in (T, U, B))
+        G = G[pick]
+        k = len(pick)
+        last = B if mu is None else np.ones((k, m))
+        lastn = -B if mu is None else np.ones((k, m))
         A_ub = np.concatenate([np.concatenate([G, last[:, :, None]], 2), np.concatenate([-G, lastn[:, :, None]], 2)], 1)
         b_ub = np.concatenate([T, U], 1) if mu is None else np.concatenate([T - mu * B, U + mu * B], 1)
         c = np.zeros(nz + 1)
         c[-1] = -1.0
         bounds = [(None, None)] * nz + ([(0.0, None)] if mu is None else [(None, 1.0)])
-        return solve_lps(c, A_ub, b_ub, np.zeros((M, 0, nz + 1)), np.zeros((M, 0)), bounds)
+        return solve_lps(c, A_ub, b_ub, np.zeros((k, 0, nz + 1)), np.zeros((k, 0)), bounds)
 
     def capacity(self, x: np.ndarray) -> Capacity | None:
         """The LP bound's capacity of the path of x on the optimiser's grid (None: refused by the IK): under the
@@ -900,20 +980,27 @@ class LPFreePathProblem(FreePathProblem):
                         "" if mass >= 0.0 else "infeasible LP", upper)
 
     def extra_start(self, x: np.ndarray, mu: float) -> np.ndarray:
-        """The scaled internal wrenches at path x feasible for mass μ with the largest common slack per
-        row-time (`_row_lps`); zeros on a row-time whose LP has no optimum, or where the IK refuses x.
+        """Choose the row-times with internal-wrench unknowns (`free`: those whose LP capacity at x is within Z_BAND
+        of the least; all where that is not positive and finite) and start their scaled internal wrenches feasible
+        for mass μ with the largest common slack per row-time (`_row_lps`); zeros on a row-time whose LP has no
+        optimum, or where the IK refuses x.
 
         Args:
             x: (K·k,) the scaled offsets.
             mu: kg, the carried mass.
 
         Returns:
-            np.ndarray: (extra_size,) the z of every row-time, one after the other.
+            np.ndarray: (extra_size,) the z of every free row-time, one after the other.
         """
         e = self.evaluate(x)
         if e is None:
             return np.zeros(self.extra_size)
-        lp = self._row_lps(e, float(mu))
+        top = self._row_lps(e, None)
+        upper = np.select([top.status == 0, top.status == 3], [top.x[:, -1], np.inf], -np.inf)
+        low = float(np.min(upper))
+        self.free = (np.flatnonzero(upper <= (1.0 + Z_BAND) * low) if np.isfinite(low) and low > 0.0
+                     else np.arange(len(upper)))
+        lp = self._row_lps(e, float(mu), self.free)
         z = np.where((lp.status == 0)[:, None], np.nan_to_num(lp.x[:, :-1]), 0.0)
         return z.ravel()
 
