@@ -74,6 +74,7 @@ INFEASIBLE = -1.0         # every constraint's value where the inverse kinematic
 JOINT_MARGIN = 1e-6       # rad (m): how far inside its range a joint's path must stay between samples
 COARSE = (1, 2)           # the starts run with these many control points first, in turn (continuation in K, `_law_stage`)
 Z_BAND = 0.5              # an LP run's internal-wrench unknowns: row-times within this of the least capacity
+ROW_BAND = 1.0            # ... and of those the motor rows whose slack at its start is at most this (× τ_s)
 LP_ROW_CLIP = 1e3         # the other row-times' rows (c_i − μ)/kg are clipped to ±this
 
 
@@ -784,7 +785,7 @@ class LPFreePathProblem(FreePathProblem):
 
     def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None,
                  control_points: int | None = None):
-        self._null_ref, self.free, self._lps = None, None, {}
+        self._null_ref, self.free, self.kept, self._lps = None, None, None, {}
         super().__init__(model, res, mode, law, control_points)
         first = self.evaluate(np.zeros(self.size))
         G = first.C / self._ts[None, :, None]
@@ -845,7 +846,7 @@ class LPFreePathProblem(FreePathProblem):
         e = self.evaluate(np.zeros(self.size))
         M, m, _ = e.C.shape
         free, rest = self._split(M)
-        return 2 * len(free) * m + len(rest) + len(self._rows(e)[3])
+        return int(np.sum(self._kept(len(free), m))) + len(rest) + len(self._rows(e)[3])
 
     def constraints(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
         """The NLP's rows (>= 0 feasible) at (x, μ, z): [T − μB − Gz; U + μB + Gz] of the row-times with z unknowns
@@ -877,7 +878,12 @@ class LPFreePathProblem(FreePathProblem):
             others = self._lp_rows(self._rest_lps(e, rest), mu)
         else:
             others = self._held_rows(e, rest, mu, held)
-        return np.concatenate([(T - mu * B - Gz).ravel(), (U + mu * B + Gz).ravel(), others, W])
+        keep = self._kept(len(free), m)
+        return np.concatenate([(T - mu * B - Gz)[keep[:, :m]], (U + mu * B + Gz)[keep[:, m:]], others, W])
+
+    def _kept(self, F: int, m: int) -> np.ndarray:
+        """(F, 2m) bool, the motor rows [τ_max side, τ_min side] of the free row-times that the NLP carries."""
+        return np.ones((F, 2 * m), bool) if self.kept is None else self.kept
 
     def _rest_lps(self, e: LPEvaluation, rest: np.ndarray):
         """The `_row_lps` capacity batch of the row-times `rest` of evaluation e (the last few kept)."""
@@ -930,10 +936,13 @@ class LPFreePathProblem(FreePathProblem):
         block[np.arange(F), :, np.arange(F), :] = G[free]
         block = block.reshape(F * m, F * nz)
         Bf = B.reshape(M, m)[free].ravel()
+        keep = self._kept(F, m)
+        k1, k2 = keep[:, :m].ravel(), keep[:, m:].ravel()
+        n1, n2 = int(np.sum(k1)), int(np.sum(k2))
         out = np.zeros((rows, F * nz + 1))
-        out[:F * m, :-1], out[F * m:2 * F * m, :-1] = -block, block
-        out[:F * m, -1], out[F * m:2 * F * m, -1] = -Bf, Bf
-        out[2 * F * m:2 * F * m + len(rest), -1] = -1.0 / self.kg
+        out[:n1, :-1], out[n1:n1 + n2, :-1] = -block[k1], block[k2]
+        out[:n1, -1], out[n1:n1 + n2, -1] = -Bf[k1], Bf[k2]
+        out[n1 + n2:n1 + n2 + len(rest), -1] = -1.0 / self.kg
         return out
 
     def _row_lps(self, e: LPEvaluation, mu: float | None, rows: np.ndarray | None = None):
@@ -993,6 +1002,7 @@ class LPFreePathProblem(FreePathProblem):
             np.ndarray: (extra_size,) the z of every free row-time, one after the other.
         """
         e = self.evaluate(x)
+        self.free = self.kept = None
         if e is None:
             return np.zeros(self.extra_size)
         top = self._row_lps(e, None)
@@ -1002,6 +1012,11 @@ class LPFreePathProblem(FreePathProblem):
                      else np.arange(len(upper)))
         lp = self._row_lps(e, float(mu), self.free)
         z = np.where((lp.status == 0)[:, None], np.nan_to_num(lp.x[:, :-1]), 0.0)
+        T, U, B, _ = self._rows(e)
+        M, m, nz = e.C.shape
+        T, U, B = (v.reshape(M, m)[self.free] for v in (T, U, B))
+        Gz = np.einsum("njz,nz->nj", self._G(e)[self.free], z)
+        self.kept = np.concatenate([T - mu * B - Gz, U + mu * B + Gz], 1) <= ROW_BAND
         return z.ravel()
 
     def scenario_grid_capacity(self, x: np.ndarray) -> float:
