@@ -75,7 +75,7 @@ JOINT_MARGIN = 1e-6       # rad (m): how far inside its range a joint's path mus
 COARSE = (1, 2)           # the starts run with these many control points first, in turn (continuation in K, `_law_stage`)
 Z_BAND = 0.5              # an LP run's internal-wrench unknowns: row-times within this of the least capacity
 ROW_BAND = 1.0            # ... and of those the motor rows whose slack at its start is at most this (× τ_s)
-LP_ROW_CLIP = 1e3         # the other row-times' rows (c_i − μ)/kg are clipped to ±this
+LP_ROW_CLIP = 1e3         # the other row-times' rows (c_i − μ)/kg where c_i = ±inf (unbounded, no optimum)
 
 
 class PathOptimizationError(CoopsimError):
@@ -850,8 +850,8 @@ class LPFreePathProblem(FreePathProblem):
 
     def constraints(self, x: np.ndarray, mu: float, extra: np.ndarray | None = None) -> np.ndarray:
         """The NLP's rows (>= 0 feasible) at (x, μ, z): [T − μB − Gz; U + μB + Gz] of the row-times with z unknowns
-        (`free`; `_rows`, G = C/τ_s), (c_i − μ)/`kg` of each other row-time i (c_i its LP capacity, `_row_lps`,
-        within ±LP_ROW_CLIP), then W.
+        (`free`; `_rows`, G = C/τ_s), (c_i − μ)/`kg` of each other row-time i (c_i its LP capacity, `_row_lps`;
+        ±LP_ROW_CLIP where unbounded or without an optimum), then W.
 
         Args:
             x: (K·k,) the scaled offsets.
@@ -895,11 +895,11 @@ class LPFreePathProblem(FreePathProblem):
         return hit[2]
 
     def _lp_rows(self, lp, mu: float) -> np.ndarray:
-        """(c_i − μ)/kg per LP of the batch (c_i: its optimum, inf where unbounded, −inf where infeasible), clipped."""
+        """(c_i − μ)/kg per LP of the batch (c_i its optimum; LP_ROW_CLIP where it is unbounded, −LP_ROW_CLIP where it
+        has no optimum otherwise)."""
         if lp is None:
             return np.zeros(0)
-        upper = np.select([lp.status == 0, lp.status == 3], [lp.x[:, -1], np.inf], -np.inf)
-        return np.clip((upper - mu) / self.kg, -LP_ROW_CLIP, LP_ROW_CLIP)
+        return np.select([lp.status == 0, lp.status == 3], [(lp.x[:, -1] - mu) / self.kg, LP_ROW_CLIP], -LP_ROW_CLIP)
 
     def _held(self, e: LPEvaluation):
         """The other row-times' LP optima (z, μ) and multipliers at evaluation e, for `_held_rows`; None: no others."""
@@ -911,14 +911,14 @@ class LPFreePathProblem(FreePathProblem):
         """The other row-times' rows as the Lagrangian of their LPs at the held optimum v* = (z*, c*) and multipliers
         y >= 0: (c* + yᵀ s(v*) − μ)/kg, s the LP's row slacks at evaluation e (complementary slackness: c* at the
         held point itself). Its change with the path is the LP optimum's (the envelope theorem) where the basis
-        is unique; held constant where the LP had no optimum or its row was clipped."""
+        is unique; held constant where the LP had no optimum."""
         lp, _ = held
         T, U, B, _ = self._rows(e)
         G = self._G(e)
         M, m, nz = G.shape
         T, U, B = (v.reshape(M, m)[rest] for v in (T, U, B))
         fixed = self._lp_rows(lp, mu)
-        ok = (lp.status == 0) & (np.abs(fixed) < LP_ROW_CLIP)
+        ok = lp.status == 0
         v = np.where(ok[:, None], np.nan_to_num(lp.x), 0.0)
         Gz = np.einsum("njz,nz->nj", G[rest], v[:, :-1])
         s = np.concatenate([T - v[:, -1:] * B - Gz, U + v[:, -1:] * B + Gz], 1)
@@ -942,7 +942,8 @@ class LPFreePathProblem(FreePathProblem):
         out = np.zeros((rows, F * nz + 1))
         out[:n1, :-1], out[n1:n1 + n2, :-1] = -block[k1], block[k2]
         out[:n1, -1], out[n1:n1 + n2, -1] = -Bf[k1], Bf[k2]
-        out[n1 + n2:n1 + n2 + len(rest), -1] = -1.0 / self.kg
+        if len(rest):                                           # constant where the LP has no optimum
+            out[n1 + n2:n1 + n2 + len(rest), -1] = np.where(self._rest_lps(e, rest).status == 0, -1.0 / self.kg, 0.0)
         return out
 
     def _row_lps(self, e: LPEvaluation, mu: float | None, rows: np.ndarray | None = None):
