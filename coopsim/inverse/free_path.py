@@ -32,9 +32,16 @@ form on the object motion's output_dt grid, is largest (a refined start competes
 
 For the LP bound (method 'lp', the best distribution: `LPFreePathProblem`) the grasp wrenches are free at every
 row-time: f = A⁺ȳ + N z (`coopsim.inverse.retime.grasp_null_space`) meets the object wrench and the passive
-joints' zero torque exactly, the internal wrenches z (nz per row-time) join the unknowns, and each row reads
-τ_min <= a(δ) + μ b(δ) + C(δ) z <= τ_max with C = Jᵀ_active N; the Jacobian is exact in z and μ. A path's
-capacity is the LP over the same rows (`coopsim.inverse.capacity.lp_capacity` under the scenario's law).
+joints' zero torque exactly, and each row reads τ_min <= a(δ) + μ b(δ) + C(δ) z <= τ_max with C = Jᵀ_active N.
+A row-time's rows share no unknown with another's but δ and μ, so z is maximised out of each row-time in closed
+form, its LP capacity c_i(δ) (the rows' own small LP): the NLP carries z (nz unknowns per row-time, the Jacobian
+exact in z and μ) only on the row-times whose c_i at the run's start is within Z_BAND of the least, and of
+their motor rows those within ROW_BAND τ_s of their line there; every other row-time is one row c_i(δ) − μ >= 0,
+its derivative in δ that of the LP's Lagrangian at its optimum and multipliers (the envelope theorem: the
+multipliers times the forward differences of its rows, no LP at the difference points). A run's cost goes
+with the square of its unknowns (SLSQP's dense subproblem); the rows left out are far from binding, and every
+point a run accepts is checked on all rows (`accepted_mass`). A path's capacity is the LP over the same rows
+(`coopsim.inverse.capacity.lp_capacity` under the scenario's law).
 
 With `weights`, the minimum-energy resolution's energy weights Q are optimised with the path (the
 paper's closing suggestion): path and weights in turn (`coopsim.inverse.capacity.optimise_weights` on
@@ -775,12 +782,17 @@ class LPFreePathProblem(FreePathProblem):
     f = A⁺ȳ + N z meeting the object wrench and the passive joints' zero torque exactly at every row, the
     null space N aligned to the straight path's (orthogonal Procrustes per row) so that it is smooth in x.
     The capacity of a path is the LP over the same rows (max μ with z free per row; under the scenario's law
-    `coopsim.inverse.capacity.lp_capacity` of its inverse problem). Rows at μ = 0 are not imposed.
+    `coopsim.inverse.capacity.lp_capacity` of its inverse problem). Rows at μ = 0 are not imposed. z is carried on
+    the row-times `free` only, with their motor rows `kept`; each other row-time is the row (c_i − μ)/kg of its
+    LP capacity c_i (module docstring; `extra_start` chooses them at a run's start).
 
     Args: as `FreePathProblem` (res: `lp_resolution`).
 
     Attributes:
         z_scale: N (N·m) per unit of a scaled z: 1 / the largest |C|/τ_s at the straight path.
+        kg: kg, the unit of the other row-times' rows: the straight path's capacity (at least 1 kg).
+        free: (F,) int, the row-times with z unknowns (None: all of them).
+        kept: (F, 2m) bool, their motor rows carried, τ_max sides then τ_min sides (None: all).
     """
 
     def __init__(self, model: Model, res: Resolution, mode: str, law: TimeLaw | None = None,
