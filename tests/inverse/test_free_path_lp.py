@@ -154,3 +154,39 @@ def test_under_a_retimed_law_the_rows_lp_is_the_retimed_payload(carry):
         dz[j] = 1.0
         diff = (held.constraints(x, mass, z + dz) - held.constraints(x, mass, z - dz)) / 2.0
         assert J[:, 3 + j] == pytest.approx(diff, abs=1e-9 * np.max(np.abs(diff)))
+
+
+def test_the_other_row_times_rows_are_their_lp_capacities(carry):
+    """After `extra_start` z is carried on the row-times near the least capacity only: each other row-time's row is
+    (c_i − μ)/kg with c_i the `lp_capacity` per-sample maximum (the LP on the grasp wrenches, not the NLP's rows:
+    to 1e-9 relative, HiGHS' tolerances), and its Jacobian in the path (the LP's Lagrangian, envelope theorem) is
+    the central difference (step 1e-5) of those maxima to 1e-4 of the largest (the differences' O(h²) and the
+    forward step's O(1e-7)); the free row-times' rows left out have slack above ROW_BAND at the start."""
+    from coopsim.inverse.free_path import LP_ROW_CLIP, ROW_BAND
+
+    _, problem, _ = carry
+    x, h = np.array([0.004, -0.006, 0.03]), 1e-5
+    c = problem.capacity(x).per_sample
+    mu = 0.9 * float(np.min(c))
+    z = problem.extra_start(x, mu)
+    free, rest = problem._split(len(c))
+    assert 0 < len(free) < len(c) and len(rest)
+    m = problem.evaluate(x).C.shape[1]
+    kept = int(np.sum(problem.kept))
+    rows = problem.constraints(x, mu, z)[kept:kept + len(rest)]
+    fin = np.isfinite(c[rest])                                         # unbounded (at rest): the constant LP_ROW_CLIP
+    assert np.all(rows[~fin] == LP_ROW_CLIP) and np.all(c[rest][~fin] == np.inf) and np.sum(fin) > 0
+    assert rows[fin] * problem.kg == pytest.approx(c[rest][fin] - mu, rel=1e-9)
+    J = problem.jacobian(x, mu, z)[kept:kept + len(rest), :3]
+    assert np.all(J[~fin] == 0.0)
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = h
+        central = (problem.capacity(x + e).per_sample[rest][fin] - problem.capacity(x - e).per_sample[rest][fin]) / (2 * h)
+        assert J[fin, i] * problem.kg == pytest.approx(central, abs=1e-4 * np.max(np.abs(central)))
+    T, U, B, _ = problem._rows(problem.evaluate(x))
+    G = problem._G(problem.evaluate(x))[free]
+    Gz = np.einsum("njz,nz->nj", G, z.reshape(len(free), -1))
+    slack = np.concatenate([T.reshape(-1, m)[free] - mu * B.reshape(-1, m)[free] - Gz,
+                            U.reshape(-1, m)[free] + mu * B.reshape(-1, m)[free] + Gz], 1)
+    assert np.all(slack[~problem.kept] > ROW_BAND) and np.min(slack[problem.kept]) >= -1e-9
