@@ -377,6 +377,37 @@ def lp_capacity(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode:
                     "" if feasible else "no mass is feasible at every sample", upper)
 
 
+def least_excess(tau_arms: np.ndarray, JT: np.ndarray, A: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                 stall: np.ndarray, passive: np.ndarray) -> LPBatch:
+    """Per point the grasp wrenches f with A f = y and zero passive torques whose torques τ = τ_arms + Jᵀ f leave
+    their motor lines least: min e s.t. τ_j − τ_max,j <= e τ_s,j and τ_min,j − τ_j <= e τ_s,j (active joints with
+    a finite τ_s), one small LP per point (`coopsim.inverse.qp.solve_lps`).
+
+    Args:
+        tau_arms: (N, n) N·m (N), the arms' own torques (no object).
+        JT: (N, n, rk) Jᵀ, the end-effector Jacobians in the rows S, transposed.
+        A: (N, k, rk) the grasp-matrix rows.
+        y: (N, k) [N; N·m], the net object wrench.
+        lo, hi: (N, n) N·m (N), the motor lines τ_min, τ_max of eq. 36 at the points' joint rates.
+        stall: (n,) N·m (N), τ_s (inf: no limit).
+        passive: (n,) bool, the passive joints (zero torque).
+
+    Returns:
+        LPBatch: per point x = [f (rk) N, N·m; e] (e relative to τ_s; ≤ 0: within every line) and its status.
+    """
+    N, rk = JT.shape[0], JT.shape[2]
+    j = np.flatnonzero(~passive & np.isfinite(stall))
+    ts = np.broadcast_to(stall[j], (N, len(j)))[:, :, None]
+    A_ub = np.concatenate([np.concatenate([JT[:, j], -ts], 2), np.concatenate([-JT[:, j], -ts], 2)], 1)
+    b_ub = np.concatenate([hi[:, j] - tau_arms[:, j], tau_arms[:, j] - lo[:, j]], 1)
+    A_eq = np.concatenate([A, JT[:, passive, :]], 1)
+    A_eq = np.concatenate([A_eq, np.zeros((N, A_eq.shape[1], 1))], 2)
+    b_eq = np.concatenate([y, -tau_arms[:, passive]], 1)
+    c = np.zeros(rk + 1)
+    c[-1] = 1.0
+    return solve_lps(c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (rk + 1))
+
+
 def _lp_rows(prob: InverseProblem, motors: Motors, passive: np.ndarray, mode: str,
              internal_bound: tuple[float, float] | None, Mstar: np.ndarray | None, definition: str):
     """Per-sample LP rows in the unknowns [f; μ] (m + 1): A_ub (N, rows, m + 1), b_ub (N, rows) — the

@@ -5,6 +5,7 @@ the inverse dynamics (the trajectory must come back), and the torques as a Pytho
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -41,7 +42,7 @@ class Replay:
 
 
 def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.ndarray,
-                  failures: list | None = None) -> np.ndarray:
+                  failures: list | None = None, wrenches: Callable | None = None) -> np.ndarray:
     """τ of resolution `res` along `traj` at times t (relative to traj.t[0]).
 
     The trajectory's quintic Hermite interpolant at each t (`coopsim.inverse.trajectory.trajectory_at_times`,
@@ -55,13 +56,15 @@ def stage_torques(model: Model, traj: JointTrajectory, res: Resolution, t: np.nd
         t: (M,) s, the times, relative to traj.t[0].
         failures: a list the SampleFailures of the unsolved times are appended to (written; indices into
             t); None: not reported.
+        wrenches: InverseProblem (M samples, t relative to traj.t[0]) ↦ its grasp wrenches (M, rk) in place of
+            the distribution of `res` (the LP bound's, `coopsim.inverse.lp_replay.lp_distribution`); None: res's.
 
     Returns:
         np.ndarray: (M, n) N·m (N on a prismatic joint), the joint torques, stacked arm by arm.
     """
     q, qd, qdd = trajectory_at_times(traj, traj.t[0] + np.asarray(t, dtype=float))
     prob = inverse_problem(model, JointTrajectory(np.asarray(t, dtype=float), q, qd, qdd, traj.source))
-    return torques_of(prob, distribute(prob, prob.y, res, failures))
+    return torques_of(prob, distribute(prob, prob.y, res, failures) if wrenches is None else wrenches(prob))
 
 
 def torque_function(model: Model, traj: JointTrajectory, res: Resolution) -> TorqueFunction:
@@ -84,7 +87,7 @@ def torque_function(model: Model, traj: JointTrajectory, res: Resolution) -> Tor
 REPLAY_METHOD = "dop853"
 
 
-def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
+def replay(model: Model, traj: JointTrajectory, res: Resolution, wrenches: Callable | None = None) -> Replay:
     """Simulate the closed chain from the trajectory's first state with the torques of `res`.
 
     Sampled at the trajectory's (uniform) sample times: DOP853 at fixed steps of one sample interval, the
@@ -96,6 +99,7 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
         model: the Model (its torques, controller and integrator method are replaced).
         traj: the JointTrajectory, at evenly spaced times.
         res: the Resolution.
+        wrenches: the grasp wrenches in place of res's distribution (`stage_torques`); None: res's.
 
     Returns:
         Replay: the SimResult and its largest angle and rate errors against the trajectory, or the stage
@@ -114,7 +118,7 @@ def replay(model: Model, traj: JointTrajectory, res: Resolution) -> Replay:
     t_stage = np.unique(np.concatenate([stage_times(a, b, dt, tab.C, tab.stages)
                                         for a, b in zip(t_out[:-1], t_out[1:])]))
     failures: list[SampleFailure] = []
-    tau = stage_torques(model, traj, res, t_stage, failures)
+    tau = stage_torques(model, traj, res, t_stage, failures, wrenches)
     if failures:
         return Replay(None, np.nan, np.nan, tuple(failures))
     tables = tuple(TorqueTable(t_stage, tau[:, sl]) for sl in model.dof_slices)

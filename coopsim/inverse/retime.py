@@ -57,7 +57,6 @@ from coopsim.core.model import Model, Motors, ObjectMotion, SampledTimeLaw
 from coopsim.inverse import capacity as cap
 from coopsim.inverse.path import JointPath
 from coopsim.inverse.problem import InverseProblem, inverse_problem
-from coopsim.inverse.qp import solve_lps
 from coopsim.inverse.solve import resolution_for
 
 LP_BOUND = "lp"                 # the method name of the best distribution (grasp wrenches free per point)
@@ -1328,24 +1327,13 @@ def best_excess(dyn: PathDynamics, mass: float, a: np.ndarray, b: np.ndarray) ->
     Raises:
         RetimeError: HiGHS fails on a point.
     """
-    j = np.flatnonzero(dyn.active & np.isfinite(dyn.stall))
-    N, rk = len(dyn.path.s), dyn.JT.shape[2]
+    rk = dyn.JT.shape[2]
     ta = dyn.torques(mass, a, b)
-    qd = dyn.path.d1[:, j] * np.sqrt(np.maximum(b, 0.0))[:, None]
-    drop = dyn.slope[j] * qd
-    JT = dyn.JT[:, j, :]
-    ts = np.broadcast_to(dyn.stall[j], (N, len(j)))[:, :, None]
-    A_ub = np.concatenate([np.concatenate([JT, -ts], 2), np.concatenate([-JT, -ts], 2)], 1)
-    b_ub = np.concatenate([dyn.stall[j] - drop - ta[:, j], ta[:, j] + dyn.stall[j] + drop], 1)
+    drop = dyn.slope * dyn.path.d1 * np.sqrt(np.maximum(b, 0.0))[:, None]
+    lo, hi = -dyn.stall - drop, dyn.stall - drop
     Y = dyn.y[0] + mass * dyn.y[1]
     y = Y[0] + a[:, None] * Y[1] + b[:, None] * Y[2]
-    pas = ~dyn.active
-    A_eq = np.concatenate([np.concatenate([dyn.A, np.zeros((N, dyn.A.shape[1], 1))], 2),
-                           np.concatenate([dyn.JT[:, pas, :], np.zeros((N, int(pas.sum()), 1))], 2)], 1)
-    b_eq = np.concatenate([y, -ta[:, pas]], 1)
-    c = np.zeros(rk + 1)
-    c[-1] = 1.0
-    lp = solve_lps(c, A_ub, b_ub, A_eq, b_eq, [(None, None)] * (rk + 1))
+    lp = cap.least_excess(ta, dyn.JT, dyn.A, y, lo, hi, dyn.stall, ~dyn.active)
     if np.any(lp.status != 0):
         i = int(np.flatnonzero(lp.status != 0)[0])
         raise RetimeError(f"lp: HiGHS failed at s={dyn.path.s[i]:.6g}: {lp.messages[i]}")

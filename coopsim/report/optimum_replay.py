@@ -20,6 +20,9 @@ import numpy as np
 from coopsim.core.model import Model, ObjectMotion, TorqueTable
 from coopsim.forward.simulate import SimResult
 from coopsim.inverse import retime as rt
+from coopsim.inverse.free_path import lp_resolution
+from coopsim.inverse.lp_replay import LPWrenches, lp_distribution, lp_wrenches
+from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.problem import Resolution
 from coopsim.inverse.replay import Replay, stage_torques
 from coopsim.inverse.solve import resolution_for
@@ -52,6 +55,8 @@ class OptimumReplay:
         twin_model: the twin's Model (its step, the torques tabulated at its RK4 stage times).
         log: the run log's file name in the output set.
         resolution: the Resolution whose torques are replayed (its weights and virtual bodies).
+        distribution: the LP bound's distribution at the samples (`lp_distribution_summary`), or None (a
+            linear resolution).
     """
 
     source: str
@@ -65,37 +70,39 @@ class OptimumReplay:
     twin_model: Model
     log: str = RUN_LOG
     resolution: Resolution | None = None
+    distribution: dict | None = None
 
 
 def optimum_replay(study: RetimeStudy, progress: Progress | None = None) -> OptimumReplay:
     """Replay the retiming study's optimum (the law the optimised scenario carries) native and in the twin.
 
     Args:
-        study: the RetimeStudy (method a linear resolution).
+        study: the RetimeStudy (method a linear resolution or the LP bound).
         progress: hears the stages replay (the IK and native run) and mujoco.
 
     Returns:
         OptimumReplay (`motion_replay` of the study's motion at its law's mass; with `--weights` the minimum
-        energy's torques with the weights optimised with the law).
+        energy's torques with the weights optimised with the law; the LP bound's wrenches those of its law,
+        `coopsim.inverse.lp_replay`).
 
     Raises:
-        coopsim.inverse.retime.RetimeError: the method is the LP bound (no distribution between grid points)
-            or the resolution has no torques somewhere along the law.
+        coopsim.inverse.retime.RetimeError: the resolution has no torques somewhere along the law.
     """
+    law = study.methods[study.method].law_of
     if study.method == rt.LP_BOUND:
-        raise rt.RetimeError("--replay: the LP bound has no torque distribution between its grid points; "
-                             "give --method paper, nonsqueezing or min_energy")
+        return motion_replay(study.model, study.motion, lp_resolution(study.model), study.mode, law.mass, "retimed",
+                             progress, lp_wrenches(law))
     weighted = study.weights is not None and study.method == "min_energy"
     res = resolution_for(study.weights.model if weighted else study.model, study.method)
-    return motion_replay(study.model, study.motion, res, study.mode, study.methods[study.method].law_of.mass,
-                         "retimed", progress)
+    return motion_replay(study.model, study.motion, res, study.mode, law.mass, "retimed", progress)
 
 
 def path_replay(study: PathStudy, progress: Progress | None = None) -> OptimumReplay:
     """Replay the free-path study's optimum (the written scenario's B-spline path and law) native and in the twin.
 
     The load is the retimed stage's payload (without that stage: the first stage's capacity on the
-    scenario's grid), carried with the optimised resolution (its weights, with `--weights`).
+    scenario's grid), carried with the optimised resolution (its weights, with `--weights`; the LP bound: the
+    retimed law's wrenches, without that stage each sample's least-excess distribution).
 
     Args:
         study: the PathStudy.
@@ -109,11 +116,12 @@ def path_replay(study: PathStudy, progress: Progress | None = None) -> OptimumRe
     """
     o = study.optimum
     mass = o.retimed.mass if o.retimed is not None else study.checks["scenario_grid_kg"]
-    return motion_replay(study.model, study.motion, o.resolution, o.mode, mass, "free_path", progress)
+    lp = lp_wrenches(o.retimed) if o.resolution.method == rt.LP_BOUND and o.retimed is not None else None
+    return motion_replay(study.model, study.motion, o.resolution, o.mode, mass, "free_path", progress, lp)
 
 
 def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str, mass: float, source: str,
-                  progress: Progress | None = None) -> OptimumReplay:
+                  progress: Progress | None = None, lp: LPWrenches | None = None) -> OptimumReplay:
     """Replay an optimised object motion carrying `mass` with the torques of `res`, native and MuJoCo twin.
 
     The samples are spaced evenly at the motion's output_dt shortened so that a whole number of them spans
@@ -123,11 +131,13 @@ def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str
     Args:
         model: the Model (nominal object; its validation thresholds judge the twin).
         motion: the optimised ObjectMotion (waypoints or a B-spline path; its time law).
-        res: the Resolution (a linear one: paper, nonsqueezing, min_energy; its weights).
+        res: the Resolution (a linear one: paper, nonsqueezing, min_energy; its weights; or method 'lp', the LP
+            bound: `coopsim.inverse.lp_replay.lp_distribution` with `lp`).
         mode: 'payload' (mass: a point payload's at inverse.payload_position) or 'scaled' (the object's).
         mass: kg, the load carried.
         source: 'retimed' or 'free_path' (the run log's name: RUN_LOG, PATH_RUN_LOG).
         progress: hears the stages replay (the IK and native run) and mujoco.
+        lp: the LP bound's wrenches on its law (method 'lp'); None: each sample's least-excess distribution.
 
     Returns:
         OptimumReplay.
@@ -140,27 +150,66 @@ def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str
     model = with_motion(model, replace(motion, output_dt=dt))
     _report(progress, "replay", 0.0)
     traj = object_motion_trajectory(model, model.inverse.object_motion)
-    rep, excess = carried_replay(model, traj, res, mode, mass)
+    wrenches = None
+    if res.method == rt.LP_BOUND:
+        lp = None if lp is None else lp.resampled(traj.t - traj.t[0])
+        def wrenches(prob):
+            return lp_distribution(prob, lp, model.motors, res.passive).f
+    rep, excess = carried_replay(model, traj, res, mode, mass, wrenches)
     if rep.sim is None:
         raise rt.RetimeError(f"--replay: the {res.method} resolution has no torques at t = "
                              f"{rep.failures[0].time:.6g} s of the optimum")
     _report(progress, "replay", 1.0)
     native = rep.sim
-    twin_model = _twin_model(native, traj, res)
+    twin_model = _twin_model(native, traj, res, wrenches)
     cv = cross_validate(native.model, native=native, twin_model=twin_model, progress=progress)
+    dist = None if wrenches is None else lp_distribution_summary(native.model, traj, lp, res)
     return OptimumReplay(source, res.method, mode, mass, traj, rep, excess, cv, twin_model,
-                         RUN_LOG if source == "retimed" else PATH_RUN_LOG, res)
+                         RUN_LOG if source == "retimed" else PATH_RUN_LOG, res, dist)
 
 
-def _twin_model(native: SimResult, traj: JointTrajectory, res: Resolution) -> Model:
+def lp_distribution_summary(model: Model, traj: JointTrajectory, lp: LPWrenches | None, res: Resolution) -> dict:
+    """The LP bound's distribution at the replay's samples (`coopsim.inverse.lp_replay.lp_distribution`).
+
+    Args:
+        model: the loaded forward model (the native replay's).
+        traj: the JointTrajectory replayed.
+        lp: the LP bound's wrenches on its law, or None.
+        res: the Resolution (method 'lp'; its passive joints).
+
+    Returns:
+        dict: interpolated (the LP's wrenches interpolated between its grid points, else the least-norm ones),
+        samples, corrected_samples (those whose nearest wrenches within the lines replaced the interpolant),
+        without_distribution_samples (those where no distribution keeps the lines widened by
+        `coopsim.inverse.retime.REFINE_TOL`), interpolant_max_line_excess and max_line_excess (relative to τ_s;
+        ≤ 0: within), and
+        max_wrench_residual (max |A f − y| over |y|'s peak, with the passive torques: the object wrench equation).
+    """
+    prob = inverse_problem(model, replace(traj, t=traj.t - traj.t[0]))
+    d = lp_distribution(prob, lp, model.motors, res.passive)
+    Aeq = np.concatenate([prob.A, prob.JT[:, res.passive, :]], 1)
+    rhs = np.concatenate([prob.y, -prob.tau_arms[:, res.passive]], 1)
+    miss = float(np.max(np.abs(np.einsum("nqi,ni->nq", Aeq, d.f) - rhs)) / max(float(np.max(np.abs(rhs))), 1e-300))
+    return {"interpolated": lp is not None, "samples": len(d.f), "corrected_samples": int(np.sum(d.corrected)),
+            "without_distribution_samples": int(np.sum(np.isfinite(d.least))),
+            "interpolant_max_line_excess": float(np.max(d.interpolant_excess)),
+            "max_line_excess": float(np.max(d.excess)), "max_wrench_residual": miss}
+
+
+def _twin_model(native: SimResult, traj: JointTrajectory, res: Resolution, wrenches=None) -> Model:
     """The twin's model: its step (`coopsim.twin.weld.twin_step`) and the same torques tabulated at the native
-    knots and at every RK4 stage time of the twin's steps too, so that neither reads an interpolated torque."""
+    knots (the native tables' values) and at every RK4 stage time of the twin's steps too, so that neither reads
+    an interpolated torque (`wrenches`: the grasp wrenches in place of res's, `stage_torques`)."""
     model, _ = twin_step(_dividing_step(native.model), native)
     h, t = model.mujoco.timestep, native.t
     steps = np.maximum(np.round(np.diff(t) / h).astype(int), 1)
     stages = [t0 + (t1 - t0) * np.arange(2 * k + 1) / (2 * k) for t0, t1, k in zip(t[:-1], t[1:], steps)]
-    knots = np.unique(np.concatenate([native.model.torques[0].times, *stages]))
-    tau = stage_torques(native.model, traj, res, knots)
+    old = native.model.torques[0].times
+    knots = np.unique(np.concatenate([old, *stages]))
+    new = ~np.isin(knots, old)
+    tau = np.empty((len(knots), model.n_total))
+    tau[~new] = np.hstack([tt.values for tt in native.model.torques])
+    tau[new] = stage_torques(native.model, traj, res, knots[new], wrenches=wrenches)
     return replace(model, torques=tuple(TorqueTable(knots, tau[:, sl]) for sl in model.dof_slices))
 
 

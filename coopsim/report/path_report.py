@@ -200,7 +200,7 @@ def _replay(model: Model, traj, res, mode: str, mass: float) -> dict:
     return {"replay_max_angle_error_rad": float(rep.max_angle_error), "replay_max_line_excess": float(excess)}
 
 
-def carried_replay(model: Model, traj, res, mode: str, mass: float) -> tuple[Replay, float]:
+def carried_replay(model: Model, traj, res, mode: str, mass: float, wrenches=None) -> tuple[Replay, float]:
     """The torques of `res` with the load at `mass` replayed open loop along a trajectory, and their excess.
 
     The forward model carries the load as one rigid body (`coopsim.inverse.capacity.scaled_model`, or
@@ -213,6 +213,8 @@ def carried_replay(model: Model, traj, res, mode: str, mass: float) -> tuple[Rep
         res: the Resolution (of the nominal model).
         mode: 'scaled' (mass: the whole object's) or 'payload' (mass: the point payload's).
         mass: kg.
+        wrenches: InverseProblem ↦ grasp wrenches in place of res's distribution (the LP bound's,
+            `coopsim.inverse.replay.stage_torques`); None: res's.
 
     Returns:
         tuple[Replay, float]: the Replay (`coopsim.inverse.replay.replay`; its SimResult's model is the
@@ -221,7 +223,7 @@ def carried_replay(model: Model, traj, res, mode: str, mass: float) -> tuple[Rep
     """
     loaded = (cap.scaled_model(model, mass) if mode == "scaled"
               else cap.payload_model(model, model.inverse.payload_position, mass))
-    rep = replay(loaded, traj, res)
+    rep = replay(loaded, traj, res, wrenches)
     tau = rep.sim.tau if rep.sim is not None else np.full_like(traj.q, np.nan)
     lo, hi = torque_limits(model.motors, traj.qd)
     act = ~res.passive & np.isfinite(model.motors.stall_torque)
