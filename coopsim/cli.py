@@ -364,9 +364,6 @@ def _cmd_optimize(args) -> int:
         raise CoopsimError("optimize: give --retime (the fixed path's time law) and/or --path (the free path)")
     if args.closed_loop and not args.replay:
         raise CoopsimError("--closed-loop: replays the optimum under feedback; give it with --replay")
-    if args.replay and args.method == "lp":
-        raise CoopsimError("--replay: the LP bound has no torque distribution between its grid points; give "
-                           "--method paper, nonsqueezing or min_energy")
     if args.weights and args.method != "min_energy":
         raise CoopsimError("--weights: the energy weights are the minimum energy's; give --method min_energy")
     for name in ("duration", "payload"):

@@ -64,7 +64,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from coopsim.control.controller import ControlError, Controller, record
-from coopsim.core.model import ControlSettings, Model, TorqueFeedback, TorqueTable, torque_at, torque_limits
+from coopsim.core.model import COMPILED_DISTRIBUTIONS, ControlSettings, Model, TorqueFeedback, TorqueTable, torque_at, torque_limits
 from coopsim.core.spatial import orientation_error, rots_to_quats
 from coopsim.dynamics.closed_chain import arm_poses
 from coopsim.dynamics.gibbs_appell import mass_matrix
@@ -239,10 +239,11 @@ def computed_torque_loop(model: Model, rep: OptimumReplay):
     Returns:
         tuple | None: (the native loop's Controller, its Model, its SimResult: adaptive DOP853 at CT_TOLERANCE
         times the scenario's tolerances, sampled as the open loop); None where the scenario's law is not
-        computed_torque or its Controller refuses the arms.
+        computed_torque, its Controller refuses the arms, or the optimum is the LP bound's (the law distributes
+        by a resolution; the LP's wrenches exist only as the replay's tables, so joint PD carries them).
     """
     c = model.control
-    if c is None or c.law != "computed_torque":
+    if c is None or c.law != "computed_torque" or rep.method not in COMPILED_DISTRIBUTIONS:
         return None
     settings = replace(c, distribution=rep.method, squeeze=0.0, mass_scale=1.0)
     try:
@@ -257,7 +258,9 @@ def computed_torque_loop(model: Model, rep: OptimumReplay):
 def _native_loop(model: Model, rep: OptimumReplay, kp, kd):
     """The native joint PD loop with the gains kp, kd (n,): (its Controller, its Model, its SimResult)."""
     traj = rep.traj
-    settings = ControlSettings("joint_pd", kp, kd, compensation="none", distribution=rep.method,
+    # compensation 'none' never evaluates the distribution; the LP bound has none of its own: 'paper' stands in
+    dist = rep.method if rep.method in COMPILED_DISTRIBUTIONS else "paper"
+    settings = ControlSettings("joint_pd", kp, kd, compensation="none", distribution=dist,
                                reference="object_motion", saturate=model.control is not None and model.control.saturate)
     native_model = _in_the_loop(rep.native.sim.model, settings, rep)
     return native_model.torques.fn, native_model, simulate(native_model, fixed_step=float(traj.t[1] - traj.t[0]))

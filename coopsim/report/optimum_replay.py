@@ -233,7 +233,7 @@ def replay_summary(rep: OptimumReplay) -> dict:
         and rate errors against the optimised joint path, the largest line excess relative to τ_s); twin
         (its step, the agreement with the native replay against the scenario's thresholds,
         `coopsim.twin.compare.Comparison.as_dict`, its largest joint angle error and whether it passed);
-        the run log's name.
+        the run log's name; for the LP bound "lp_distribution" (`lp_distribution_summary`).
     """
     cv = rep.cross
     angle = next(m for m in cv.comparison.metrics if m.name == "joint angle error")
@@ -247,7 +247,7 @@ def replay_summary(rep: OptimumReplay) -> dict:
                  "max_angle_error_rad": angle.max, "threshold_rad": angle.threshold,
                  "passed": cv.comparison.passed, "agreement": cv.comparison.as_dict()},
         "log": rep.log,
-    }
+    } | ({} if rep.distribution is None else {"lp_distribution": rep.distribution})
 
 
 def replay_run_log(rep: OptimumReplay, metadata: dict | None = None, extra_series=()) -> tuple[list, dict]:

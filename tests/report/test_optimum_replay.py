@@ -59,11 +59,44 @@ def test_the_replay_run_log_reads_back_as_a_run_log(replayed, tmp_path):
     assert np.array_equal(payload.position, rep.cross.native.model.inverse.payload_position)
 
 
-def test_the_lp_bound_is_not_replayed(replayed):
-    """The LP bound's wrenches exist at its grid points only: one line naming --replay and the methods."""
-    study, _ = replayed
-    with pytest.raises(rt.RetimeError, match=r"^--replay: the LP bound"):
-        optimum_replay(replace(study, method="lp"))
+@pytest.fixture(scope="module")
+def lp_replayed():
+    """The LP bound's bare-object minimum-time law (--payload 0, 6 intervals a segment: 4.01 s), replayed with
+    its wrenches between the grid points (`coopsim.inverse.lp_replay`)."""
+    model = load_scenario(SCENARIOS / "paper_planar_2x3_carry.yaml")
+    study = retime_study(model, payload=0.0, intervals=6, methods=(rt.LP_BOUND,), method=rt.LP_BOUND)
+    return study, optimum_replay(study)
+
+
+def test_the_lp_bound_is_replayed_within_its_lines(lp_replayed):
+    """The LP bound's optimum: native within 1e-8 rad of the optimised path (its wrenches meet the object wrench
+    equation exactly, so they move nothing but the internal wrench), the twin within every threshold of the
+    scenario. The interpolant of the LP's wrenches alone leaves the lines by more than the linear resolutions'
+    replays allow on this grid (1e-2 τ_s); the wrenches replayed keep them widened by REFINE_TOL at every sample
+    (1e-13 for the QP's rounding), the object wrench equation to 1e-12 there, and the excess the native run
+    reports from its own torques is the distribution's (1e-12)."""
+    study, rep = lp_replayed
+    s = replay_summary(rep)
+    d = s["lp_distribution"]
+    assert s["method"] == rt.LP_BOUND and s["mass_kg"] == 0.0
+    assert s["duration_s"] == pytest.approx(study.methods[rt.LP_BOUND].bare.duration, rel=1e-9)
+    assert s["native"]["max_angle_error_rad"] <= 1e-8
+    assert s["twin"]["passed"], rep.cross.comparison.failures()
+    assert d["interpolated"] and d["interpolant_max_line_excess"] > 1e-2 and d["corrected_samples"] >= 1
+    assert d["without_distribution_samples"] == 0
+    assert s["native"]["max_line_excess"] <= rt.REFINE_TOL + 1e-13
+    assert s["native"]["max_line_excess"] == pytest.approx(d["max_line_excess"], abs=1e-12)
+    assert d["max_wrench_residual"] <= 1e-12
+
+
+def test_the_twin_reads_the_native_torques_at_the_native_knots(lp_replayed):
+    """Native and twin are driven by the same torques: the twin's tables hold the native tables' values at
+    every native knot (copied, not recomputed), and more knots at its own RK4 stage times."""
+    _, rep = lp_replayed
+    for nat, tw in zip(rep.native.sim.model.torques, rep.twin_model.torques):
+        at = np.isin(tw.times, nat.times)
+        assert at.sum() == len(nat.times) and len(tw.times) > len(nat.times)
+        assert np.array_equal(tw.values[at], nat.values)
 
 
 def test_a_law_retimed_with_its_weights_is_replayed_with_them(replayed, monkeypatch):
