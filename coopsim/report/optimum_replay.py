@@ -282,7 +282,8 @@ def format_replay_summary(s: dict) -> str:
         s: the "replay" entry.
 
     Returns:
-        str: two lines, the native replay against the optimised path and the twin against the native run.
+        str: two lines, the native replay against the optimised path and the twin against the native run (the LP
+        bound: a third, its wrenches between the grid points).
     """
     tw = s["twin"]
     verdict = "PASS" if tw["passed"] else "FAIL: " + "; ".join(
@@ -292,4 +293,13 @@ def format_replay_summary(s: dict) -> str:
             f"{s['native']['max_angle_error_rad']:.2e} rad from the optimised path, line excess "
             f"{s['native']['max_line_excess']:.2e} τ_s\n"
             f"                twin (step {tw['timestep_s']:.3g} s) {tw['max_angle_error_rad']:.2e} rad from the native "
-            f"run (threshold {tw['threshold_rad']:.3g}): {verdict}")
+            f"run (threshold {tw['threshold_rad']:.3g}): {verdict}" + _lp_line(s.get("lp_distribution")))
+
+
+def _lp_line(d: dict | None) -> str:
+    """The LP bound's distribution line of `format_replay_summary` ('' for a linear resolution)."""
+    if d is None:
+        return ""
+    return (f"\n                LP wrenches {'interpolated' if d['interpolated'] else 'least-norm'}, "
+            f"{d['corrected_samples']} of {d['samples']} samples moved within the lines (interpolant "
+            f"{d['interpolant_max_line_excess']:.2e} τ_s over), {d['without_distribution_samples']} where none is")

@@ -100,15 +100,34 @@ def test_a_linearisation_that_does_not_converge_says_so_and_writes_nothing(workd
     assert not (workdir / "res").exists()
 
 
+def test_the_lp_bound_is_replayed_in_its_set(workdir):
+    """--method lp --replay (the bare object's minimum-time law, 4 intervals a segment): the complete set with
+    the optimum's run log; the replay's native run within 1e-8 rad of the optimised path, the twin within the
+    scenario's thresholds, the LP's wrenches between its grid points keeping the lines widened by REFINE_TOL
+    (1e-13 for the QP's rounding) and the object wrench equation to 1e-12."""
+    out = run_cli("optimize", CARRY, "--retime", "--method", "lp", "--payload", "0", "--replay", "--intervals", "4",
+                  "--json", "--out", "res", cwd=workdir)
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    names = sorted(p.name for p in (workdir / "res").iterdir())
+    assert names == sorted(["optimize.json", "optimize.mcap", "optimize_motors.png", "optimize_payload_time.png",
+                            "optimize_phase_plane.png", "paper_planar_2x3_carry_retimed.yaml", "optimum_run.mcap"])
+    rep = s["replay"]
+    assert rep["method"] == "lp" and rep["mass_kg"] == 0.0
+    assert rep["duration_s"] == pytest.approx(s["methods"]["lp"]["payload"]["duration_s"], rel=1e-9)
+    assert rep["native"]["max_angle_error_rad"] <= 1e-8 and rep["twin"]["passed"]
+    assert rep["native"]["max_line_excess"] <= rt.REFINE_TOL + 1e-13
+    assert rep["lp_distribution"]["max_wrench_residual"] <= 1e-12
+    assert {"/native/joint_state", "/mujoco/joint_state"} <= set(read_run_log(workdir / rep["log"]).topics)
+
+
 @pytest.mark.parametrize("args, line", [
     (["--replay"], "coopsim: error: optimize: give --retime (the fixed path's time law) and/or --path"),
-    (["--retime", "--replay", "--method", "lp"], "coopsim: error: --replay: the LP bound has no torque distribution"),
     (["--retime", "--closed-loop"], "coopsim: error: --closed-loop: replays the optimum under feedback; give it "
                                     "with --replay"),
 ])
-def test_replay_without_an_optimum_or_of_the_lp_bound_is_refused(workdir, args, line):
-    """--replay alone (nothing to replay), the LP bound's optimum, --closed-loop without --replay: one line,
-    exit 2, nothing written."""
+def test_replay_without_an_optimum_is_refused(workdir, args, line):
+    """--replay alone (nothing to replay), --closed-loop without --replay: one line, exit 2, nothing written."""
     out = run_cli("optimize", CARRY, *args, "--out", "res", cwd=workdir)
     assert out.returncode == 2 and out.stderr.startswith(line), out.stderr
     assert not (workdir / "res").exists()
