@@ -11,6 +11,7 @@ the internal wrench and object stress, and the dynamic load carrying capacity.
                       (eqs. 33–35), bounded; the internal wrench
     solve.py          a resolution chosen by name, distributed at every sample, resolved torques
     replay.py         resolved torques fed back through the forward model
+    lp_replay.py      the LP bound's grasp wrenches between its grid points, for the optimum's replay
     resolutions.py    the registry of redundancy resolutions (paper W⁺, non-squeezing, minimum energy,
                       bounded)
     qp.py             the small QPs and LPs (bounded resolution, the LP bound)
