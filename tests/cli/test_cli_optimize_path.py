@@ -7,7 +7,6 @@ import json
 import pytest
 import yaml
 
-from coopsim.inverse import retime as rt
 from coopsim.io.log import read_run_log
 from coopsim.io.scenario import load_scenario
 from helpers import run_cli
@@ -72,12 +71,9 @@ def test_optimize_path_lp_writes_its_set(workdir):
     """--path --method lp (the best distribution; a 1 s optimiser grid, so 13 retiming intervals): optimize.json's
     path entry (method lp, the LP free path at least the straight path's capacity and its retimed payload at least
     the own path's retimed, the checks without a brute-force rerun) and the free path's scenario, which loads
-    as it is. With --replay the free path's optimum replayed with the LP's wrenches between its grid points
-    (`coopsim.inverse.lp_replay`) and its run log in the set: native within 1e-8 rad, the twin within the
-    thresholds, the lines widened by REFINE_TOL kept where some distribution keeps them (1e-13: the QP's
-    rounding), else the least excess of any; the object wrench equation to 1e-12."""
-    out = run_cli("optimize", _scenario(workdir, sample_dt=1.0), "--path", "--method", "lp", "--replay", "--json",
-                  "--out", "res", cwd=workdir)
+    as it is."""
+    out = run_cli("optimize", _scenario(workdir, sample_dt=1.0), "--path", "--method", "lp", "--json", "--out", "res",
+                  cwd=workdir)
     assert out.returncode == 0, out.stderr
     p = json.loads(out.stdout)["path"]
     kg = p["payload_kg"]
@@ -86,18 +82,9 @@ def test_optimize_path_lp_writes_its_set(workdir):
     assert kg["free_path_retimed"] >= kg["own_path_retimed"] * (1 - 1e-9) > 0
     assert p["checks"]["retimed_grid_excess"] <= 1e-9
     files = {f.name for f in (workdir / "res").iterdir()}
-    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "paper_planar_2x3_carry_path.yaml",
-            "optimum_path_run.mcap"} <= files
+    assert {"optimize.json", "optimize.mcap", "optimize_path.png", "paper_planar_2x3_carry_path.yaml"} <= files
     m = load_scenario(workdir / "res" / "paper_planar_2x3_carry_path.yaml")
     assert m.inverse.object_motion.path is not None and m.inverse.object_motion.time_law == "sampled"
-    rep = p["replay"]
-    assert rep["source"] == "free_path" and rep["method"] == "lp" and rep["mass_kg"] == kg["free_path_retimed"]
-    assert rep["native"]["max_angle_error_rad"] <= 1e-8 and rep["twin"]["passed"]
-    d = rep["lp_distribution"]
-    assert d["max_wrench_residual"] <= 1e-12
-    assert rep["native"]["max_line_excess"] <= (rt.REFINE_TOL + 1e-13 if d["without_distribution_samples"] == 0
-                                                else d["max_line_excess"] + 1e-12)
-    assert {"/native/joint_state", "/mujoco/joint_state"} <= set(read_run_log(workdir / rep["log"]).topics)
 
 
 def test_weights_with_the_free_path_are_written_into_its_scenario(workdir):
