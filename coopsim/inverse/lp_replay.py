@@ -20,7 +20,9 @@ REFINE_TOL τ_s (one small QP, `coopsim.inverse.qp.solve_qps`; continuous in the
 vertex of the least-excess LP, whose jumps the twin's welds would feel). Where even the widened lines
 admit none, the least excess e* any distribution reaches (`coopsim.inverse.capacity.least_excess`, the
 LP bound's own definition: f free per point) widens them to e* + REFINE_TOL. So every sample is within
-REFINE_TOL of its lines, or of the least excess of any distribution there. Without the LP's wrenches (a
+REFINE_TOL of its lines, or of the least excess of any distribution there. The QPs are solved at the
+replay's samples only; at the integrators' stage times between them the samples' wrenches are joined
+linearly and projected alike (`sample_wrenches`), so the motion is exact there too. Without the LP's wrenches (a
 free path under the scenario's law) f_LP = 0: the least-norm wrenches A⁺ȳ, corrected alike.
 """
 
@@ -126,7 +128,7 @@ class LPDistribution(NamedTuple):
 
 
 def lp_distribution(prob: InverseProblem, wrenches: LPWrenches | None, motors: Motors,
-                    passive: np.ndarray) -> LPDistribution:
+                    passive: np.ndarray, correct: bool = True) -> LPDistribution:
     """The LP bound's grasp wrenches at the samples of `prob` (see the module).
 
     Args:
@@ -134,6 +136,8 @@ def lp_distribution(prob: InverseProblem, wrenches: LPWrenches | None, motors: M
         wrenches: the LPWrenches of the law, or None (the interpolant f_LP = 0: the least-norm wrenches A⁺ȳ).
         motors: the Motors (the lines of eq. 36).
         passive: (n,) bool, the passive joints.
+        correct: False: the least-norm projection only, no sample corrected (between the replay's samples,
+            `sample_wrenches`).
 
     Returns:
         LPDistribution.
@@ -148,7 +152,7 @@ def lp_distribution(prob: InverseProblem, wrenches: LPWrenches | None, motors: M
     f0 = np.zeros(prob.JT.shape[::2]) if wrenches is None else wrenches.at(prob.t)
     f = f0 + np.einsum("niq,nq->ni", np.linalg.pinv(Aeq, rcond=PINV_RCOND), ybar - np.einsum("nqi,ni->nq", Aeq, f0))
     interp = _excess(torques_of(prob, f), lo, hi, motors.stall_torque, passive)
-    bad = np.flatnonzero(interp > REFINE_TOL)
+    bad = np.flatnonzero(interp > REFINE_TOL) if correct else np.zeros(0, int)
     least = np.full(len(f), np.nan)
     if bad.size:
         rows = (prob.tau_arms[bad], prob.JT[bad], Aeq[bad], ybar[bad], lo[bad], hi[bad], motors.stall_torque, passive)
@@ -170,6 +174,26 @@ def lp_distribution(prob: InverseProblem, wrenches: LPWrenches | None, motors: M
     corrected = np.zeros(len(f), bool)
     corrected[bad] = True
     return LPDistribution(f, interp, ex, corrected, least)
+
+
+def sample_wrenches(prob: InverseProblem, wrenches: LPWrenches | None, motors: Motors,
+                    passive: np.ndarray) -> LPWrenches:
+    """The replay's wrenches at its samples (`lp_distribution`, corrected) joined linearly between them.
+
+    Read at an integrator's stage times with `lp_distribution(..., correct=False)`: the motion exact there
+    too (the least-norm projection), the lines kept at the samples, one QP a sample and none a stage time.
+
+    Args:
+        prob: the InverseProblem at the replay's samples (N, increasing t from the law's start).
+        wrenches: the LPWrenches of the law (`LPWrenches.resampled` at those samples), or None.
+        motors: the Motors.
+        passive: (n,) bool, the passive joints.
+
+    Returns:
+        LPWrenches: N − 1 intervals.
+    """
+    f = lp_distribution(prob, wrenches, motors, passive).f
+    return LPWrenches(prob.t[:-1], prob.t[1:], np.stack([f[:-1], f[1:]], 1))
 
 
 def _nearest(f0, tau_arms, JT, Aeq, ybar, lo, hi, stall, passive, widen):

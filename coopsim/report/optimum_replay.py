@@ -21,7 +21,7 @@ from coopsim.core.model import Model, ObjectMotion, TorqueTable
 from coopsim.forward.simulate import SimResult
 from coopsim.inverse import retime as rt
 from coopsim.inverse.free_path import lp_resolution
-from coopsim.inverse.lp_replay import LPWrenches, lp_distribution, lp_wrenches
+from coopsim.inverse.lp_replay import LPWrenches, lp_distribution, lp_wrenches, sample_wrenches
 from coopsim.inverse.problem import inverse_problem
 from coopsim.inverse.problem import Resolution
 from coopsim.inverse.replay import Replay, stage_torques
@@ -30,7 +30,7 @@ from coopsim.inverse.trajectory import JointTrajectory, object_motion_trajectory
 from coopsim.io.log import run_log
 from coopsim.report.inverse_report import Progress, _report
 from coopsim.report.optimize_report import RetimeStudy, with_motion
-from coopsim.report.path_report import PathStudy, carried_replay
+from coopsim.report.path_report import PathStudy, carried_replay, loaded_model
 from coopsim.twin.harness import CrossValidation, cross_validate
 from coopsim.twin.weld import twin_step
 
@@ -152,9 +152,12 @@ def motion_replay(model: Model, motion: ObjectMotion, res: Resolution, mode: str
     traj = object_motion_trajectory(model, model.inverse.object_motion)
     wrenches = None
     if res.method == rt.LP_BOUND:
-        lp = None if lp is None else lp.resampled(traj.t - traj.t[0])
+        rel = replace(traj, t=traj.t - traj.t[0])
+        lp = None if lp is None else lp.resampled(rel.t)
+        knots = sample_wrenches(inverse_problem(loaded_model(model, mode, mass), rel), lp, model.motors, res.passive)
+
         def wrenches(prob):
-            return lp_distribution(prob, lp, model.motors, res.passive).f
+            return lp_distribution(prob, knots, model.motors, res.passive, correct=False).f
     rep, excess = carried_replay(model, traj, res, mode, mass, wrenches)
     if rep.sim is None:
         raise rt.RetimeError(f"--replay: the {res.method} resolution has no torques at t = "

@@ -200,6 +200,22 @@ def _replay(model: Model, traj, res, mode: str, mass: float) -> dict:
     return {"replay_max_angle_error_rad": float(rep.max_angle_error), "replay_max_line_excess": float(excess)}
 
 
+def loaded_model(model: Model, mode: str, mass: float) -> Model:
+    """The forward model carrying the load (`coopsim.inverse.capacity.scaled_model` or `payload_model`).
+
+    Args:
+        model: the Model (nominal object).
+        mode: 'scaled' (mass: the whole object's) or 'payload' (mass: the point payload's, at the scenario's
+            payload position).
+        mass: kg.
+
+    Returns:
+        Model: the loaded model.
+    """
+    return (cap.scaled_model(model, mass) if mode == "scaled"
+            else cap.payload_model(model, model.inverse.payload_position, mass))
+
+
 def carried_replay(model: Model, traj, res, mode: str, mass: float, wrenches=None) -> tuple[Replay, float]:
     """The torques of `res` with the load at `mass` replayed open loop along a trajectory, and their excess.
 
@@ -221,9 +237,7 @@ def carried_replay(model: Model, traj, res, mode: str, mass: float, wrenches=Non
         loaded forward model) and the largest excess of a replayed torque over its motor line at the
         samples, relative to τ_s (≤ 0: within; nan without a simulation).
     """
-    loaded = (cap.scaled_model(model, mass) if mode == "scaled"
-              else cap.payload_model(model, model.inverse.payload_position, mass))
-    rep = replay(loaded, traj, res, wrenches)
+    rep = replay(loaded_model(model, mode, mass), traj, res, wrenches)
     tau = rep.sim.tau if rep.sim is not None else np.full_like(traj.q, np.nan)
     lo, hi = torque_limits(model.motors, traj.qd)
     act = ~res.passive & np.isfinite(model.motors.stall_torque)
